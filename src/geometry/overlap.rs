@@ -1,0 +1,302 @@
+//! Overlap of two convex polyhedra by dual-space Quickhull (seed paper Alg. II–VI, Eq. 4–9).
+//!
+//! The intersection `A ∩ B` is the set of points below every face plane of A and of B. With an
+//! interior point `x₀` (the Chebyshev centre, [`super::interior`]) each plane `n·x <= h` has a
+//! positive distance `δ = h − n·x₀` and a dual point `y = n / δ` (Eq. 4–5). The convex hull of
+//! the dual points is the polar of the intersection: its triangles are the intersection's
+//! vertices, its vertices are the planes that bound it (points inside the dual hull are redundant
+//! planes), and its edges are the intersection's edges.
+//!
+//! We use the hull for the combinatorics only. Each intersection vertex is recomputed from the
+//! three original planes of its dual triangle (`n_i · m = δ_i`, Cramer's rule), which is better
+//! conditioned than unpolarising the dual plane (Eq. 6–8) when some `δ` are small. Each
+//! intersection face (a dual vertex `u`) is then traversed through the triangle adjacency
+//! without sorting: the half-edge `u → w` of dual triangle `t` is the primal edge from `m_t` to
+//! `m_t'`, `t'` the triangle across it. Fanning each face from the foot `δ_u n_u` of `x₀` gives
+//! its area `A_u` and area centroid `c_u`, and:
+//!
+//! - volume `V = Σ_u δ_u A_u / 3` (pyramids from `x₀`, Eq. 9);
+//! - centroid `Σ_u (δ_u A_u / 3)(3/4) c_u / V`;
+//! - `S = dV/dx_B = Σ_{u ∈ B} A_u n_u`, the vector area of the part of the intersection surface
+//!   lying on B (Feng, Han & Owen 2012; `|S| = A_n`, `−S/|S|` the normal from A to B);
+//! - `M_B = Σ_{u ∈ B} A_u (c_u − c) × n_u`, the moment of that surface about the overlap
+//!   centroid `c`, from which the energy-conserving torque on B about its centre `x_B` is
+//!   `−U'(V) (M_B + (c − x_B) × S)` (../shared/reference/validation.md §1). For A the moment is
+//!   `−M_B` (the closed surface has zero vector moment).
+
+use super::Real;
+use super::gjk::gjk_intersect;
+use super::interior::chebyshev_centre;
+use super::polytope::{Plane, PosedPolytope, widen};
+use super::quickhull::{DualHull, HullError, MAX_HULL_FACES, MAX_HULL_POINTS};
+use crate::shape::ConvexTemplate;
+use nalgebra::{Isometry3, Vector3};
+
+/// Geometric result of an overlap evaluation.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Overlap<T: Real> {
+    /// Overlap volume `V`.
+    pub volume: T,
+    /// Centroid of the overlap region.
+    pub centroid: Vector3<T>,
+    /// `S = dV/dx_B`: vector area of the overlap surface lying on B.
+    pub dv_dxb: Vector3<T>,
+    /// `M_B = ∫_{∂(A∩B) ∩ ∂B} (x − centroid) × n dA`: moment of B's part of the overlap surface.
+    pub moment_b: Vector3<T>,
+    /// Radius of the largest ball inside the overlap (half-thickness of a thin lens); negative
+    /// when the bodies are apart.
+    pub depth: T,
+}
+
+impl<T: Real> Overlap<T> {
+    /// Projected contact area `A_n = |S|`.
+    pub fn area(&self) -> T {
+        self.dv_dxb.norm()
+    }
+
+    /// Unit contact normal from A towards B, `−S/|S|`; `None` when there is no overlap.
+    pub fn normal(&self) -> Option<Vector3<T>> {
+        let a = self.area();
+        (self.volume > T::zero() && a > T::zero()).then(|| -self.dv_dxb / a)
+    }
+
+    /// The same overlap expressed in f64 and shifted by `origin` (back to world coordinates).
+    pub fn to_world(&self, origin: &Vector3<f64>) -> Overlap<f64> {
+        Overlap {
+            volume: self.volume.f64(),
+            centroid: widen(&self.centroid) + origin,
+            dv_dxb: widen(&self.dv_dxb),
+            moment_b: widen(&self.moment_b),
+            depth: self.depth.f64(),
+        }
+    }
+}
+
+/// Why an overlap could not be evaluated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum OverlapError {
+    #[error("{0} planes exceed the capacity of {MAX_HULL_POINTS}")]
+    TooManyPlanes(usize),
+    #[error("dual hull failed: {0}")]
+    Hull(#[from] HullError),
+}
+
+/// Buffers of one overlap evaluation, allocated once per thread and reused for every pair.
+#[derive(Clone, Debug)]
+pub struct OverlapWorkspace<T: Real> {
+    hull: DualHull<T>,
+    dual: [Vector3<T>; MAX_HULL_POINTS],
+    normal: [Vector3<T>; MAX_HULL_POINTS],
+    delta: [T; MAX_HULL_POINTS],
+    area: [T; MAX_HULL_POINTS],
+    first_moment: [Vector3<T>; MAX_HULL_POINTS],
+    vertex: [Vector3<T>; MAX_HULL_FACES],
+    x0: Vector3<T>,
+}
+
+impl<T: Real> Default for OverlapWorkspace<T> {
+    fn default() -> Self {
+        OverlapWorkspace {
+            hull: DualHull::default(),
+            dual: [Vector3::zeros(); MAX_HULL_POINTS],
+            normal: [Vector3::zeros(); MAX_HULL_POINTS],
+            delta: [T::zero(); MAX_HULL_POINTS],
+            area: [T::zero(); MAX_HULL_POINTS],
+            first_moment: [Vector3::zeros(); MAX_HULL_POINTS],
+            vertex: [Vector3::zeros(); MAX_HULL_FACES],
+            x0: Vector3::zeros(),
+        }
+    }
+}
+
+impl<T: Real> OverlapWorkspace<T> {
+    /// A workspace on the heap (it is tens of kilobytes).
+    pub fn boxed() -> Box<Self> {
+        Box::default()
+    }
+
+    /// Area of the intersection face lying on plane `i` of the last evaluation (planes of A
+    /// first, then of B); zero for planes that do not bound the intersection.
+    pub fn face_area(&self, i: usize) -> T {
+        self.area[i]
+    }
+
+    /// Area centroid of the intersection face on plane `i` of the last evaluation, in the frame
+    /// of the planes; `None` when that face has no area.
+    pub fn face_centroid(&self, i: usize) -> Option<Vector3<T>> {
+        (self.area[i] > T::zero()).then(|| self.x0 + self.first_moment[i] / self.area[i])
+    }
+}
+
+/// Outside tolerance of the dual hull, in units of machine epsilon times the largest dual
+/// coordinate; the retry uses a coarser one when round-off breaks the first attempt.
+const HULL_EPS: [f64; 2] = [32.0, 4096.0];
+
+/// Overlap of the polytopes `{x : n·x <= h for every plane of a}` and likewise `b`, both
+/// bounded, in one common frame. `start` seeds the interior-point search (any point; the
+/// midpoint of the centres is a good choice). Returns a zero overlap when the interiors are
+/// disjoint or only touch (inscribed radius below round-off).
+pub fn overlap_volume<T: Real>(
+    ws: &mut OverlapWorkspace<T>,
+    a: &[Plane<T>],
+    b: &[Plane<T>],
+    start: Vector3<T>,
+) -> Result<Overlap<T>, OverlapError> {
+    let m = a.len() + b.len();
+    if m > MAX_HULL_POINTS {
+        return Err(OverlapError::TooManyPlanes(m));
+    }
+    let centre = chebyshev_centre(a, b, start);
+    let x0 = centre.point;
+    ws.x0 = x0;
+    let mut scale = T::zero();
+    for (i, p) in a.iter().chain(b).enumerate() {
+        ws.normal[i] = p.normal;
+        ws.delta[i] = p.offset - p.normal.dot(&x0);
+        scale = scale.max(ws.delta[i]);
+    }
+    let none = Overlap { depth: centre.radius, ..Overlap::default() };
+    for i in 0..m {
+        ws.area[i] = T::zero();
+    }
+    if centre.radius <= T::of(16.0) * T::EPSILON * scale {
+        return Ok(none);
+    }
+    // Polar transform (seed Alg. II). Every δ is at least the inscribed radius, so every dual
+    // point is finite.
+    for i in 0..m {
+        ws.delta[i] = ws.delta[i].max(centre.radius);
+        ws.dual[i] = ws.normal[i] / ws.delta[i];
+    }
+    let mut result = Err(HullError::Degenerate);
+    for eps in HULL_EPS {
+        result = ws.hull.build(&ws.dual[..m], T::of(eps));
+        if result.is_ok() {
+            break;
+        }
+    }
+    result?;
+
+    // Intersection vertices, one per dual triangle (seed Alg. VI, by Cramer's rule).
+    for (s, t) in ws.hull.triangles() {
+        let [i, j, k] = t.v.map(usize::from);
+        let (ni, nj, nk) = (ws.normal[i], ws.normal[j], ws.normal[k]);
+        let (cjk, cki, cij) = (nj.cross(&nk), nk.cross(&ni), ni.cross(&nj));
+        let det = ni.dot(&cjk);
+        ws.vertex[s] = if det.abs() > T::of(64.0) * T::EPSILON {
+            (cjk * ws.delta[i] + cki * ws.delta[j] + cij * ws.delta[k]) / det
+        } else if t.offset > T::zero() {
+            // Nearly dependent normals: unpolarise the dual plane instead (seed Eq. 6–8).
+            t.normal / t.offset
+        } else {
+            Vector3::zeros()
+        };
+    }
+
+    // Faces of the intersection: fan every face from the foot of x₀ on its plane.
+    for i in 0..m {
+        ws.first_moment[i] = Vector3::zeros();
+    }
+    let third = T::of(1.0 / 3.0);
+    for (s, t) in ws.hull.triangles() {
+        for k in 0..3 {
+            let u = t.v[k] as usize;
+            let p = ws.vertex[s];
+            let q = ws.vertex[t.adj[k] as usize];
+            let foot = ws.normal[u] * ws.delta[u];
+            let twice = ws.normal[u].dot(&(p - foot).cross(&(q - foot)));
+            let tri_area = twice * T::of(0.5);
+            ws.area[u] += tri_area;
+            ws.first_moment[u] += (foot + p + q) * (tri_area * third);
+        }
+    }
+    // The traversal orientation is a global convention of the hull; make the areas positive.
+    let mut volume = T::zero();
+    for i in 0..m {
+        volume += ws.delta[i] * ws.area[i];
+    }
+    if volume < T::zero() {
+        for i in 0..m {
+            ws.area[i] = -ws.area[i];
+            ws.first_moment[i] = -ws.first_moment[i];
+        }
+        volume = -volume;
+    }
+    volume *= third;
+    if volume <= T::zero() {
+        return Ok(none);
+    }
+    let mut centroid = Vector3::zeros();
+    let mut dv_dxb = Vector3::zeros();
+    let mut moment_b = Vector3::zeros();
+    for i in 0..m {
+        centroid += ws.first_moment[i] * (ws.delta[i] * T::of(0.25));
+        if i >= a.len() {
+            dv_dxb += ws.normal[i] * ws.area[i];
+            moment_b += ws.first_moment[i].cross(&ws.normal[i]);
+        }
+    }
+    centroid /= volume;
+    // Moment about the overlap centroid rather than x₀.
+    moment_b -= centroid.cross(&dv_dxb);
+    Ok(Overlap {
+        volume,
+        centroid: centroid + x0,
+        dv_dxb,
+        moment_b,
+        depth: centre.radius,
+    })
+}
+
+/// Buffers for a full pair evaluation: both placed polytopes and the overlap workspace.
+#[derive(Clone, Debug, Default)]
+pub struct PairWorkspace<T: Real> {
+    /// Body A in the pair frame.
+    pub a: PosedPolytope<T>,
+    /// Body B in the pair frame.
+    pub b: PosedPolytope<T>,
+    /// Overlap buffers.
+    pub overlap: OverlapWorkspace<T>,
+}
+
+impl<T: Real> PairWorkspace<T> {
+    /// A workspace on the heap.
+    pub fn boxed() -> Box<Self> {
+        Box::default()
+    }
+}
+
+/// Contact geometry of one particle pair in world coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PairGeometry {
+    /// Narrow-phase (GJK) verdict.
+    pub intersects: bool,
+    /// The overlap, evaluated only when GJK reports an intersection (as in the pipeline).
+    pub overlap: Overlap<f64>,
+}
+
+/// Narrow phase and overlap of template `ta` scaled by `sa` at `pose_a` against `tb` at
+/// `pose_b`, computed in arithmetic `T` in a frame centred near the contact (DESIGN.md §3).
+pub fn overlap_pair<T: Real>(
+    ws: &mut PairWorkspace<T>,
+    (ta, sa, pose_a): (&ConvexTemplate, f64, &Isometry3<f64>),
+    (tb, sb, pose_b): (&ConvexTemplate, f64, &Isometry3<f64>),
+) -> Result<PairGeometry, OverlapError> {
+    // Frame origin on the centre line where the bounding spheres would touch: near the contact,
+    // so that the planes that bound the overlap pass close to the origin and their f32 offsets
+    // and normals carry round-off proportional to the overlap's size, not the particles'.
+    let (xa, xb) = (pose_a.translation.vector, pose_b.translation.vector);
+    let (ra, rb) = (ta.circumscribed_radius * sa, tb.circumscribed_radius * sb);
+    let origin = xa + (xb - xa) * (ra / (ra + rb));
+    ws.a.place(ta, sa, pose_a, &origin);
+    ws.b.place(tb, sb, pose_b, &origin);
+    let dir = ws.b.centre - ws.a.centre;
+    let intersects = gjk_intersect(ws.a.vertices(), ws.b.vertices(), dir);
+    let overlap = if intersects {
+        let start = (ws.a.centre + ws.b.centre) * T::of(0.5);
+        overlap_volume(&mut ws.overlap, ws.a.planes(), ws.b.planes(), start)?.to_world(&origin)
+    } else {
+        Overlap::default()
+    };
+    Ok(PairGeometry { intersects, overlap })
+}

@@ -1,0 +1,10 @@
+//! polydem: discrete element method for convex polyhedral particles.
+//!
+//! The crate is laid out by concept (see `DESIGN.md` §2): [`shape`] builds particle templates,
+//! [`geometry`] holds the exact contact-geometry queries (GJK, overlap volume by dual-space
+//! Quickhull, wall clipping), and [`probe`] exposes those queries to users and tests.
+
+pub mod geometry;
+pub mod probe;
+pub mod rng;
+pub mod shape;

@@ -1,0 +1,80 @@
+//! The `polydem` command line.
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use polydem::probe::{Precision, probe_overlap, probe_wall};
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(name = "polydem", version, about = "DEM for convex polyhedral particles")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Contact-geometry queries on given shapes and poses (JSON in, one JSON line per query out).
+    Probe {
+        #[command(subcommand)]
+        query: ProbeQuery,
+    },
+    /// Shape templates: mass properties and face counts, or export as STL.
+    Shape {
+        #[command(subcommand)]
+        action: ShapeAction,
+    },
+}
+
+#[derive(Subcommand)]
+enum ProbeQuery {
+    /// Overlap of polyhedron pairs: volume, S = dV/dx_B, area, normal, centroid.
+    Overlap {
+        file: PathBuf,
+        #[arg(long, value_enum, default_value = "f64")]
+        precision: Precision,
+    },
+    /// A polyhedron against triangle facets: clipped section area, centroid, penetrating volume.
+    Wall {
+        file: PathBuf,
+        #[arg(long, value_enum, default_value = "f64")]
+        precision: Precision,
+    },
+}
+
+#[derive(Subcommand)]
+enum ShapeAction {
+    /// Prints a template's properties as JSON: from a mesh file, or a generator name and size.
+    Info {
+        /// STL or OBJ file, or a generator name (tetrahedron, cube, octahedron, dodecahedron,
+        /// icosahedron).
+        shape: String,
+        /// Circumscribed diameter for a generator.
+        #[arg(long, default_value_t = 1.0)]
+        size: f64,
+    },
+}
+
+fn main() {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    if let Err(e) = run(Cli::parse()) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    let stdout = std::io::stdout();
+    let mut out = stdout.lock();
+    match cli.command {
+        Command::Probe { query: ProbeQuery::Overlap { file, precision } } => probe_overlap(&file, precision, &mut out),
+        Command::Probe { query: ProbeQuery::Wall { file, precision } } => probe_wall(&file, precision, &mut out),
+        Command::Shape { action: ShapeAction::Info { shape, size } } => polydem::probe::shape_info(&shape, size, &mut out),
+    }
+}

@@ -1,0 +1,269 @@
+//! `polydem probe`: the contact-geometry queries on user-given shapes and poses, one JSON line
+//! per query. It is both a user tool (check what the contact law will see for a given pair) and
+//! a test hook (oracle tests drive it from Python).
+//!
+//! Input (`probe overlap`):
+//! ```json
+//! {"shapes": {"NAME": {"vertices": [[x,y,z], ...]} | {"mesh": "path.stl"}
+//!                   | {"generator": "dodecahedron", "size": 1.0}},
+//!  "pairs": [{"a": "NAME", "b": "NAME",
+//!             "pose_a": {"position": [x,y,z], "orientation": [w,x,y,z]},
+//!             "pose_b": {...}}]}
+//! ```
+//! A shape is placed in the coordinates it was given in: `world = R(q)·v + position`, with no
+//! re-centring (the template's principal frame is undone through `file_to_body`).
+//!
+//! Input (`probe wall`): the same `shapes`, and
+//! `"cases": [{"shape": "NAME", "pose": {...}, "triangles": [[[x,y,z],[x,y,z],[x,y,z]], ...]}]`
+//! with triangles counter-clockwise seen from the side the particle is meant to be on.
+
+use crate::geometry::clip::facet_contact;
+use crate::geometry::overlap::{OverlapWorkspace, PairWorkspace, overlap_pair};
+use crate::geometry::polytope::{PosedPolytope, cast, widen};
+use crate::geometry::{Overlap, Real};
+use crate::shape::{ConvexTemplate, Generator};
+use anyhow::{Context, Result, anyhow, bail};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use serde::Deserialize;
+use serde_json::{Value, json};
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::Path;
+
+/// Arithmetic of the pair geometry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Precision {
+    /// All f64 (the reference).
+    F64,
+    /// f32 pair geometry in a frame centred on the first body (positions stay f64).
+    F32,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum ShapeSpec {
+    Vertices {
+        vertices: Vec<[f64; 3]>,
+    },
+    Mesh {
+        mesh: String,
+    },
+    Generator {
+        generator: String,
+        size: f64,
+    },
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PoseSpec {
+    position: [f64; 3],
+    orientation: [f64; 4],
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PairSpec {
+    a: String,
+    b: String,
+    pose_a: PoseSpec,
+    pose_b: PoseSpec,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WallCaseSpec {
+    shape: String,
+    pose: PoseSpec,
+    triangles: Vec<[[f64; 3]; 3]>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OverlapInput {
+    shapes: BTreeMap<String, Value>,
+    pairs: Vec<PairSpec>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WallInput {
+    shapes: BTreeMap<String, Value>,
+    cases: Vec<WallCaseSpec>,
+}
+
+/// A loaded shape: its template, and the pose correction that places it in input coordinates.
+struct PlacedShape {
+    template: ConvexTemplate,
+    body_to_input: Isometry3<f64>,
+}
+
+fn load_shapes(shapes: &BTreeMap<String, Value>, base: &Path) -> Result<BTreeMap<String, PlacedShape>> {
+    let mut out = BTreeMap::new();
+    for (name, value) in shapes {
+        let spec: ShapeSpec = serde_json::from_value(value.clone()).map_err(|_| {
+            anyhow!(
+                "shapes.{name}: expected {{\"vertices\": [[x,y,z], ...]}}, {{\"mesh\": \"file.stl|obj\"}} \
+                 or {{\"generator\": \"dodecahedron\", \"size\": 1.0}}"
+            )
+        })?;
+        let template = match spec {
+            ShapeSpec::Vertices { vertices } => {
+                let pts: Vec<_> = vertices.iter().map(|v| nalgebra::Point3::new(v[0], v[1], v[2])).collect();
+                ConvexTemplate::from_points(name, &pts).map_err(|e| anyhow!("shapes.{name}.vertices: {e}"))?
+            }
+            ShapeSpec::Mesh { mesh } => ConvexTemplate::from_file(&base.join(&mesh))
+                .map_err(|e| anyhow!("shapes.{name}.mesh: {e}"))?,
+            ShapeSpec::Generator { generator, size } => Generator::parse(&generator, size)
+                .and_then(|g| g.build())
+                .map_err(|e| anyhow!("shapes.{name}.generator: {e}"))?,
+        };
+        let body_to_input = template.file_to_body.inverse();
+        out.insert(name.clone(), PlacedShape { template, body_to_input });
+    }
+    Ok(out)
+}
+
+fn pose_of(spec: &PoseSpec, field: &str) -> Result<Isometry3<f64>> {
+    if spec.position.iter().any(|x| !x.is_finite()) {
+        bail!("{field}.position: coordinates must be finite numbers");
+    }
+    let [w, x, y, z] = spec.orientation;
+    let q = Quaternion::new(w, x, y, z);
+    let norm = q.norm();
+    // Unit quaternions are expected; round-off in hand-written values (a few 1e-7) is accepted
+    // and normalised, anything else is an input error rather than a silent rescaling.
+    if !norm.is_finite() || (norm - 1.0).abs() > 1e-6 {
+        bail!("{field}.orientation: [w, x, y, z] must be a unit quaternion (norm is {norm})");
+    }
+    let [px, py, pz] = spec.position;
+    Ok(Isometry3::from_parts(
+        Translation3::new(px, py, pz),
+        UnitQuaternion::new_normalize(q),
+    ))
+}
+
+fn lookup<'a>(shapes: &'a BTreeMap<String, PlacedShape>, name: &str, field: &str) -> Result<&'a PlacedShape> {
+    shapes.get(name).ok_or_else(|| {
+        let known: Vec<_> = shapes.keys().map(String::as_str).collect();
+        anyhow!("{field}: unknown shape \"{name}\" (defined: {})", known.join(", "))
+    })
+}
+
+fn vec_json(v: &Vector3<f64>) -> Value {
+    json!([v.x, v.y, v.z])
+}
+
+/// JSON of one pair's result (fields of the `probe overlap` output).
+pub fn overlap_json(intersects: bool, o: &Overlap<f64>) -> Value {
+    if o.volume > 0.0 {
+        let normal = o.normal().map(|n| vec_json(&n)).unwrap_or(Value::Null);
+        json!({"intersects": intersects, "volume": o.volume, "dv_dxb": vec_json(&o.dv_dxb),
+               "area": o.area(), "normal": normal, "centroid": vec_json(&o.centroid)})
+    } else {
+        json!({"intersects": intersects, "volume": 0.0, "dv_dxb": null, "area": null,
+               "normal": null, "centroid": null})
+    }
+}
+
+fn read_input(path: &Path) -> Result<(String, &Path)> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    Ok((text, path.parent().unwrap_or(Path::new("."))))
+}
+
+/// `polydem probe overlap FILE`: writes one JSON object per pair, in input order.
+pub fn probe_overlap(path: &Path, precision: Precision, out: &mut dyn Write) -> Result<()> {
+    let (text, base) = read_input(path)?;
+    let input: OverlapInput = serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
+    let shapes = load_shapes(&input.shapes, base).with_context(|| format!("{}", path.display()))?;
+    let mut ws64 = PairWorkspace::<f64>::boxed();
+    let mut ws32 = PairWorkspace::<f32>::boxed();
+    for (i, pair) in input.pairs.iter().enumerate() {
+        let field = |f: &str| format!("{}: pairs[{i}].{f}", path.display());
+        let a = lookup(&shapes, &pair.a, &field("a"))?;
+        let b = lookup(&shapes, &pair.b, &field("b"))?;
+        let pose_a = pose_of(&pair.pose_a, &field("pose_a"))? * a.body_to_input;
+        let pose_b = pose_of(&pair.pose_b, &field("pose_b"))? * b.body_to_input;
+        let body_a = (&a.template, 1.0, &pose_a);
+        let body_b = (&b.template, 1.0, &pose_b);
+        let result = match precision {
+            Precision::F64 => overlap_pair(&mut ws64, body_a, body_b),
+            Precision::F32 => overlap_pair(&mut ws32, body_a, body_b),
+        }
+        .map_err(|e| anyhow!("{}: {e}", field("")))?;
+        writeln!(out, "{}", overlap_json(result.intersects, &result.overlap))?;
+    }
+    Ok(())
+}
+
+fn wall_case<T: Real>(
+    ws: &mut OverlapWorkspace<T>,
+    body: &mut PosedPolytope<T>,
+    shape: &PlacedShape,
+    pose: &Isometry3<f64>,
+    triangles: &[[[f64; 3]; 3]],
+) -> Result<Value> {
+    let origin = pose.translation.vector;
+    body.place(&shape.template, 1.0, pose, &origin);
+    let mut facets = Vec::new();
+    let (mut total_area, mut total_volume) = (0.0, 0.0);
+    for tri in triangles {
+        let t: [Vector3<T>; 3] = tri.map(|p| cast(&(Vector3::from(p) - origin)));
+        let c = facet_contact(ws, body, &t)?;
+        total_area += c.area.f64();
+        total_volume += c.volume.f64();
+        let centroid = (c.area > T::zero()).then(|| vec_json(&(widen(&c.centroid) + origin)));
+        let dv_dx = (c.volume > T::zero()).then(|| vec_json(&widen(&c.dv_dx)));
+        facets.push(json!({"area": c.area.f64(), "centroid": centroid,
+                           "volume": c.volume.f64(), "dv_dx": dv_dx}));
+    }
+    Ok(json!({"area": total_area, "volume": total_volume, "facets": facets}))
+}
+
+/// `polydem probe wall FILE`: writes one JSON object per case: per-facet clipped section area and
+/// centroid, penetrating volume and its gradient, and their totals.
+pub fn probe_wall(path: &Path, precision: Precision, out: &mut dyn Write) -> Result<()> {
+    let (text, base) = read_input(path)?;
+    let input: WallInput = serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
+    let shapes = load_shapes(&input.shapes, base).with_context(|| format!("{}", path.display()))?;
+    let mut ws64 = PairWorkspace::<f64>::boxed();
+    let mut ws32 = PairWorkspace::<f32>::boxed();
+    for (i, case) in input.cases.iter().enumerate() {
+        let field = |f: &str| format!("{}: cases[{i}].{f}", path.display());
+        let shape = lookup(&shapes, &case.shape, &field("shape"))?;
+        let pose = pose_of(&case.pose, &field("pose"))? * shape.body_to_input;
+        if case.triangles.iter().flatten().flatten().any(|x| !x.is_finite()) {
+            bail!("{}: coordinates must be finite numbers", field("triangles"));
+        }
+        let value = match precision {
+            Precision::F64 => wall_case(&mut ws64.overlap, &mut ws64.a, shape, &pose, &case.triangles),
+            Precision::F32 => wall_case(&mut ws32.overlap, &mut ws32.a, shape, &pose, &case.triangles),
+        }
+        .map_err(|e| anyhow!("{}: {e}", field("")))?;
+        writeln!(out, "{value}")?;
+    }
+    Ok(())
+}
+
+/// `polydem shape info`: a template's counts and mass properties as one JSON object.
+pub fn shape_info(shape: &str, size: f64, out: &mut dyn Write) -> Result<()> {
+    let path = Path::new(shape);
+    let template = if path.exists() {
+        ConvexTemplate::from_file(path)?
+    } else {
+        Generator::parse(shape, size)?.build()?
+    };
+    let i = template.principal_inertia;
+    let value = json!({
+        "name": template.name,
+        "vertices": template.vertices.len(),
+        "faces": template.faces.len(),
+        "edges": template.edges.len(),
+        "volume": template.volume,
+        "principal_inertia_per_density": [i.x, i.y, i.z],
+        "circumscribed_radius": template.circumscribed_radius,
+        "equivalent_radius": template.equivalent_radius,
+    });
+    writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+    Ok(())
+}

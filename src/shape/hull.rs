@@ -1,0 +1,478 @@
+//! Convex hull of a point set with coplanar hull triangles merged into polygon faces.
+//!
+//! The seed paper (Sec. 2.1) stores a template as faces with one outward normal each, merging the
+//! adjacent triangles that share a normal. Here the triangle hull comes from parry3d-f64's
+//! quickhull (a closed, outward-wound triangle mesh); then
+//!
+//! 1. hull points closer than the tolerance are welded (near-duplicates of one corner);
+//! 2. faces are grown as regions of adjacent triangles: from the largest unassigned triangle,
+//!    a neighbour joins while all its vertices lie within `PLANE_TOL × size` of the seed
+//!    triangle's plane (a fixed plane, so the tolerance cannot chain across a gently curved
+//!    surface); regions of negligible area (slivers along an edge) join a neighbour;
+//! 3. a hull vertex is a template vertex when three or more faces meet at it: a point inside a
+//!    face (one face) or in the middle of an edge (two faces) is dropped, so each face's loop,
+//!    read from the region's boundary, has no interior or collinear middle vertices;
+//! 4. the result is checked to be a closed, consistently oriented 2-manifold with
+//!    V − E + F = 2 (Euler), so consumers can rely on the topology.
+//!
+//! Because the faces come from the quickhull's own triangle adjacency, the topology is consistent
+//! by construction even for noisy input near the tolerance.
+
+use super::{Face, ShapeError};
+use nalgebra::{Point3, Vector3};
+use std::collections::HashMap;
+
+/// Points within this fraction of the bounding-box diagonal of a plane count as on it. It is set
+/// by the coarsest input precision the importer must accept: STL stores f32 (relative 6e-8 per
+/// coordinate) and OBJ exporters often write 6 decimals, so the vertices of one face of a
+/// dodecahedron read from a file are coplanar only to about 1e-7 of its size. Two genuine faces
+/// closer than 1e-6 rad to coplanar do not occur in a DEM particle.
+pub(crate) const PLANE_TOL: f64 = 1e-6;
+
+/// A point set thinner than this fraction of its bounding-box diagonal has no usable volume.
+pub(crate) const FLAT_TOL: f64 = 1e-5;
+
+/// A convex polytope with merged faces, in the input's coordinates.
+pub(crate) struct Polytope {
+    pub vertices: Vec<Point3<f64>>,
+    pub faces: Vec<Face>,
+    pub edges: Vec<[u32; 2]>,
+    /// Volume of the exact (unmerged) triangle hull, for comparison with an input mesh's volume.
+    pub exact_hull_volume: f64,
+}
+
+fn degenerate(src: &str, message: String) -> ShapeError {
+    ShapeError::Degenerate {
+        source_name: src.to_string(),
+        message,
+    }
+}
+
+/// Builds the convex polytope of `points`; `src` names the input in errors.
+pub(crate) fn convex_polytope(points: &[Point3<f64>], src: &str) -> Result<Polytope, ShapeError> {
+    let n = points.len();
+    if n < 4 {
+        return Err(degenerate(
+            src,
+            format!("a convex particle needs at least 4 points, got {n}"),
+        ));
+    }
+    for (i, p) in points.iter().enumerate() {
+        if !p.iter().all(|x| x.is_finite()) {
+            return Err(degenerate(
+                src,
+                format!(
+                    "point {i} has a non-finite coordinate ({}, {}, {})",
+                    p.x, p.y, p.z
+                ),
+            ));
+        }
+    }
+    let size = check_extent(points, src)?;
+    let tol = PLANE_TOL * size;
+
+    let (hull_pts, hull_tris) = parry_hull(points, src)?;
+    let exact_hull_volume = super::MassProperties::from_triangles(&hull_pts, &hull_tris)
+        .map(|m| m.volume)
+        .ok_or_else(|| degenerate(src, "the convex hull has zero volume".to_string()))?;
+
+    // Weld hull points closer than the tolerance, so that near-duplicates do not become
+    // zero-length edges.
+    let (hull, remap) = weld(&hull_pts, tol);
+    let tris: Vec<[usize; 3]> = hull_tris
+        .iter()
+        .filter_map(|t| {
+            let a = *remap.get(t[0] as usize)?;
+            let b = *remap.get(t[1] as usize)?;
+            let c = *remap.get(t[2] as usize)?;
+            (a != b && b != c && a != c).then_some([a, b, c])
+        })
+        .collect();
+    let faces = merge_regions(&hull, &tris, tol).map_err(|why| {
+        degenerate(
+            src,
+            format!("hull construction failed ({why}); simplify or clean the mesh"),
+        )
+    })?;
+
+    // Template vertices: hull vertices where three or more faces meet.
+    let mut new_index = vec![u32::MAX; hull.len()];
+    let mut vertices = Vec::new();
+    let mut face_count = vec![0usize; hull.len()];
+    for f in &faces {
+        for &v in &f.boundary {
+            face_count[v] += 1;
+        }
+    }
+    for (i, p) in hull.iter().enumerate() {
+        if face_count[i] >= 3 {
+            new_index[i] = vertices.len() as u32;
+            vertices.push(*p);
+        }
+    }
+    let mut out_faces = Vec::with_capacity(faces.len());
+    for f in &faces {
+        let loop_idx: Vec<u32> = f
+            .boundary
+            .iter()
+            .filter(|&&v| face_count[v] >= 3)
+            .map(|&v| new_index[v])
+            .collect();
+        if loop_idx.len() < 3 {
+            return Err(degenerate(
+                src,
+                "hull construction failed (a merged face has fewer than 3 corners)".to_string(),
+            ));
+        }
+        out_faces.push(Face {
+            normal: f.normal,
+            offset: 0.0,
+            vertices: loop_idx,
+        });
+    }
+    // Offset = support value over all vertices (largest n·v): no vertex is outside any face
+    // plane. For exact input this is n·v of the face's own vertices to rounding.
+    for f in &mut out_faces {
+        f.offset = vertices
+            .iter()
+            .map(|v| f.normal.dot(&v.coords))
+            .fold(f64::NEG_INFINITY, f64::max);
+    }
+
+    let edges = check_topology(vertices.len(), &out_faces).map_err(|why| {
+        degenerate(
+            src,
+            format!("hull construction produced an invalid polytope ({why})"),
+        )
+    })?;
+    Ok(Polytope {
+        vertices,
+        faces: out_faces,
+        edges,
+        exact_hull_volume,
+    })
+}
+
+/// One merged face before vertex selection.
+struct Region {
+    /// Unit outward normal: the normalised sum of the member triangles' area vectors.
+    normal: Vector3<f64>,
+    /// Boundary loop (hull vertex indices), counter-clockwise seen from outside.
+    boundary: Vec<usize>,
+}
+
+/// Groups the closed triangle mesh `tris` into planar regions (see the module docs).
+fn merge_regions(
+    hull: &[Point3<f64>],
+    tris: &[[usize; 3]],
+    tol: f64,
+) -> Result<Vec<Region>, String> {
+    // Directed edge → triangle; the quickhull output must be a closed, oriented manifold.
+    let mut edge_tri: HashMap<(usize, usize), usize> = HashMap::with_capacity(3 * tris.len());
+    for (ti, t) in tris.iter().enumerate() {
+        for k in 0..3 {
+            if edge_tri.insert((t[k], t[(k + 1) % 3]), ti).is_some() {
+                return Err("quickhull mesh has a repeated edge".to_string());
+            }
+        }
+    }
+    let twin = |a: usize, b: usize| edge_tri.get(&(b, a)).copied();
+    if edge_tri.keys().any(|&(a, b)| twin(a, b).is_none()) {
+        return Err("quickhull mesh is not closed".to_string());
+    }
+    let area_vec = |t: &[usize; 3]| (hull[t[1]] - hull[t[0]]).cross(&(hull[t[2]] - hull[t[0]]));
+    let mut order: Vec<usize> = (0..tris.len()).collect();
+    order.sort_by(|&s, &t| {
+        area_vec(&tris[t])
+            .norm()
+            .total_cmp(&area_vec(&tris[s]).norm())
+    });
+
+    // Region growing from the largest triangles, against the seed's fixed plane.
+    let mut region = vec![usize::MAX; tris.len()];
+    let mut count = 0;
+    for &seed in &order {
+        if region[seed] != usize::MAX {
+            continue;
+        }
+        let r = count;
+        count += 1;
+        region[seed] = r;
+        let Some(n0) = area_vec(&tris[seed]).try_normalize(0.0) else {
+            continue; // zero-area triangle: left alone here, merged below
+        };
+        let d0 = tris[seed]
+            .iter()
+            .map(|&v| n0.dot(&hull[v].coords))
+            .sum::<f64>()
+            / 3.0;
+        let mut stack = vec![seed];
+        while let Some(t) = stack.pop() {
+            for k in 0..3 {
+                let Some(nb) = twin(tris[t][k], tris[t][(k + 1) % 3]) else {
+                    continue;
+                };
+                let on_plane = tris[nb]
+                    .iter()
+                    .all(|&v| (n0.dot(&hull[v].coords) - d0).abs() <= tol);
+                if region[nb] == usize::MAX && on_plane {
+                    region[nb] = r;
+                    stack.push(nb);
+                }
+            }
+        }
+    }
+
+    // Slivers: a region whose area is below tol × its longest edge joins the neighbouring region
+    // with which it shares the most edges (its vertices lie on that region's boundary).
+    let mut area = vec![Vector3::zeros(); count];
+    let mut longest = vec![0.0f64; count];
+    for (ti, t) in tris.iter().enumerate() {
+        area[region[ti]] += area_vec(t);
+        for k in 0..3 {
+            longest[region[ti]] =
+                longest[region[ti]].max((hull[t[(k + 1) % 3]] - hull[t[k]]).norm());
+        }
+    }
+    let mut target: Vec<usize> = (0..count).collect();
+    for r in 0..count {
+        if 0.5 * area[r].norm() > tol * longest[r] {
+            continue;
+        }
+        let mut shared: HashMap<usize, usize> = HashMap::new();
+        for t in tris
+            .iter()
+            .enumerate()
+            .filter(|(ti, _)| region[*ti] == r)
+            .map(|(_, t)| t)
+        {
+            for k in 0..3 {
+                if let Some(nb) = twin(t[k], t[(k + 1) % 3]) {
+                    let q = target[region[nb]];
+                    if q != r {
+                        *shared.entry(q).or_insert(0) += 1;
+                    }
+                }
+            }
+        }
+        if let Some((&q, _)) = shared
+            .iter()
+            .max_by_key(|(q, n)| (**n, std::cmp::Reverse(**q)))
+        {
+            target[r] = q;
+            for t in target.iter_mut() {
+                if *t == r {
+                    *t = q;
+                }
+            }
+        }
+    }
+    for r in region.iter_mut() {
+        *r = target[*r];
+    }
+
+    // Boundary loops: per region, the directed edges whose twin lies in another region.
+    let mut ids: Vec<usize> = region.clone();
+    ids.sort_unstable();
+    ids.dedup();
+    let slot = |r: usize| ids.binary_search(&r).unwrap_or(0);
+    let mut next: Vec<HashMap<usize, usize>> = vec![HashMap::new(); ids.len()];
+    let mut sum = vec![Vector3::zeros(); ids.len()];
+    for (ti, t) in tris.iter().enumerate() {
+        let r = slot(region[ti]);
+        sum[r] += area_vec(t);
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let inside = twin(a, b).is_some_and(|nb| region[nb] == region[ti]);
+            if !inside && next[r].insert(a, b).is_some() {
+                return Err("a merged face touches itself at a vertex".to_string());
+            }
+        }
+    }
+    let mut out = Vec::with_capacity(ids.len());
+    for (r, edges) in next.iter().enumerate() {
+        let Some(&start) = edges.keys().min() else {
+            return Err("a merged face has no boundary".to_string());
+        };
+        let mut boundary = vec![start];
+        let mut v = start;
+        while let Some(&w) = edges.get(&v) {
+            if w == start || boundary.len() > edges.len() {
+                break;
+            }
+            boundary.push(w);
+            v = w;
+        }
+        if boundary.len() != edges.len() {
+            return Err("a merged face is not a disk".to_string());
+        }
+        let normal = sum[r]
+            .try_normalize(0.0)
+            .ok_or("a merged face has zero area")?;
+        out.push(Region { normal, boundary });
+    }
+    Ok(out)
+}
+
+/// Checks that the points span a volume and returns their bounding-box diagonal.
+fn check_extent(points: &[Point3<f64>], src: &str) -> Result<f64, ShapeError> {
+    let mut lo = points[0].coords;
+    let mut hi = lo;
+    for p in points {
+        lo = lo.inf(&p.coords);
+        hi = hi.sup(&p.coords);
+    }
+    let size = (hi - lo).norm();
+    if size == 0.0 {
+        return Err(degenerate(
+            src,
+            format!("all {} points coincide", points.len()),
+        ));
+    }
+    if !(1e-100..=1e100).contains(&size) {
+        return Err(ShapeError::BadParameter {
+            source_name: src.to_string(),
+            message: format!(
+                "bounding-box diagonal {size:e} is outside the supported range 1e-100..1e100"
+            ),
+        });
+    }
+    // Affine rank: farthest point from p0, farthest from that line, extent normal to that plane.
+    let p0 = points[0];
+    let far = |f: &dyn Fn(&Point3<f64>) -> f64| points.iter().map(f).fold(0.0f64, f64::max);
+    let argfar = |f: &dyn Fn(&Point3<f64>) -> f64| {
+        points
+            .iter()
+            .copied()
+            .max_by(|a, b| f(a).total_cmp(&f(b)))
+            .unwrap_or(p0)
+    };
+    let p1 = argfar(&|p| (p - p0).norm());
+    let axis = (p1 - p0).normalize();
+    let off_line = |p: &Point3<f64>| {
+        let d = p - p0;
+        (d - axis * axis.dot(&d)).norm()
+    };
+    let p2 = argfar(&off_line);
+    let line_dist = off_line(&p2);
+    if line_dist <= FLAT_TOL * size {
+        return Err(degenerate(
+            src,
+            format!(
+                "all {} points are collinear (largest distance from a line {line_dist:.3e}, size {size:.3e}); a particle needs volume",
+                points.len()
+            ),
+        ));
+    }
+    let normal = axis.cross(&(p2 - p0)).normalize();
+    let above = far(&|p| normal.dot(&(p - p0)));
+    let below = far(&|p| -normal.dot(&(p - p0)));
+    let thickness = above + below;
+    if thickness <= FLAT_TOL * size {
+        return Err(degenerate(
+            src,
+            format!(
+                "all {} points are coplanar (thickness {thickness:.3e} is below {FLAT_TOL:e} of the size {size:.3e}); a particle needs volume",
+                points.len()
+            ),
+        ));
+    }
+    Ok(size)
+}
+
+type HullMesh = (Vec<Point3<f64>>, Vec<[u32; 3]>);
+
+/// parry3d-f64's quickhull, with failures (including panics inside it) turned into errors.
+fn parry_hull(points: &[Point3<f64>], src: &str) -> Result<HullMesh, ShapeError> {
+    use parry3d_f64::math::Vector;
+    let pts: Vec<Vector> = points.iter().map(|p| Vector::new(p.x, p.y, p.z)).collect();
+    let result = std::panic::catch_unwind(|| parry3d_f64::transformation::try_convex_hull(&pts));
+    match result {
+        Ok(Ok((verts, tris))) => Ok((
+            verts.iter().map(|v| Point3::new(v.x, v.y, v.z)).collect(),
+            tris,
+        )),
+        Ok(Err(e)) => Err(degenerate(src, format!("convex hull failed: {e:?}"))),
+        Err(_) => Err(degenerate(
+            src,
+            "convex hull failed (quickhull aborted)".to_string(),
+        )),
+    }
+}
+
+/// Merges points closer than `tol` (sweep along x); returns the kept points and, for each input
+/// point, its index among them.
+fn weld(points: &[Point3<f64>], tol: f64) -> (Vec<Point3<f64>>, Vec<usize>) {
+    let mut order: Vec<usize> = (0..points.len()).collect();
+    order.sort_by(|&a, &b| points[a].x.total_cmp(&points[b].x));
+    let mut rep: Vec<usize> = (0..points.len()).collect();
+    for (k, &i) in order.iter().enumerate() {
+        if rep[i] != i {
+            continue;
+        }
+        for &j in &order[k + 1..] {
+            if points[j].x - points[i].x > tol {
+                break;
+            }
+            if rep[j] == j && (points[j] - points[i]).norm() <= tol {
+                rep[j] = i;
+            }
+        }
+    }
+    let mut index = vec![usize::MAX; points.len()];
+    let mut kept = Vec::new();
+    for i in 0..points.len() {
+        if rep[i] == i {
+            index[i] = kept.len();
+            kept.push(points[i]);
+        }
+    }
+    let remap = (0..points.len()).map(|i| index[rep[i]]).collect();
+    (kept, remap)
+}
+
+/// Checks that the faces form a closed, consistently oriented 2-manifold of genus 0 and returns
+/// its undirected edges (lower index first, sorted).
+pub(crate) fn check_topology(num_vertices: usize, faces: &[Face]) -> Result<Vec<[u32; 2]>, String> {
+    let mut directed: HashMap<(u32, u32), usize> = HashMap::new();
+    let mut used = vec![false; num_vertices];
+    for (fi, f) in faces.iter().enumerate() {
+        if f.vertices.len() < 3 {
+            return Err(format!("face {fi} has {} vertices", f.vertices.len()));
+        }
+        for k in 0..f.vertices.len() {
+            let a = f.vertices[k];
+            let b = f.vertices[(k + 1) % f.vertices.len()];
+            if a as usize >= num_vertices || b as usize >= num_vertices {
+                return Err(format!("face {fi} has an out-of-range vertex"));
+            }
+            used[a as usize] = true;
+            if directed.insert((a, b), fi).is_some() {
+                return Err(format!("edge {a}-{b} is used twice in the same direction"));
+            }
+        }
+    }
+    if let Some(v) = used.iter().position(|u| !u) {
+        return Err(format!("vertex {v} is on no face"));
+    }
+    let mut edges = Vec::with_capacity(directed.len() / 2);
+    for &(a, b) in directed.keys() {
+        if !directed.contains_key(&(b, a)) {
+            return Err(format!("edge {a}-{b} has only one face"));
+        }
+        if a < b {
+            edges.push([a, b]);
+        }
+    }
+    edges.sort_unstable();
+    let euler = num_vertices as i64 - edges.len() as i64 + faces.len() as i64;
+    if euler != 2 {
+        return Err(format!(
+            "V - E + F = {} - {} + {} = {euler}, not 2",
+            num_vertices,
+            edges.len(),
+            faces.len()
+        ));
+    }
+    Ok(edges)
+}

@@ -1,0 +1,140 @@
+//! Shared test support: repository paths, the test shape set, random poses, and an independent
+//! exact oracle for the intersection of convex polytopes.
+#![allow(dead_code)]
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use polydem::rng::Rng;
+use polydem::shape::{ConvexTemplate, Generator};
+use std::path::PathBuf;
+
+/// The repository root: `POLYDEM_ROOT` when set, else the current directory (tests also run on
+/// machines where the source tree is not at its original path).
+pub fn repo_root() -> PathBuf {
+    std::env::var_os("POLYDEM_ROOT")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| std::env::current_dir().expect("current directory"))
+}
+
+/// A template with a scale, as particles carry them.
+pub struct Shape {
+    pub name: &'static str,
+    pub template: ConvexTemplate,
+}
+
+/// The shapes of the geometry acceptance tests: the seed's cases plus plates, needles and a
+/// 1:20 size ratio.
+pub fn test_shapes() -> Vec<Shape> {
+    let g = |name: &'static str, generator: Generator| Shape { name, template: generator.build().unwrap() };
+    let file = |name: &'static str, f: &str| Shape {
+        name,
+        template: ConvexTemplate::from_file(&repo_root().join("meshes/particles").join(f))
+            .unwrap_or_else(|e| panic!("{e}"))
+            .scaled(1000.0), // mm-sized files → unit-ish sizes keep the tolerances readable
+    };
+    vec![
+        g("tetrahedron", Generator::Tetrahedron { size: 1.0 }),
+        g("cube", Generator::Cube { size: 1.0 }),
+        g("octahedron", Generator::Octahedron { size: 1.0 }),
+        g("dodecahedron", Generator::Dodecahedron { size: 1.0 }),
+        g("icosahedron", Generator::Icosahedron { size: 1.0 }),
+        file("cylinder_42", "cylinder_42.stl"),
+        file("catalyst_cylinder", "catalyst_cylinder.stl"),
+        file("mineral_grain", "mineral_grain.stl"),
+        g("plate", Generator::Cuboid { a: 1.0, b: 0.8, c: 0.04 }),
+        g("needle", Generator::Prism { sides: 6, diameter: 0.05, height: 1.0 }),
+        g("small_dodecahedron", Generator::Dodecahedron { size: 0.05 }),
+    ]
+}
+
+/// A uniformly random rotation.
+pub fn random_rotation(rng: &mut Rng) -> UnitQuaternion<f64> {
+    let [w, x, y, z] = rng.unit_quaternion();
+    UnitQuaternion::new_normalize(nalgebra::Quaternion::new(w, x, y, z))
+}
+
+/// A pose from a position and a rotation.
+pub fn pose(p: Vector3<f64>, q: UnitQuaternion<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(Translation3::from(p), q)
+}
+
+/// World vertices of a posed template.
+pub fn world_vertices(t: &ConvexTemplate, pose: &Isometry3<f64>) -> Vec<Vector3<f64>> {
+    t.vertices.iter().map(|v| (pose * v).coords).collect()
+}
+
+/// World face planes `(n, h)` of a posed template.
+pub fn world_planes(t: &ConvexTemplate, pose: &Isometry3<f64>) -> Vec<(Vector3<f64>, f64)> {
+    t.faces
+        .iter()
+        .map(|f| {
+            let n = pose.rotation * f.normal;
+            (n, f.offset + n.dot(&pose.translation.vector))
+        })
+        .collect()
+}
+
+/// Exact oracle, independent of the code under test: the vertices of `∩ {n·x <= h}` by brute
+/// force over all plane triples, then parry3d-f64's convex hull of those vertices and the volume
+/// and centroid of that hull by signed tetrahedra.
+pub struct OracleOverlap {
+    pub volume: f64,
+    pub centroid: Vector3<f64>,
+}
+
+pub fn oracle_intersection(planes: &[(Vector3<f64>, f64)], scale: f64) -> OracleOverlap {
+    let tol = 1e-11 * scale;
+    let mut pts: Vec<Vector3<f64>> = Vec::new();
+    let m = planes.len();
+    for i in 0..m {
+        for j in i + 1..m {
+            let cij = planes[i].0.cross(&planes[j].0);
+            if cij.norm() < 1e-12 {
+                continue;
+            }
+            for k in j + 1..m {
+                let det = cij.dot(&planes[k].0);
+                if det.abs() < 1e-12 {
+                    continue;
+                }
+                let (ni, nj, nk) = (planes[i].0, planes[j].0, planes[k].0);
+                let x = (nj.cross(&nk) * planes[i].1 + nk.cross(&ni) * planes[j].1 + cij * planes[k].1) / det;
+                // Vertices where more than three planes meet come out several times; keep one
+                // copy so the hull below sees distinct points.
+                if planes.iter().all(|(n, h)| n.dot(&x) <= h + tol)
+                    && pts.iter().all(|p| (p - x).norm() > 1e-9 * scale)
+                {
+                    pts.push(x);
+                }
+            }
+        }
+    }
+    if pts.len() < 4 {
+        return OracleOverlap { volume: 0.0, centroid: Vector3::zeros() };
+    }
+    // Shift to the mean for a well-conditioned hull and tetrahedra.
+    let mean = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
+    let glam: Vec<parry3d_f64::math::Vector> = pts
+        .iter()
+        .map(|p| parry3d_f64::math::Vector::new(p.x - mean.x, p.y - mean.y, p.z - mean.z))
+        .collect();
+    let (hv, ht) = parry3d_f64::transformation::convex_hull(&glam);
+    let mut vol = 0.0;
+    let mut cen = Vector3::zeros();
+    for t in &ht {
+        let a = Vector3::new(hv[t[0] as usize].x, hv[t[0] as usize].y, hv[t[0] as usize].z);
+        let b = Vector3::new(hv[t[1] as usize].x, hv[t[1] as usize].y, hv[t[1] as usize].z);
+        let c = Vector3::new(hv[t[2] as usize].x, hv[t[2] as usize].y, hv[t[2] as usize].z);
+        let v = a.dot(&b.cross(&c)) / 6.0;
+        vol += v;
+        cen += (a + b + c) * (v / 4.0);
+    }
+    if vol.abs() <= 0.0 {
+        return OracleOverlap { volume: 0.0, centroid: mean };
+    }
+    OracleOverlap { volume: vol.abs(), centroid: cen / vol + mean }
+}
+
+/// Point `p` placed with an f64 `Point3` convenience.
+pub fn p3(x: f64, y: f64, z: f64) -> Point3<f64> {
+    Point3::new(x, y, z)
+}
