@@ -28,10 +28,10 @@ fn scratch() {
                 let mapped: Vec<_> = pts.iter().map(|p| t.file_to_body * p).collect();
                 let mut worst: f64 = 0.0;
                 for f in &t.faces { for m in &mapped { worst = worst.max(f.normal.dot(&m.coords) - f.offset); } }
-                if worst > 1e-5 * size { println!("trial {trial} kind {kind} noise {noise}: input point outside by {:e}", worst/size); bad = true; }
+                if worst > 1e-5 * size { println!("trial {trial} kind {kind} noise {noise}: input point outside by {:e} nf {} nv {} pts {:?}", worst/size, t.faces.len(), t.vertices.len(), pts.iter().map(|p| [p.x,p.y,p.z]).collect::<Vec<_>>()); bad = true; }
                 if bad { "ok-but-bad".to_string() } else { "ok".to_string() }
             }
-            Err(e) => { let s = e.to_string(); if s.contains("invalid polytope") || s.contains("hull failed") { println!("trial {trial} kind {kind} noise {noise} n {n}: {s}"); } s.split(':').nth(1).unwrap_or("").chars().take(30).collect() }
+            Err(e) => { let s = e.to_string(); if s.contains("construction fail") { println!("trial {trial} kind {kind} noise {noise} n {n}: {s}"); } s.split(':').nth(1).unwrap_or("").chars().take(30).collect() }
         };
         *stats.entry(key).or_insert(0) += 1;
     }

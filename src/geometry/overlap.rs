@@ -18,7 +18,8 @@
 //! - volume `V = Σ_u δ_u A_u / 3` (pyramids from `x₀`, Eq. 9);
 //! - centroid `Σ_u (δ_u A_u / 3)(3/4) c_u / V`;
 //! - `S = dV/dx_B = Σ_{u ∈ B} A_u n_u`, the vector area of the part of the intersection surface
-//!   lying on B (Feng, Han & Owen 2012; `|S| = A_n`, `−S/|S|` the normal from A to B);
+//!   lying on B (Feng, Han & Owen 2012; `|S| = A_n`, `−S/|S|` the normal from A to B); a face
+//!   lying on coincident planes of A and B counts half to each;
 //! - `M_B = Σ_{u ∈ B} A_u (c_u − c) × n_u`, the moment of that surface about the overlap
 //!   centroid `c`, from which the energy-conserving torque on B about its centre `x_B` is
 //!   `−U'(V) (M_B + (c − x_B) × S)` (../shared/reference/validation.md §1). For A the moment is
@@ -91,6 +92,7 @@ pub struct OverlapWorkspace<T: Real> {
     area: [T; MAX_HULL_POINTS],
     first_moment: [Vector3<T>; MAX_HULL_POINTS],
     vertex: [Vector3<T>; MAX_HULL_FACES],
+    share_b: [T; MAX_HULL_POINTS],
     x0: Vector3<T>,
 }
 
@@ -104,6 +106,7 @@ impl<T: Real> Default for OverlapWorkspace<T> {
             area: [T::zero(); MAX_HULL_POINTS],
             first_moment: [Vector3::zeros(); MAX_HULL_POINTS],
             vertex: [Vector3::zeros(); MAX_HULL_FACES],
+            share_b: [T::zero(); MAX_HULL_POINTS],
             x0: Vector3::zeros(),
         }
     }
@@ -147,25 +150,40 @@ pub fn overlap_volume<T: Real>(
         return Err(OverlapError::TooManyPlanes(m));
     }
     let centre = chebyshev_centre(a, b, start);
-    let x0 = centre.point;
+    overlap_about(ws, a, b, centre.point)
+}
+
+/// [`overlap_volume`] about a given interior point `x0` (normally the Chebyshev centre).
+fn overlap_about<T: Real>(
+    ws: &mut OverlapWorkspace<T>,
+    a: &[Plane<T>],
+    b: &[Plane<T>],
+    x0: Vector3<T>,
+) -> Result<Overlap<T>, OverlapError> {
+    let m = a.len() + b.len();
+    if m > MAX_HULL_POINTS {
+        return Err(OverlapError::TooManyPlanes(m));
+    }
     ws.x0 = x0;
     let mut scale = T::zero();
+    let mut radius = T::max_value().unwrap_or(T::one());
     for (i, p) in a.iter().chain(b).enumerate() {
         ws.normal[i] = p.normal;
         ws.delta[i] = p.offset - p.normal.dot(&x0);
         scale = scale.max(ws.delta[i]);
+        radius = radius.min(ws.delta[i]);
     }
-    let none = Overlap { depth: centre.radius, ..Overlap::default() };
+    let none = Overlap { depth: radius, ..Overlap::default() };
     for i in 0..m {
         ws.area[i] = T::zero();
     }
-    if centre.radius <= T::of(16.0) * T::EPSILON * scale {
+    if radius <= T::of(16.0) * T::EPSILON * scale {
         return Ok(none);
     }
     // Polar transform (seed Alg. II). Every δ is at least the inscribed radius, so every dual
     // point is finite.
     for i in 0..m {
-        ws.delta[i] = ws.delta[i].max(centre.radius);
+        ws.delta[i] = ws.delta[i].max(radius);
         ws.dual[i] = ws.normal[i] / ws.delta[i];
     }
     let mut result = Err(HullError::Degenerate);
@@ -176,6 +194,26 @@ pub fn overlap_volume<T: Real>(
         }
     }
     result?;
+
+    // Share of each plane's face in S: 1 for B's planes, 0 for A's, except that a plane of A and
+    // a plane of B that coincide (dual points within the hull tolerance: aligned faces, a cube
+    // on a cube) bound the overlap with one face, of which the hull keeps one copy. V is not
+    // differentiable there (moving B one way grows the overlap, the other way does not); we take
+    // the mean of the one-sided derivatives, half the face to each body, so that S does not
+    // depend on which copy the hull happened to keep.
+    let tol = ws.hull.tolerance();
+    let na = a.len();
+    for i in 0..m {
+        ws.share_b[i] = if i < na { T::zero() } else { T::one() };
+    }
+    for i in 0..na {
+        for j in na..m {
+            if (ws.dual[i] - ws.dual[j]).norm_squared() <= tol * tol {
+                ws.share_b[i] = T::of(0.5);
+                ws.share_b[j] = T::of(0.5);
+            }
+        }
+    }
 
     // Intersection vertices, one per dual triangle (seed Alg. VI, by Cramer's rule).
     for (s, t) in ws.hull.triangles() {
@@ -231,9 +269,10 @@ pub fn overlap_volume<T: Real>(
     let mut moment_b = Vector3::zeros();
     for i in 0..m {
         centroid += ws.first_moment[i] * (ws.delta[i] * T::of(0.25));
-        if i >= a.len() {
-            dv_dxb += ws.normal[i] * ws.area[i];
-            moment_b += ws.first_moment[i].cross(&ws.normal[i]);
+        let share = ws.share_b[i];
+        if share > T::zero() {
+            dv_dxb += ws.normal[i] * (ws.area[i] * share);
+            moment_b += ws.first_moment[i].cross(&ws.normal[i]) * share;
         }
     }
     centroid /= volume;
@@ -244,7 +283,7 @@ pub fn overlap_volume<T: Real>(
         centroid: centroid + x0,
         dv_dxb,
         moment_b,
-        depth: centre.radius,
+        depth: radius,
     })
 }
 
@@ -293,8 +332,16 @@ pub fn overlap_pair<T: Real>(
     let dir = ws.b.centre - ws.a.centre;
     let intersects = gjk_intersect(ws.a.vertices(), ws.b.vertices(), dir);
     let overlap = if intersects {
+        // Interior point in T, then the frame moved onto it (in f64) before the dual transform:
+        // the planes that bound the overlap then have offsets of the overlap's size, so their
+        // distances δ keep full relative precision in f32 even for a shallow contact of bodies
+        // large compared with it.
         let start = (ws.a.centre + ws.b.centre) * T::of(0.5);
-        overlap_volume(&mut ws.overlap, ws.a.planes(), ws.b.planes(), start)?.to_world(&origin)
+        let centre = chebyshev_centre(ws.a.planes(), ws.b.planes(), start);
+        let origin = origin + widen(&centre.point);
+        ws.a.place(ta, sa, pose_a, &origin);
+        ws.b.place(tb, sb, pose_b, &origin);
+        overlap_about(&mut ws.overlap, ws.a.planes(), ws.b.planes(), Vector3::zeros())?.to_world(&origin)
     } else {
         Overlap::default()
     };

@@ -46,6 +46,8 @@ pub struct HullTriangle<T: Real> {
     pub normal: Vector3<T>,
     /// Plane offset: `normal · y = offset` on the triangle.
     pub offset: T,
+    /// The vertex of smallest magnitude, from which distances are measured.
+    anchor: u16,
     far: i32,
     far_dist: T,
     alive: bool,
@@ -159,9 +161,13 @@ impl<T: Real> DualHull<T> {
         Ok(())
     }
 
+    /// Signed distance of point `p` from triangle `slot`'s plane, measured from the triangle's
+    /// smallest vertex: dual hulls of thin overlaps mix points of very different magnitude
+    /// (a plane with small δ maps far out), and measuring from a far vertex would put round-off
+    /// of that vertex's size on distances between nearby small points.
     fn distance(&self, slot: usize, p: usize) -> T {
         let t = &self.tri[slot];
-        t.normal.dot(&self.pts[p]) - t.offset
+        t.normal.dot(&(self.pts[p] - self.pts[t.anchor as usize]))
     }
 
     fn alloc(&mut self) -> Result<usize, HullError> {
@@ -179,18 +185,33 @@ impl<T: Real> DualHull<T> {
     /// Creates triangle (a, b, c) with its plane; adjacency is set by the caller.
     fn make(&mut self, a: u16, b: u16, c: u16) -> Result<usize, HullError> {
         let s = self.alloc()?;
-        let (pa, pb, pc) = (self.pts[a as usize], self.pts[b as usize], self.pts[c as usize]);
-        let n = (pb - pa).cross(&(pc - pa));
+        // Cross the two edges leaving the smallest vertex: their round-off is proportional to
+        // the triangle's own edges rather than to the largest coordinate involved.
+        let ids = [a, b, c];
+        let mags = ids.map(|i| self.pts[i as usize].norm_squared());
+        let k = if mags[0] <= mags[1] && mags[0] <= mags[2] {
+            0
+        } else if mags[1] <= mags[2] {
+            1
+        } else {
+            2
+        };
+        let anchor = ids[k];
+        let p0 = self.pts[anchor as usize];
+        let p1 = self.pts[ids[(k + 1) % 3] as usize];
+        let p2 = self.pts[ids[(k + 2) % 3] as usize];
+        let n = (p1 - p0).cross(&(p2 - p0));
         let len = n.norm();
         // A zero-area triangle gets a zero normal: no point is ever outside it, and the
         // overlap computation gives it no area. It only arises from exactly collinear points.
         let normal = if len > T::zero() { n / len } else { Vector3::zeros() };
-        let offset = normal.dot(&((pa + pb + pc) / T::of(3.0)));
+        let offset = normal.dot(&p0);
         self.tri[s] = HullTriangle {
             v: [a, b, c],
             adj: [NONE; 3],
             normal,
             offset,
+            anchor,
             far: -1,
             far_dist: T::zero(),
             alive: true,

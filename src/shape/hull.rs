@@ -71,14 +71,86 @@ pub(crate) fn convex_polytope(points: &[Point3<f64>], src: &str) -> Result<Polyt
     let size = check_extent(points, src)?;
     let tol = PLANE_TOL * size;
 
-    let (hull_pts, hull_tris) = parry_hull(points, src)?;
+    // Quickhull and face merging can fail on exactly degenerate or tolerance-scale noisy input
+    // (coplanar points: parry's quickhull may drop a point or emit a non-manifold mesh; welding
+    // near-duplicates may pinch the mesh). Each result is checked (closed manifold, Euler, every
+    // input point inside), and on failure retried without welding, then on points perturbed far
+    // below the tolerance (the hull's combinatorics from the perturbed points, its coordinates
+    // the original ones).
+    let attempts = [
+        (true, None),
+        (false, None),
+        (true, Some(1)),
+        (false, Some(2)),
+        (false, Some(3)),
+    ];
+    let mut why = String::new();
+    for (welded, perturb) in attempts {
+        match attempt(points, tol, welded, perturb) {
+            Ok(poly) => match outside_point(points, &poly, 2.0 * tol) {
+                None => return Ok(poly),
+                Some(i) => why = format!("input point {i} is outside the computed hull"),
+            },
+            Err(e) => why = e,
+        }
+    }
+    Err(degenerate(
+        src,
+        format!("convex hull construction failed ({why}); simplify or clean the point set"),
+    ))
+}
+
+/// The first input point farther than `tol` outside a face plane, if any. Skipped (None) for
+/// hulls with more faces than a template may have: those are rejected anyway, by count.
+fn outside_point(points: &[Point3<f64>], poly: &Polytope, tol: f64) -> Option<usize> {
+    if poly.faces.len() > super::MAX_TEMPLATE_FACES {
+        return None;
+    }
+    points.iter().position(|p| {
+        poly.faces
+            .iter()
+            .any(|f| f.normal.dot(&p.coords) > f.offset + tol)
+    })
+}
+
+/// One hull construction: quickhull (optionally on perturbed points), optional welding, face
+/// merging, vertex selection and topology check.
+fn attempt(
+    points: &[Point3<f64>],
+    tol: f64,
+    welded: bool,
+    perturb: Option<u64>,
+) -> Result<Polytope, String> {
+    let (hull_pts, hull_tris) = match perturb {
+        None => parry_hull(points)?,
+        Some(seed) => {
+            let mut rng = crate::rng::Rng::new(seed);
+            let moved: Vec<Point3<f64>> = points
+                .iter()
+                .map(|p| {
+                    let u = rng.unit_vector();
+                    p + Vector3::new(u[0], u[1], u[2]) * (1e-3 * tol)
+                })
+                .collect();
+            let key = |p: &Point3<f64>| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+            let index: HashMap<[u64; 3], usize> =
+                moved.iter().enumerate().map(|(i, p)| (key(p), i)).collect();
+            let (hv, ht) = parry_hull(&moved)?;
+            let orig = hv
+                .iter()
+                .map(|p| index.get(&key(p)).map(|&i| points[i]))
+                .collect::<Option<Vec<_>>>()
+                .ok_or("quickhull returned a point not in its input")?;
+            (orig, ht)
+        }
+    };
     let exact_hull_volume = super::MassProperties::from_triangles(&hull_pts, &hull_tris)
         .map(|m| m.volume)
-        .ok_or_else(|| degenerate(src, "the convex hull has zero volume".to_string()))?;
+        .ok_or("the convex hull has zero volume")?;
 
-    // Weld hull points closer than the tolerance, so that near-duplicates do not become
-    // zero-length edges.
-    let (hull, remap) = weld(&hull_pts, tol);
+    // Weld hull points closer than the tolerance, so that near-duplicates of one corner do not
+    // become zero-length edges.
+    let (hull, remap) = weld(&hull_pts, if welded { tol } else { 0.0 });
     let tris: Vec<[usize; 3]> = hull_tris
         .iter()
         .filter_map(|t| {
@@ -88,12 +160,7 @@ pub(crate) fn convex_polytope(points: &[Point3<f64>], src: &str) -> Result<Polyt
             (a != b && b != c && a != c).then_some([a, b, c])
         })
         .collect();
-    let faces = merge_regions(&hull, &tris, tol).map_err(|why| {
-        degenerate(
-            src,
-            format!("hull construction failed ({why}); simplify or clean the mesh"),
-        )
-    })?;
+    let faces = merge_regions(&hull, &tris, tol)?;
 
     // Template vertices: hull vertices where three or more faces meet.
     let mut new_index = vec![u32::MAX; hull.len()];
@@ -119,10 +186,7 @@ pub(crate) fn convex_polytope(points: &[Point3<f64>], src: &str) -> Result<Polyt
             .map(|&v| new_index[v])
             .collect();
         if loop_idx.len() < 3 {
-            return Err(degenerate(
-                src,
-                "hull construction failed (a merged face has fewer than 3 corners)".to_string(),
-            ));
+            return Err("a merged face has fewer than 3 corners".to_string());
         }
         out_faces.push(Face {
             normal: f.normal,
@@ -137,14 +201,21 @@ pub(crate) fn convex_polytope(points: &[Point3<f64>], src: &str) -> Result<Polyt
             .iter()
             .map(|v| f.normal.dot(&v.coords))
             .fold(f64::NEG_INFINITY, f64::max);
+        // Each face's own vertices must lie on its plane (merged within `tol` of the seed plane,
+        // so within a few `tol` of the fitted one): otherwise the quickhull mesh was not convex.
+        let depth = f
+            .vertices
+            .iter()
+            .map(|&v| f.offset - f.normal.dot(&vertices[v as usize].coords))
+            .fold(0.0, f64::max);
+        if depth > 4.0 * tol {
+            return Err(format!(
+                "a merged face is not planar ({depth:.3e} > {:.3e}): the quickhull mesh is not convex",
+                4.0 * tol
+            ));
+        }
     }
-
-    let edges = check_topology(vertices.len(), &out_faces).map_err(|why| {
-        degenerate(
-            src,
-            format!("hull construction produced an invalid polytope ({why})"),
-        )
-    })?;
+    let edges = check_topology(vertices.len(), &out_faces)?;
     Ok(Polytope {
         vertices,
         faces: out_faces,
@@ -383,7 +454,7 @@ fn check_extent(points: &[Point3<f64>], src: &str) -> Result<f64, ShapeError> {
 type HullMesh = (Vec<Point3<f64>>, Vec<[u32; 3]>);
 
 /// parry3d-f64's quickhull, with failures (including panics inside it) turned into errors.
-fn parry_hull(points: &[Point3<f64>], src: &str) -> Result<HullMesh, ShapeError> {
+fn parry_hull(points: &[Point3<f64>]) -> Result<HullMesh, String> {
     use parry3d_f64::math::Vector;
     let pts: Vec<Vector> = points.iter().map(|p| Vector::new(p.x, p.y, p.z)).collect();
     let result = std::panic::catch_unwind(|| parry3d_f64::transformation::try_convex_hull(&pts));
@@ -392,11 +463,8 @@ fn parry_hull(points: &[Point3<f64>], src: &str) -> Result<HullMesh, ShapeError>
             verts.iter().map(|v| Point3::new(v.x, v.y, v.z)).collect(),
             tris,
         )),
-        Ok(Err(e)) => Err(degenerate(src, format!("convex hull failed: {e:?}"))),
-        Err(_) => Err(degenerate(
-            src,
-            "convex hull failed (quickhull aborted)".to_string(),
-        )),
+        Ok(Err(e)) => Err(format!("quickhull failed: {e:?}")),
+        Err(_) => Err("quickhull aborted".to_string()),
     }
 }
 

@@ -189,7 +189,7 @@ impl ConvexTemplate {
             .map(|f| {
                 let normal = (rot * f.normal).normalize();
                 Face {
-                    offset: plane_offset(&normal, &f.vertices, &vertices),
+                    offset: plane_offset(&normal, &vertices),
                     normal,
                     vertices: f.vertices.clone(),
                 }
@@ -282,13 +282,14 @@ fn fan(faces: &[Face]) -> Vec<[u32; 3]> {
     tris
 }
 
-/// Plane offset of a face: the largest `n · v` over its vertices. For an exactly planar face
-/// this is the mean to rounding; for a face merged within the coplanarity tolerance it keeps
-/// every vertex inside every face plane (`n · v <= offset` for all vertices and faces), so the
-/// half-space and vertex descriptions contain each other and the contact kernels can rely on it.
-fn plane_offset(n: &Vector3<f64>, idx: &[u32], vertices: &[Point3<f64>]) -> f64 {
-    idx.iter()
-        .filter_map(|&i| vertices.get(i as usize))
+/// Plane offset of a face: the support value `max_v n · v` over all vertices. For an exactly
+/// planar face this is `n · v` of its own vertices to rounding; for a face merged within the
+/// coplanarity tolerance it keeps every vertex inside every face plane (`n · v <= offset` for all
+/// vertices and faces), so the half-space and vertex descriptions contain each other and the
+/// contact kernels can rely on it.
+fn plane_offset(n: &Vector3<f64>, vertices: &[Point3<f64>]) -> f64 {
+    vertices
+        .iter()
         .map(|v| n.dot(&v.coords))
         .fold(f64::NEG_INFINITY, f64::max)
 }
