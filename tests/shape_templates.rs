@@ -330,11 +330,8 @@ fn prisms_match_closed_forms() {
             );
             let mut want = [perp, perp, axis];
             want.sort_by(f64::total_cmp);
-            for k in 0..3 {
-                assert!(
-                    rel(t.principal_inertia[k], want[k]) < 1e-12,
-                    "prism{sides} I{k}"
-                );
+            for (k, w) in want.iter().enumerate() {
+                assert!(rel(t.principal_inertia[k], *w) < 1e-12, "prism{sides} I{k}");
             }
             check_invariants(&t, 1e-12);
             check_file_to_body(&t, &g.points().unwrap(), 1e-12);
@@ -409,12 +406,11 @@ fn random_hulls_match_parry() {
         let pi = mp.principal_inertia();
         let mut theirs = [pi.x, pi.y, pi.z];
         theirs.sort_by(f64::total_cmp);
-        for k in 0..3 {
+        for (k, th) in theirs.iter().enumerate() {
             assert!(
-                rel(t.principal_inertia[k], theirs[k]) < 1e-10,
-                "I{k} {} vs {}",
-                t.principal_inertia[k],
-                theirs[k]
+                rel(t.principal_inertia[k], *th) < 1e-10,
+                "I{k} {} vs {th}",
+                t.principal_inertia[k]
             );
         }
         // Full tensor in the input frame: R diag(I) Rᵀ against parry's.
@@ -1042,4 +1038,25 @@ fn large_point_clouds_are_fast_and_rejected_cleanly() {
         "{e}"
     );
     assert!(start.elapsed().as_secs_f64() < 5.0, "{:?}", start.elapsed());
+}
+
+#[test]
+fn generators_deserialize_from_toml() {
+    let g: Generator =
+        toml::from_str("kind = \"prism\"\nsides = 20\ndiameter = 8e-3\nheight = 5.3e-3\n").unwrap();
+    assert_eq!(
+        g,
+        Generator::Prism {
+            sides: 20,
+            diameter: 8e-3,
+            height: 5.3e-3
+        }
+    );
+    assert_eq!(g.name(), "prism20");
+    let g: Generator = toml::from_str(
+        "kind = \"random_hull\"\npoints = 18\nsize = 2e-3\nseed = 2024\naspect = [1.0, 0.8, 0.6]\n",
+    )
+    .unwrap();
+    assert_eq!(g, mineral_grain());
+    assert!(toml::from_str::<Generator>("kind = \"cube\"\nsize = 1.0\nedge = 2.0\n").is_err());
 }

@@ -138,3 +138,21 @@ pub fn oracle_intersection(planes: &[(Vector3<f64>, f64)], scale: f64) -> Oracle
 pub fn p3(x: f64, y: f64, z: f64) -> Point3<f64> {
     Point3::new(x, y, z)
 }
+
+/// The `polydem` binary: `POLYDEM_BIN`, else the one cargo built for this test run, else `polydem`
+/// on the PATH (GPU machines run tests from a copied tree with the binary on the PATH).
+pub fn polydem_bin() -> PathBuf {
+    if let Some(p) = std::env::var_os("POLYDEM_BIN") {
+        return PathBuf::from(p);
+    }
+    let built = PathBuf::from(env!("CARGO_BIN_EXE_polydem"));
+    if built.exists() { built } else { PathBuf::from("polydem") }
+}
+
+/// A fresh temporary directory for one test.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("polydem-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
