@@ -18,7 +18,7 @@ const PAIRS: usize = 1000;
 
 fn poses(t: &ConvexTemplate, seed: u64) -> Vec<(Isometry3<f64>, Isometry3<f64>)> {
     let mut rng = Rng::new(seed);
-    let mut rot = |rng: &mut Rng| {
+    let rot = |rng: &mut Rng| {
         let [w, x, y, z] = rng.unit_quaternion();
         UnitQuaternion::new_normalize(Quaternion::new(w, x, y, z))
     };
@@ -53,7 +53,8 @@ fn bench_overlap<T: Real>(c: &mut Criterion, label: &str, t: &ConvexTemplate) {
 }
 
 fn bench_gjk(c: &mut Criterion, label: &str, t: &ConvexTemplate) {
-    let cases: Vec<(Vec<Vector3<f64>>, Vec<Vector3<f64>>)> = poses(t, 2)
+    type VertexPair = (Vec<Vector3<f64>>, Vec<Vector3<f64>>);
+    let cases: Vec<VertexPair> = poses(t, 2)
         .iter()
         .map(|(pa, pb)| {
             (
@@ -82,7 +83,13 @@ fn benches(c: &mut Criterion) {
     bench_overlap::<f32>(c, "dodecahedron", &dodeca);
     let cube = Generator::Cube { size: 1.0 }.build().unwrap();
     bench_overlap::<f64>(c, "cube", &cube);
-    let cylinder = Generator::Prism { sides: 20, diameter: 8.0, height: 5.3 }.build().unwrap();
+    let cylinder = Generator::Prism {
+        sides: 20,
+        diameter: 8.0,
+        height: 5.3,
+    }
+    .build()
+    .unwrap();
     bench_overlap::<f64>(c, "cylinder20", &cylinder);
 }
 

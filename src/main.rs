@@ -6,7 +6,11 @@ use polydem::probe::{Precision, probe_overlap, probe_wall};
 use std::path::PathBuf;
 
 #[derive(Parser)]
-#[command(name = "polydem", version, about = "DEM for convex polyhedral particles")]
+#[command(
+    name = "polydem",
+    version,
+    about = "DEM for convex polyhedral particles"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -73,8 +77,14 @@ fn run(cli: Cli) -> Result<()> {
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     match cli.command {
-        Command::Probe { query: ProbeQuery::Overlap { file, precision } } => probe_overlap(&file, precision, &mut out),
-        Command::Probe { query: ProbeQuery::Wall { file, precision } } => probe_wall(&file, precision, &mut out),
-        Command::Shape { action: ShapeAction::Info { shape, size } } => polydem::probe::shape_info(&shape, size, &mut out),
+        Command::Probe {
+            query: ProbeQuery::Overlap { file, precision },
+        } => probe_overlap(&file, precision, &mut out),
+        Command::Probe {
+            query: ProbeQuery::Wall { file, precision },
+        } => probe_wall(&file, precision, &mut out),
+        Command::Shape {
+            action: ShapeAction::Info { shape, size },
+        } => polydem::probe::shape_info(&shape, size, &mut out),
     }
 }

@@ -42,16 +42,9 @@ pub enum Precision {
 #[derive(Deserialize)]
 #[serde(untagged)]
 enum ShapeSpec {
-    Vertices {
-        vertices: Vec<[f64; 3]>,
-    },
-    Mesh {
-        mesh: String,
-    },
-    Generator {
-        generator: String,
-        size: f64,
-    },
+    Vertices { vertices: Vec<[f64; 3]> },
+    Mesh { mesh: String },
+    Generator { generator: String, size: f64 },
 }
 
 #[derive(Deserialize)]
@@ -98,7 +91,10 @@ struct PlacedShape {
     body_to_input: Isometry3<f64>,
 }
 
-fn load_shapes(shapes: &BTreeMap<String, Value>, base: &Path) -> Result<BTreeMap<String, PlacedShape>> {
+fn load_shapes(
+    shapes: &BTreeMap<String, Value>,
+    base: &Path,
+) -> Result<BTreeMap<String, PlacedShape>> {
     let mut out = BTreeMap::new();
     for (name, value) in shapes {
         let spec: ShapeSpec = serde_json::from_value(value.clone()).map_err(|_| {
@@ -109,8 +105,12 @@ fn load_shapes(shapes: &BTreeMap<String, Value>, base: &Path) -> Result<BTreeMap
         })?;
         let template = match spec {
             ShapeSpec::Vertices { vertices } => {
-                let pts: Vec<_> = vertices.iter().map(|v| nalgebra::Point3::new(v[0], v[1], v[2])).collect();
-                ConvexTemplate::from_points(name, &pts).map_err(|e| anyhow!("shapes.{name}.vertices: {e}"))?
+                let pts: Vec<_> = vertices
+                    .iter()
+                    .map(|v| nalgebra::Point3::new(v[0], v[1], v[2]))
+                    .collect();
+                ConvexTemplate::from_points(name, &pts)
+                    .map_err(|e| anyhow!("shapes.{name}.vertices: {e}"))?
             }
             ShapeSpec::Mesh { mesh } => ConvexTemplate::from_file(&base.join(&mesh))
                 .map_err(|e| anyhow!("shapes.{name}.mesh: {e}"))?,
@@ -119,7 +119,13 @@ fn load_shapes(shapes: &BTreeMap<String, Value>, base: &Path) -> Result<BTreeMap
                 .map_err(|e| anyhow!("shapes.{name}.generator: {e}"))?,
         };
         let body_to_input = template.file_to_body.inverse();
-        out.insert(name.clone(), PlacedShape { template, body_to_input });
+        out.insert(
+            name.clone(),
+            PlacedShape {
+                template,
+                body_to_input,
+            },
+        );
     }
     Ok(out)
 }
@@ -143,10 +149,17 @@ fn pose_of(spec: &PoseSpec, field: &str) -> Result<Isometry3<f64>> {
     ))
 }
 
-fn lookup<'a>(shapes: &'a BTreeMap<String, PlacedShape>, name: &str, field: &str) -> Result<&'a PlacedShape> {
+fn lookup<'a>(
+    shapes: &'a BTreeMap<String, PlacedShape>,
+    name: &str,
+    field: &str,
+) -> Result<&'a PlacedShape> {
     shapes.get(name).ok_or_else(|| {
         let known: Vec<_> = shapes.keys().map(String::as_str).collect();
-        anyhow!("{field}: unknown shape \"{name}\" (defined: {})", known.join(", "))
+        anyhow!(
+            "{field}: unknown shape \"{name}\" (defined: {})",
+            known.join(", ")
+        )
     })
 }
 
@@ -167,14 +180,16 @@ pub fn overlap_json(intersects: bool, o: &Overlap<f64>) -> Value {
 }
 
 fn read_input(path: &Path) -> Result<(String, &Path)> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
     Ok((text, path.parent().unwrap_or(Path::new("."))))
 }
 
 /// `polydem probe overlap FILE`: writes one JSON object per pair, in input order.
 pub fn probe_overlap(path: &Path, precision: Precision, out: &mut dyn Write) -> Result<()> {
     let (text, base) = read_input(path)?;
-    let input: OverlapInput = serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
+    let input: OverlapInput =
+        serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
     let shapes = load_shapes(&input.shapes, base).with_context(|| format!("{}", path.display()))?;
     let mut ws64 = PairWorkspace::<f64>::boxed();
     let mut ws32 = PairWorkspace::<f32>::boxed();
@@ -224,7 +239,8 @@ fn wall_case<T: Real>(
 /// centroid, penetrating volume and its gradient, and their totals.
 pub fn probe_wall(path: &Path, precision: Precision, out: &mut dyn Write) -> Result<()> {
     let (text, base) = read_input(path)?;
-    let input: WallInput = serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
+    let input: WallInput =
+        serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
     let shapes = load_shapes(&input.shapes, base).with_context(|| format!("{}", path.display()))?;
     let mut ws64 = PairWorkspace::<f64>::boxed();
     let mut ws32 = PairWorkspace::<f32>::boxed();
@@ -232,12 +248,30 @@ pub fn probe_wall(path: &Path, precision: Precision, out: &mut dyn Write) -> Res
         let field = |f: &str| format!("{}: cases[{i}].{f}", path.display());
         let shape = lookup(&shapes, &case.shape, &field("shape"))?;
         let pose = pose_of(&case.pose, &field("pose"))? * shape.body_to_input;
-        if case.triangles.iter().flatten().flatten().any(|x| !x.is_finite()) {
+        if case
+            .triangles
+            .iter()
+            .flatten()
+            .flatten()
+            .any(|x| !x.is_finite())
+        {
             bail!("{}: coordinates must be finite numbers", field("triangles"));
         }
         let value = match precision {
-            Precision::F64 => wall_case(&mut ws64.overlap, &mut ws64.a, shape, &pose, &case.triangles),
-            Precision::F32 => wall_case(&mut ws32.overlap, &mut ws32.a, shape, &pose, &case.triangles),
+            Precision::F64 => wall_case(
+                &mut ws64.overlap,
+                &mut ws64.a,
+                shape,
+                &pose,
+                &case.triangles,
+            ),
+            Precision::F32 => wall_case(
+                &mut ws32.overlap,
+                &mut ws32.a,
+                shape,
+                &pose,
+                &case.triangles,
+            ),
         }
         .map_err(|e| anyhow!("{}: {e}", field("")))?;
         writeln!(out, "{value}")?;

@@ -13,12 +13,23 @@ use polydem::shape::{ConvexTemplate, Generator};
 use std::f64::consts::{FRAC_PI_4, SQRT_2};
 
 fn unit_cube() -> ConvexTemplate {
-    Generator::Cuboid { a: 1.0, b: 1.0, c: 1.0 }.build().unwrap()
+    Generator::Cuboid {
+        a: 1.0,
+        b: 1.0,
+        c: 1.0,
+    }
+    .build()
+    .unwrap()
 }
 
 /// Poses here place shapes in the coordinates they were generated in (a prism along z, say);
 /// templates live in their principal frame, so the pose is composed with `file_to_body⁻¹`.
-fn eval<T: Real>(a: &ConvexTemplate, pa: &Isometry3<f64>, b: &ConvexTemplate, pb: &Isometry3<f64>) -> PairGeometry {
+fn eval<T: Real>(
+    a: &ConvexTemplate,
+    pa: &Isometry3<f64>,
+    b: &ConvexTemplate,
+    pb: &Isometry3<f64>,
+) -> PairGeometry {
     let mut ws = PairWorkspace::<T>::boxed();
     let pa = pa * a.file_to_body.inverse();
     let pb = pb * b.file_to_body.inverse();
@@ -27,15 +38,29 @@ fn eval<T: Real>(a: &ConvexTemplate, pa: &Isometry3<f64>, b: &ConvexTemplate, pb
 
 /// Checks f64 against `expected` within `tol64`, and f32 within `tol32` (skipped when `tol32` is
 /// None: below f32 resolution).
-fn check(label: &str, a: &ConvexTemplate, pa: &Isometry3<f64>, b: &ConvexTemplate, pb: &Isometry3<f64>, expected: f64, tol64: f64, tol32: Option<f64>) {
+fn check(
+    label: &str,
+    (a, pa): (&ConvexTemplate, &Isometry3<f64>),
+    (b, pb): (&ConvexTemplate, &Isometry3<f64>),
+    expected: f64,
+    (tol64, tol32): (f64, Option<f64>),
+) {
     let r = eval::<f64>(a, pa, b, pb);
     let e = (r.overlap.volume - expected).abs() / expected.max(f64::MIN_POSITIVE);
-    assert!(e <= tol64, "{label}: f64 V = {:e}, expected {expected:e} (relative error {e:e})", r.overlap.volume);
+    assert!(
+        e <= tol64,
+        "{label}: f64 V = {:e}, expected {expected:e} (relative error {e:e})",
+        r.overlap.volume
+    );
     assert!(r.intersects, "{label}: GJK misses an overlapping pair");
     if let Some(t32) = tol32 {
         let r = eval::<f32>(a, pa, b, pb);
         let e = (r.overlap.volume - expected).abs() / expected;
-        assert!(e <= t32, "{label}: f32 V = {:e}, expected {expected:e} (relative error {e:e})", r.overlap.volume);
+        assert!(
+            e <= t32,
+            "{label}: f32 V = {:e}, expected {expected:e} (relative error {e:e})",
+            r.overlap.volume
+        );
     }
 }
 
@@ -46,23 +71,49 @@ fn at(x: f64, y: f64, z: f64) -> Isometry3<f64> {
 #[test]
 fn parallel_face_face_from_deep_to_1e_minus_7() {
     let cube = unit_cube();
-    for (d, dy, dz) in [(0.5f64, 0.0f64, 0.0f64), (0.3, 0.25, -0.4), (1e-3, 0.1, 0.2), (1e-5, 0.0, 0.5), (1e-7, 0.3, 0.3)] {
+    for (d, dy, dz) in [
+        (0.5f64, 0.0f64, 0.0f64),
+        (0.3, 0.25, -0.4),
+        (1e-3, 0.1, 0.2),
+        (1e-5, 0.0, 0.5),
+        (1e-7, 0.3, 0.3),
+    ] {
         let expected = d * (1.0 - dy.abs()) * (1.0 - dz.abs());
         // f32 resolves a 1e-7 layer only to its own epsilon: its tolerance follows 1e-7/d.
         let t32 = if d >= 1e-5 { Some(1e-4) } else { None };
-        check(&format!("face-face depth {d}"), &cube, &at(0.0, 0.0, 0.0), &cube, &at(1.0 - d, dy, dz), expected, 1e-9, t32);
+        check(
+            &format!("face-face depth {d}"),
+            (&cube, &at(0.0, 0.0, 0.0)),
+            (&cube, &at(1.0 - d, dy, dz)),
+            expected,
+            (1e-9, t32),
+        );
         let r = eval::<f64>(&cube, &at(0.0, 0.0, 0.0), &cube, &at(1.0 - d, dy, dz));
         // S = dV/dx_B of V = d (1 − |dy|)(1 − |dz|), with d = 1 − x_B.
         let area = (1.0 - dy.abs()) * (1.0 - dz.abs());
-        let grad = Vector3::new(-area, -d * (1.0 - dz.abs()) * dy.signum() * (dy != 0.0) as i32 as f64, -d * (1.0 - dy.abs()) * dz.signum() * (dz != 0.0) as i32 as f64);
-        assert!((r.overlap.dv_dxb - grad).norm() <= 1e-9 * area, "S = {:?}, expected {grad:?}", r.overlap.dv_dxb);
+        let grad = Vector3::new(
+            -area,
+            -d * (1.0 - dz.abs()) * dy.signum() * (dy != 0.0) as i32 as f64,
+            -d * (1.0 - dy.abs()) * dz.signum() * (dz != 0.0) as i32 as f64,
+        );
+        assert!(
+            (r.overlap.dv_dxb - grad).norm() <= 1e-9 * area,
+            "S = {:?}, expected {grad:?}",
+            r.overlap.dv_dxb
+        );
     }
     // The same in a rotated, translated frame far from the origin.
     let q = UnitQuaternion::from_euler_angles(0.3, -1.1, 2.0);
     let far = Vector3::new(1e3, -2e3, 5e2);
     let pa = Isometry3::from_parts(far.into(), q);
     let pb = Isometry3::from_parts((far + q * Vector3::new(1.0 - 1e-4, 0.2, 0.0)).into(), q);
-    check("rotated face-face", &cube, &pa, &cube, &pb, 1e-4 * 0.8, 1e-7, Some(1e-3));
+    check(
+        "rotated face-face",
+        (&cube, &pa),
+        (&cube, &pb),
+        1e-4 * 0.8,
+        (1e-7, Some(1e-3)),
+    );
 }
 
 #[test]
@@ -78,10 +129,23 @@ fn touching_and_just_separated_pairs_have_no_volume() {
         assert_eq!(r32.overlap.volume, 0.0, "f32, gap {gap}");
     }
     // Vertex exactly on a face, and edge exactly on a face.
-    let diag = UnitQuaternion::rotation_between(&Vector3::new(1.0, 1.0, 1.0), &Vector3::new(-1.0, 0.0, 0.0)).unwrap();
+    let diag = UnitQuaternion::rotation_between(
+        &Vector3::new(1.0, 1.0, 1.0),
+        &Vector3::new(-1.0, 0.0, 0.0),
+    )
+    .unwrap();
     let vertex_reach = 3f64.sqrt() / 2.0;
-    let r = eval::<f64>(&cube, &at(0.0, 0.0, 0.0), &cube, &Isometry3::from_parts(Vector3::new(0.5 + vertex_reach, 0.1, 0.1).into(), diag));
-    assert!(r.overlap.volume <= 1e-15, "vertex touching: V = {:e}", r.overlap.volume);
+    let r = eval::<f64>(
+        &cube,
+        &at(0.0, 0.0, 0.0),
+        &cube,
+        &Isometry3::from_parts(Vector3::new(0.5 + vertex_reach, 0.1, 0.1).into(), diag),
+    );
+    assert!(
+        r.overlap.volume <= 1e-15,
+        "vertex touching: V = {:e}",
+        r.overlap.volume
+    );
 }
 
 #[test]
@@ -89,20 +153,39 @@ fn vertex_face_edge_face_and_edge_edge_follow_their_power_laws() {
     let cube = unit_cube();
     let origin = at(0.0, 0.0, 0.0);
     // Vertex into a face: the corner {x+y+z <= √3 d} of B, volume (√3/2) d³ (F ∝ δ³ regime).
-    let diag = UnitQuaternion::rotation_between(&Vector3::new(1.0, 1.0, 1.0), &Vector3::new(-1.0, 0.0, 0.0)).unwrap();
+    let diag = UnitQuaternion::rotation_between(
+        &Vector3::new(1.0, 1.0, 1.0),
+        &Vector3::new(-1.0, 0.0, 0.0),
+    )
+    .unwrap();
     let reach = 3f64.sqrt() / 2.0;
     for d in [0.2, 0.01, 1e-3] {
         let pb = Isometry3::from_parts(Vector3::new(0.5 + reach - d, 0.05, -0.1).into(), diag);
         let expected = 3f64.sqrt() / 2.0 * d * d * d;
         let t32 = (expected > 1e-6).then_some(1e-4);
-        check(&format!("vertex-face {d}"), &cube, &origin, &cube, &pb, expected, 1e-9, t32);
+        check(
+            &format!("vertex-face {d}"),
+            (&cube, &origin),
+            (&cube, &pb),
+            expected,
+            (1e-9, t32),
+        );
     }
     // Edge into a face: B turned 45° about z, its edge (length 1) enters by d: a wedge of
     // cross-section d² and length 1.
     let turn_z = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), FRAC_PI_4);
     for d in [0.3, 0.01, 1e-4] {
-        let pb = Isometry3::from_parts(Vector3::new(0.5 + SQRT_2 / 2.0 - d, 0.1, 0.0).into(), turn_z);
-        check(&format!("edge-face {d}"), &cube, &origin, &cube, &pb, d * d, 1e-9, Some(1e-4));
+        let pb = Isometry3::from_parts(
+            Vector3::new(0.5 + SQRT_2 / 2.0 - d, 0.1, 0.0).into(),
+            turn_z,
+        );
+        check(
+            &format!("edge-face {d}"),
+            (&cube, &origin),
+            (&cube, &pb),
+            d * d,
+            (1e-9, Some(1e-4)),
+        );
     }
     // Edge across edge: A's edge along z at x = √2/2, B's edge along y at x = x_B − √2/2; the
     // overlap {b + |z| <= x <= a − |y|} has volume 2d³/3 with d = a − b.
@@ -112,7 +195,13 @@ fn vertex_face_edge_face_and_edge_edge_follow_their_power_laws() {
         let pb = Isometry3::from_parts(Vector3::new(SQRT_2 - d, 0.0, 0.0).into(), turn_y);
         let expected = 2.0 * d * d * d / 3.0;
         let t32 = (expected > 1e-6).then_some(1e-4);
-        check(&format!("edge-edge {d}"), &cube, &pa, &cube, &pb, expected, 1e-9, t32);
+        check(
+            &format!("edge-edge {d}"),
+            (&cube, &pa),
+            (&cube, &pb),
+            expected,
+            (1e-9, t32),
+        );
     }
 }
 
@@ -123,32 +212,82 @@ fn containment_and_coincident_bodies() {
     let q = UnitQuaternion::from_euler_angles(0.1, 0.2, 0.3);
     // 1:20, one inside the other: V is the small body's volume, and B's surface takes no part.
     let inside = Isometry3::from_parts(Vector3::new(0.2, -0.1, 0.3).into(), q);
-    check("small inside cube", &cube, &at(0.0, 0.0, 0.0), &small, &inside, small.volume, 1e-12, Some(1e-5));
+    check(
+        "small inside cube",
+        (&cube, &at(0.0, 0.0, 0.0)),
+        (&small, &inside),
+        small.volume,
+        (1e-12, Some(1e-5)),
+    );
     let r = eval::<f64>(&small, &inside, &cube, &at(0.0, 0.0, 0.0));
     assert!((r.overlap.volume - small.volume).abs() <= 1e-12 * small.volume);
     // S is the vector area of the cube's surface inside the overlap: none.
-    assert!(r.overlap.dv_dxb.norm() <= 1e-12, "S = {:?}", r.overlap.dv_dxb);
+    assert!(
+        r.overlap.dv_dxb.norm() <= 1e-12,
+        "S = {:?}",
+        r.overlap.dv_dxb
+    );
     // Coincident bodies: every plane appears twice; V is the body's volume.
-    for t in [cube.clone(), Generator::Dodecahedron { size: 1.0 }.build().unwrap(), Generator::Prism { sides: 20, diameter: 1.0, height: 0.6 }.build().unwrap()] {
+    for t in [
+        cube.clone(),
+        Generator::Dodecahedron { size: 1.0 }.build().unwrap(),
+        Generator::Prism {
+            sides: 20,
+            diameter: 1.0,
+            height: 0.6,
+        }
+        .build()
+        .unwrap(),
+    ] {
         let p = Isometry3::from_parts(Vector3::new(0.3, 0.2, -5.0).into(), q);
-        check(&format!("coincident {}", t.name), &t, &p, &t, &p, t.volume, 1e-12, Some(1e-5));
+        check(
+            &format!("coincident {}", t.name),
+            (&t, &p),
+            (&t, &p),
+            t.volume,
+            (1e-12, Some(1e-5)),
+        );
     }
 }
 
 #[test]
 fn plates_needles_and_size_ratio_twenty() {
-    let plate = Generator::Cuboid { a: 1.0, b: 0.8, c: 0.04 }.build().unwrap();
+    let plate = Generator::Cuboid {
+        a: 1.0,
+        b: 0.8,
+        c: 0.04,
+    }
+    .build()
+    .unwrap();
     // Plates stacked face to face, overlapping by d through their thickness.
     for d in [0.02, 1e-4, 1e-6] {
         let t32 = (d >= 1e-4).then_some(1e-4);
-        check(&format!("plate on plate {d}"), &plate, &at(0.0, 0.0, 0.0), &plate, &at(0.1, 0.0, 0.04 - d), 0.9 * 0.8 * d, 1e-9, t32);
+        check(
+            &format!("plate on plate {d}"),
+            (&plate, &at(0.0, 0.0, 0.0)),
+            (&plate, &at(0.1, 0.0, 0.04 - d)),
+            0.9 * 0.8 * d,
+            (1e-9, t32),
+        );
     }
     // A needle (hexagonal prism along z, circumscribed diameter 0.05) pushed end-first into the
     // plate: a hexagonal column of depth d.
-    let needle = Generator::Prism { sides: 6, diameter: 0.05, height: 1.0 }.build().unwrap();
+    let needle = Generator::Prism {
+        sides: 6,
+        diameter: 0.05,
+        height: 1.0,
+    }
+    .build()
+    .unwrap();
     let hexagon = 3.0 * 3f64.sqrt() / 2.0 * 0.025 * 0.025;
     for d in [0.01, 1e-4] {
-        check(&format!("needle into plate {d}"), &plate, &at(0.0, 0.0, 0.0), &needle, &at(0.2, 0.1, 0.02 + 0.5 - d), hexagon * d, 1e-9, Some(1e-4));
+        check(
+            &format!("needle into plate {d}"),
+            (&plate, &at(0.0, 0.0, 0.0)),
+            (&needle, &at(0.2, 0.1, 0.02 + 0.5 - d)),
+            hexagon * d,
+            (1e-9, Some(1e-4)),
+        );
     }
     // Needles crossing at right angles, through each other's axis: a square-ish overlap checked
     // against the brute-force oracle.
@@ -157,7 +296,13 @@ fn plates_needles_and_size_ratio_twenty() {
     let mut planes = world_planes(&needle, &needle.file_to_body.inverse());
     planes.extend(world_planes(&needle, &(pb * needle.file_to_body.inverse())));
     let reference = oracle_intersection(&planes, 0.5).volume;
-    check("crossed needles", &needle, &at(0.0, 0.0, 0.0), &needle, &pb, reference, 1e-9, Some(1e-4));
+    check(
+        "crossed needles",
+        (&needle, &at(0.0, 0.0, 0.0)),
+        (&needle, &pb),
+        reference,
+        (1e-9, Some(1e-4)),
+    );
     // 1:20: a small dodecahedron (size 0.05) face-down into a unit cube by d. Near a face the
     // dodecahedron's sections are pentagons whose apothem grows by h·cot(π − dihedral) = h/2
     // (the dihedral angle is 2·atan φ), so V = A_f (d + d²/(2a₀) + d³/(12a₀²)).
@@ -170,10 +315,20 @@ fn plates_needles_and_size_ratio_twenty() {
     let down = UnitQuaternion::rotation_between(&face, &(-Vector3::x())).unwrap();
     let inradius = small.faces[0].offset;
     for d in [0.01, 1e-4, 1e-6] {
-        let pb = Isometry3::from_parts(Vector3::new(0.5 + inradius - d, 0.1, 0.2).into(), down * small.file_to_body.rotation);
-        let expected = face_area * (d + d * d / (2.0 * apothem) + d * d * d / (12.0 * apothem * apothem));
+        let pb = Isometry3::from_parts(
+            Vector3::new(0.5 + inradius - d, 0.1, 0.2).into(),
+            down * small.file_to_body.rotation,
+        );
+        let expected =
+            face_area * (d + d * d / (2.0 * apothem) + d * d * d / (12.0 * apothem * apothem));
         let t32 = (d >= 1e-4).then_some(1e-4);
-        check(&format!("1:20 face-down {d}"), &unit_cube(), &at(0.0, 0.0, 0.0), &small, &pb, expected, 1e-9, t32);
+        check(
+            &format!("1:20 face-down {d}"),
+            (&unit_cube(), &at(0.0, 0.0, 0.0)),
+            (&small, &pb),
+            expected,
+            (1e-9, t32),
+        );
     }
 }
 
@@ -193,17 +348,46 @@ fn extreme_inputs_give_finite_answers() {
         let base = Vector3::new(far, -far, 0.5 * far);
         // Offsets on the scale of the bodies, sometimes exactly zero (coincident centres).
         let r = (a.circumscribed_radius * sa + b.circumscribed_radius * sb) * rng.uniform();
-        let off = if i % 7 == 0 { Vector3::zeros() } else { Vector3::from(rng.unit_vector()) * r };
+        let off = if i % 7 == 0 {
+            Vector3::zeros()
+        } else {
+            Vector3::from(rng.unit_vector()) * r
+        };
         let pa = pose(base, random_rotation(&mut rng));
-        let pb = pose(base + off, if i % 5 == 0 { pa.rotation } else { random_rotation(&mut rng) });
-        for res in [overlap_pair(&mut ws, (a, sa, &pa), (b, sb, &pb)), overlap_pair(&mut ws32, (a, sa, &pa), (b, sb, &pb))] {
-            if let Ok(g) = res {
-                let o = g.overlap;
-                assert!(o.volume.is_finite() && o.volume >= 0.0, "case {i}: V = {}", o.volume);
-                assert!(o.dv_dxb.iter().chain(o.centroid.iter()).chain(o.moment_b.iter()).all(|x| x.is_finite()), "case {i}: non-finite output");
-                let bound = (a.volume * sa.powi(3)).min(b.volume * sb.powi(3));
-                assert!(o.volume <= bound * (1.0 + 1e-4) + 1e-300, "case {i}: V {} exceeds the smaller body {bound}", o.volume);
-            }
+        let pb = pose(
+            base + off,
+            if i % 5 == 0 {
+                pa.rotation
+            } else {
+                random_rotation(&mut rng)
+            },
+        );
+        for res in [
+            overlap_pair(&mut ws, (a, sa, &pa), (b, sb, &pb)),
+            overlap_pair(&mut ws32, (a, sa, &pa), (b, sb, &pb)),
+        ] {
+            // An error is an acceptable outcome for pathological input, but none of these is.
+            let g = res.unwrap_or_else(|e| panic!("case {i}: {e}"));
+            let o = g.overlap;
+            assert!(
+                o.volume.is_finite() && o.volume >= 0.0,
+                "case {i}: V = {}",
+                o.volume
+            );
+            assert!(
+                o.dv_dxb
+                    .iter()
+                    .chain(o.centroid.iter())
+                    .chain(o.moment_b.iter())
+                    .all(|x| x.is_finite()),
+                "case {i}: non-finite output"
+            );
+            let bound = (a.volume * sa.powi(3)).min(b.volume * sb.powi(3));
+            assert!(
+                o.volume <= bound * (1.0 + 1e-4) + 1e-300,
+                "case {i}: V {} exceeds the smaller body {bound}",
+                o.volume
+            );
         }
     }
 }

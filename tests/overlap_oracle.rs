@@ -30,7 +30,11 @@ fn random_cases(shapes: &[Shape], n: usize, seed: u64) -> Vec<Case> {
             let (a, b) = (i % k, (i / k) % k);
             let ra = shapes[a].template.circumscribed_radius;
             let rb = shapes[b].template.circumscribed_radius;
-            let pa = Vector3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), rng.range(-2.0, 2.0));
+            let pa = Vector3::new(
+                rng.range(-2.0, 2.0),
+                rng.range(-2.0, 2.0),
+                rng.range(-2.0, 2.0),
+            );
             let dir = Vector3::from(rng.unit_vector());
             let dist = rng.uniform() * 1.05 * (ra + rb);
             Case {
@@ -57,7 +61,8 @@ fn random_pairs_match_the_exact_oracle_in_f64_and_f32() {
     let cases = random_cases(&shapes, 2420, 2026);
     let mut ws64 = PairWorkspace::<f64>::boxed();
     let mut ws32 = PairWorkspace::<f32>::boxed();
-    let (mut checked, mut overlapping, mut worst64, mut worst32, mut worst_c) = (0, 0, 0.0f64, 0.0f64, 0.0f64);
+    let (mut checked, mut overlapping, mut worst64, mut worst32, mut worst_c) =
+        (0, 0, 0.0f64, 0.0f64, 0.0f64);
     let mut failures = Vec::new();
     for (i, c) in cases.iter().enumerate() {
         let (ta, tb) = (&shapes[c.a].template, &shapes[c.b].template);
@@ -67,19 +72,28 @@ fn random_pairs_match_the_exact_oracle_in_f64_and_f32() {
         let r32 = overlap_pair(&mut ws32, (ta, 1.0, &c.pose_a), (tb, 1.0, &c.pose_b)).unwrap();
         let label = format!("case {i}: {} vs {}", shapes[c.a].name, shapes[c.b].name);
         let v = r64.overlap.volume;
-        assert!(v.is_finite() && r32.overlap.volume.is_finite(), "{label}: non-finite volume");
+        assert!(
+            v.is_finite() && r32.overlap.volume.is_finite(),
+            "{label}: non-finite volume"
+        );
         // No missed contact: the oracle sees a non-negligible overlap (above round-off of the
         // brute force, 1e-12 of the smaller volume) and we report none; no phantom: we report an
         // overlap where the oracle's intersection has no volume at all.
         if reference.volume > 1e-12 * v_small && v == 0.0 {
-            failures.push(format!("{label}: missed contact, oracle V = {:e}", reference.volume));
+            failures.push(format!(
+                "{label}: missed contact, oracle V = {:e}",
+                reference.volume
+            ));
         }
         if reference.volume == 0.0 && v > 0.0 {
             failures.push(format!("{label}: phantom contact V = {v:e}"));
         }
         // GJK's verdict agrees with V > 0 away from touching (1e-9 of the smaller volume).
         if reference.volume > 1e-9 * v_small && !r64.intersects {
-            failures.push(format!("{label}: GJK says apart, oracle V = {:e}", reference.volume));
+            failures.push(format!(
+                "{label}: GJK says apart, oracle V = {:e}",
+                reference.volume
+            ));
         }
         if reference.volume > 1e-6 * v_small {
             overlapping += 1;
@@ -90,7 +104,10 @@ fn random_pairs_match_the_exact_oracle_in_f64_and_f32() {
             worst32 = worst32.max(e32);
             worst_c = worst_c.max(ec);
             if e64 > 1e-9 {
-                failures.push(format!("{label}: f64 relative error {e64:e} (V = {v:e}, oracle {:e})", reference.volume));
+                failures.push(format!(
+                    "{label}: f64 relative error {e64:e} (V = {v:e}, oracle {:e})",
+                    reference.volume
+                ));
             }
             if e32 > 1e-4 {
                 failures.push(format!("{label}: f32 relative error {e32:e}"));
@@ -101,9 +118,19 @@ fn random_pairs_match_the_exact_oracle_in_f64_and_f32() {
         }
         checked += 1;
     }
-    println!("{checked} pairs, {overlapping} with V > 1e-6 V_small; worst relative error f64 {worst64:e}, f32 {worst32:e}; worst centroid {worst_c:e}");
-    assert!(overlapping > 1000, "too few overlapping pairs ({overlapping}) for a meaningful test");
-    assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
+    println!(
+        "{checked} pairs, {overlapping} with V > 1e-6 V_small; worst relative error f64 {worst64:e}, f32 {worst32:e}; worst centroid {worst_c:e}"
+    );
+    assert!(
+        overlapping > 1000,
+        "too few overlapping pairs ({overlapping}) for a meaningful test"
+    );
+    assert!(
+        failures.is_empty(),
+        "{} failures:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
 }
 
 #[test]
@@ -130,11 +157,20 @@ fn gjk_agrees_with_parry_intersection_test() {
         let (ta, tb) = (&shapes[c.a].template, &shapes[c.b].template);
         let va = world_vertices(ta, &c.pose_a);
         let vb = world_vertices(tb, &c.pose_b);
-        let ours = gjk_intersect(&va, &vb, c.pose_b.translation.vector - c.pose_a.translation.vector);
+        let ours = gjk_intersect(
+            &va,
+            &vb,
+            c.pose_b.translation.vector - c.pose_a.translation.vector,
+        );
         let (pa, pb) = (to_pose(&c.pose_a), to_pose(&c.pose_b));
-        let theirs = parry3d_f64::query::intersection_test(&pa, &parry_shapes[c.a], &pb, &parry_shapes[c.b]).unwrap().intersecting;
+        let theirs =
+            parry3d_f64::query::intersection_test(&pa, &parry_shapes[c.a], &pb, &parry_shapes[c.b])
+                .unwrap()
+                .intersecting;
         // Pairs closer than 1e-9 of the size to touching are legitimately ambiguous.
-        let dist = parry3d_f64::query::distance(&pa, &parry_shapes[c.a], &pb, &parry_shapes[c.b]).unwrap().distance;
+        let dist = parry3d_f64::query::distance(&pa, &parry_shapes[c.a], &pb, &parry_shapes[c.b])
+            .unwrap()
+            .distance;
         let (reference, _) = oracle(&shapes, c);
         let ambiguous = (dist > 0.0 && dist < 1e-9) || (dist == 0.0 && reference.volume < 1e-12);
         if ambiguous {
@@ -142,10 +178,15 @@ fn gjk_agrees_with_parry_intersection_test() {
             continue;
         }
         if ours != theirs {
-            disagreements.push(format!("case {i}: ours {ours}, parry {theirs}, distance {dist:e}"));
+            disagreements.push(format!(
+                "case {i}: ours {ours}, parry {theirs}, distance {dist:e}"
+            ));
         }
     }
-    println!("{} pairs, {near} within 1e-9 of touching skipped", cases.len());
+    println!(
+        "{} pairs, {near} within 1e-9 of touching skipped",
+        cases.len()
+    );
     assert!(disagreements.is_empty(), "{}", disagreements.join("\n"));
 }
 
@@ -161,7 +202,9 @@ fn gradient_and_moment_match_central_differences() {
     for (i, c) in cases.iter().enumerate() {
         let (ta, tb) = (&shapes[c.a].template, &shapes[c.b].template);
         let mut vol = |pb: &Isometry3<f64>| {
-            overlap_pair(&mut ws, (ta, 1.0, &c.pose_a), (tb, 1.0, pb)).unwrap().overlap
+            overlap_pair(&mut ws, (ta, 1.0, &c.pose_a), (tb, 1.0, pb))
+                .unwrap()
+                .overlap
         };
         let base = vol(&c.pose_b);
         if base.volume < 1e-3 * ta.volume.min(tb.volume) {
@@ -174,10 +217,20 @@ fn gradient_and_moment_match_central_differences() {
         let mut fd_rot = Vector3::zeros();
         for k in 0..3 {
             let e = Vector3::ith(k, 1.0);
-            let shift = |s: f64| Isometry3::from_parts((c.pose_b.translation.vector + e * s).into(), c.pose_b.rotation);
+            let shift = |s: f64| {
+                Isometry3::from_parts(
+                    (c.pose_b.translation.vector + e * s).into(),
+                    c.pose_b.rotation,
+                )
+            };
             fd[k] = (vol(&shift(h)).volume - vol(&shift(-h)).volume) / (2.0 * h);
             let angle = h / size;
-            let turn = |s: f64| Isometry3::from_parts(c.pose_b.translation, UnitQuaternion::from_scaled_axis(e * s) * c.pose_b.rotation);
+            let turn = |s: f64| {
+                Isometry3::from_parts(
+                    c.pose_b.translation,
+                    UnitQuaternion::from_scaled_axis(e * s) * c.pose_b.rotation,
+                )
+            };
             fd_rot[k] = (vol(&turn(angle)).volume - vol(&turn(-angle)).volume) / (2.0 * angle);
         }
         let s = base.dv_dxb;
@@ -192,11 +245,20 @@ fn gradient_and_moment_match_central_differences() {
         if es > 1e-6 || em > 1e-6 {
             failures.push(format!(
                 "case {i} ({} vs {}): S error {es:e}, moment error {em:e}; S {:?} fd {:?} V {:e}",
-                shapes[c.a].name, shapes[c.b].name, s.as_slice(), fd.as_slice(), base.volume
+                shapes[c.a].name,
+                shapes[c.b].name,
+                s.as_slice(),
+                fd.as_slice(),
+                base.volume
             ));
         }
     }
     println!("{n} pairs; worst relative error of S {worst_s:e}, of the moment {worst_m:e}");
     assert!(n > 150, "too few overlapping pairs ({n})");
-    assert!(failures.is_empty(), "{} of {n} pairs fail:\n{}", failures.len(), failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} of {n} pairs fail:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
 }

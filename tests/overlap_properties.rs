@@ -15,26 +15,43 @@ fn shapes() -> &'static [Shape] {
 
 fn rotation() -> impl Strategy<Value = UnitQuaternion<f64>> {
     (-1.0..1.0f64, -1.0..1.0f64, -1.0..1.0f64, -1.0..1.0f64)
-        .prop_filter("non-degenerate", |(w, x, y, z)| w * w + x * x + y * y + z * z > 1e-3)
+        .prop_filter("non-degenerate", |(w, x, y, z)| {
+            w * w + x * x + y * y + z * z > 1e-3
+        })
         .prop_map(|(w, x, y, z)| UnitQuaternion::new_normalize(Quaternion::new(w, x, y, z)))
 }
 
 /// A pair: two shape indices, poses with B at a fraction of the bounding-sphere reach from A.
 fn pair() -> impl Strategy<Value = (usize, usize, Isometry3<f64>, Isometry3<f64>)> {
     let k = shapes().len();
-    (0..k, 0..k, rotation(), rotation(), (-1.0..1.0f64, -1.0..1.0f64, -1.0..1.0f64), 0.0..0.9f64).prop_map(
-        move |(a, b, qa, qb, (x, y, z), frac)| {
+    (
+        0..k,
+        0..k,
+        rotation(),
+        rotation(),
+        (-1.0..1.0f64, -1.0..1.0f64, -1.0..1.0f64),
+        0.0..0.9f64,
+    )
+        .prop_map(move |(a, b, qa, qb, (x, y, z), frac)| {
             let s = shapes();
             let reach = s[a].template.circumscribed_radius + s[b].template.circumscribed_radius;
-            let dir = Vector3::new(x, y, z).try_normalize(1e-9).unwrap_or(Vector3::x());
+            let dir = Vector3::new(x, y, z)
+                .try_normalize(1e-9)
+                .unwrap_or(Vector3::x());
             let pa = Isometry3::from_parts(Translation3::new(0.3, -0.2, 0.1), qa);
             let pb = Isometry3::from_parts((pa.translation.vector + dir * frac * reach).into(), qb);
             (a, b, pa, pb)
-        },
-    )
+        })
 }
 
-fn volume_and_s(a: usize, pa: &Isometry3<f64>, sa: f64, b: usize, pb: &Isometry3<f64>, sb: f64) -> (f64, Vector3<f64>) {
+fn volume_and_s(
+    a: usize,
+    pa: &Isometry3<f64>,
+    sa: f64,
+    b: usize,
+    pb: &Isometry3<f64>,
+    sb: f64,
+) -> (f64, Vector3<f64>) {
     let s = shapes();
     let mut ws = PairWorkspace::<f64>::boxed();
     let g = overlap_pair(&mut ws, (&s[a].template, sa, pa), (&s[b].template, sb, pb)).unwrap();

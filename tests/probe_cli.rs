@@ -8,12 +8,23 @@ use serde_json::Value;
 use std::process::Command;
 
 fn probe(kind: &str, json: &str, extra: &[&str]) -> (bool, Vec<Value>, String) {
-    let dir = temp_dir(&format!("probe-{kind}-{:x}", json.len() ^ extra.len() << 16));
+    let dir = temp_dir(&format!(
+        "probe-{kind}-{:x}",
+        json.len() ^ extra.len() << 16
+    ));
     let file = dir.join("input.json");
     std::fs::write(&file, json).unwrap();
-    let out = Command::new(polydem_bin()).args(["probe", kind]).arg(&file).args(extra).output().expect("run polydem");
+    let out = Command::new(polydem_bin())
+        .args(["probe", kind])
+        .arg(&file)
+        .args(extra)
+        .output()
+        .expect("run polydem");
     let stdout = String::from_utf8_lossy(&out.stdout);
-    let lines = stdout.lines().map(|l| serde_json::from_str(l).expect("JSON line")).collect();
+    let lines = stdout
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("JSON line"))
+        .collect();
     let stderr = String::from_utf8_lossy(&out.stderr).to_string();
     assert!(!stderr.contains("panicked"), "polydem panicked: {stderr}");
     (out.status.success(), lines, stderr)
@@ -59,17 +70,36 @@ fn overlap_output_for_vertex_generator_and_mesh_shapes() {
         let l = &lines[0];
         assert_eq!(l["intersects"], true);
         assert!((l["volume"].as_f64().unwrap() - 0.125).abs() < tol);
-        let c: Vec<f64> = l["centroid"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        let c: Vec<f64> = l["centroid"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
         for (x, y) in c.iter().zip([0.875, 0.75, 0.5]) {
             assert!((x - y).abs() < tol, "centroid {c:?}");
         }
         // S = dV/dx_B = (−0.5, −0.25, 0) (faces x = 0.75 and y = 0.5 of B), area |S|.
-        let s: Vec<f64> = l["dv_dxb"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
-        assert!((s[0] + 0.5).abs() < tol && (s[1] + 0.25).abs() < tol && s[2].abs() < tol, "S {s:?}");
-        assert!((l["area"].as_f64().unwrap() - (0.5f64.powi(2) + 0.25f64.powi(2)).sqrt()).abs() < tol);
+        let s: Vec<f64> = l["dv_dxb"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        assert!(
+            (s[0] + 0.5).abs() < tol && (s[1] + 0.25).abs() < tol && s[2].abs() < tol,
+            "S {s:?}"
+        );
+        assert!(
+            (l["area"].as_f64().unwrap() - (0.5f64.powi(2) + 0.25f64.powi(2)).sqrt()).abs() < tol
+        );
         // Separated dodecahedra: zero volume and null geometry.
         assert_eq!(lines[1]["volume"], 0.0);
-        assert!(lines[1]["normal"].is_null() && lines[1]["centroid"].is_null() && lines[1]["dv_dxb"].is_null());
+        assert!(
+            lines[1]["normal"].is_null()
+                && lines[1]["centroid"].is_null()
+                && lines[1]["dv_dxb"].is_null()
+        );
         // Coincident bodies: the body's volume (dodecahedron of circumradius 1/2, edge 1/(√3 φ)).
         let phi = (1.0 + 5f64.sqrt()) / 2.0;
         let edge = 1.0 / (3f64.sqrt() * phi);
@@ -84,15 +114,21 @@ fn bad_input_names_the_pair_and_field() {
     let good_pose = pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]);
     let cases = [
         (
-            format!(r#"{{"shapes": {{"box": {{"vertices": {CUBE}}}}}, "pairs": [{{"a": "box", "b": "box", "pose_a": {good_pose}, "pose_b": {good_pose}}}, {{"a": "box", "b": "ball", "pose_a": {good_pose}, "pose_b": {good_pose}}}]}}"#),
+            format!(
+                r#"{{"shapes": {{"box": {{"vertices": {CUBE}}}}}, "pairs": [{{"a": "box", "b": "box", "pose_a": {good_pose}, "pose_b": {good_pose}}}, {{"a": "box", "b": "ball", "pose_a": {good_pose}, "pose_b": {good_pose}}}]}}"#
+            ),
             vec!["pairs[1].b", "unknown shape \"ball\"", "box"],
         ),
         (
-            format!(r#"{{"shapes": {{"box": {{"vertices": {CUBE}}}}}, "pairs": [{{"a": "box", "b": "box", "pose_a": {}, "pose_b": {good_pose}}}]}}"#, pose([0.0, 0.0, 0.0], [2.0, 0.0, 0.0, 0.0])),
+            format!(
+                r#"{{"shapes": {{"box": {{"vertices": {CUBE}}}}}, "pairs": [{{"a": "box", "b": "box", "pose_a": {}, "pose_b": {good_pose}}}]}}"#,
+                pose([0.0, 0.0, 0.0], [2.0, 0.0, 0.0, 0.0])
+            ),
             vec!["pairs[0].pose_a.orientation", "unit quaternion"],
         ),
         (
-            r#"{"shapes": {"flat": {"vertices": [[0,0,0],[1,0,0],[0,1,0],[1,1,0]]}}, "pairs": []}"#.to_string(),
+            r#"{"shapes": {"flat": {"vertices": [[0,0,0],[1,0,0],[0,1,0],[1,1,0]]}}, "pairs": []}"#
+                .to_string(),
             vec!["shapes.flat.vertices"],
         ),
         (
@@ -103,7 +139,10 @@ fn bad_input_names_the_pair_and_field() {
             r#"{"shapes": {"g": {"generator": "sphere", "size": 1.0}}, "pairs": []}"#.to_string(),
             vec!["shapes.g.generator", "dodecahedron"],
         ),
-        (r#"{"shapes": {}, "pairs": [], "extra": 1}"#.to_string(), vec!["unknown field", "extra"]),
+        (
+            r#"{"shapes": {}, "pairs": [], "extra": 1}"#.to_string(),
+            vec!["unknown field", "extra"],
+        ),
     ];
     for (json, needles) in cases {
         let (ok, _, err) = probe("overlap", &json, &[]);
@@ -128,8 +167,16 @@ fn wall_probe_sums_over_a_triangulated_wall() {
         let (ok, lines, err) = probe("wall", &json, &["--precision", precision]);
         assert!(ok, "{err}");
         let tol = if precision == "f64" { 1e-12 } else { 1e-5 };
-        assert!((lines[0]["volume"].as_f64().unwrap() - 0.1).abs() < tol, "{}", lines[0]);
-        assert!((lines[0]["area"].as_f64().unwrap() - 1.0).abs() < tol, "{}", lines[0]);
+        assert!(
+            (lines[0]["volume"].as_f64().unwrap() - 0.1).abs() < tol,
+            "{}",
+            lines[0]
+        );
+        assert!(
+            (lines[0]["area"].as_f64().unwrap() - 1.0).abs() < tol,
+            "{}",
+            lines[0]
+        );
         assert_eq!(lines[0]["facets"].as_array().unwrap().len(), 2);
     }
 }

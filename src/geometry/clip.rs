@@ -34,7 +34,10 @@ pub struct Polygon2<T: Real> {
 
 impl<T: Real> Default for Polygon2<T> {
     fn default() -> Self {
-        Polygon2 { pts: [Vector2::zeros(); MAX_POLYGON], n: 0 }
+        Polygon2 {
+            pts: [Vector2::zeros(); MAX_POLYGON],
+            n: 0,
+        }
     }
 }
 
@@ -143,7 +146,12 @@ impl<T: Real> FacetFrame<T> {
         }
         let normal = n.normalize();
         let e1 = e.normalize();
-        Some(FacetFrame { origin: tri[0], e1, e2: normal.cross(&e1), normal })
+        Some(FacetFrame {
+            origin: tri[0],
+            e1,
+            e2: normal.cross(&e1),
+            normal,
+        })
     }
 
     /// 2D coordinates of a point of the plane.
@@ -223,15 +231,25 @@ pub fn facet_contact<T: Real>(
     }
     // 1. Section ∩ triangle by Sutherland–Hodgman.
     let section = section_polygon(body, &frame);
-    let tri2 = Polygon2::from_points(&[frame.to_2d(&tri[0]), frame.to_2d(&tri[1]), frame.to_2d(&tri[2])]);
+    let tri2 = Polygon2::from_points(&[
+        frame.to_2d(&tri[0]),
+        frame.to_2d(&tri[1]),
+        frame.to_2d(&tri[2]),
+    ]);
     let clipped = sutherland_hodgman(&section, &tri2);
     let (area, c2) = clipped.area_centroid();
     // 2. Penetrating volume: body ∩ prism below the triangle.
-    let mut prism = [Plane { normal: frame.normal, offset: h }; 4];
+    let mut prism = [Plane {
+        normal: frame.normal,
+        offset: h,
+    }; 4];
     for k in 0..3 {
         let (p, q) = (tri[k], tri[(k + 1) % 3]);
         let n = (q - p).cross(&frame.normal).normalize();
-        prism[k + 1] = Plane { normal: n, offset: n.dot(&p) };
+        prism[k + 1] = Plane {
+            normal: n,
+            offset: n.dot(&p),
+        };
     }
     let centroid_tri = (tri[0] + tri[1] + tri[2]) / T::of(3.0);
     let start = (body.centre + centroid_tri) * T::of(0.5);

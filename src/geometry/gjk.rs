@@ -85,6 +85,10 @@ pub fn gjk_intersect<T: Real>(a: &[Vector3<T>], b: &[Vector3<T>], dir: Vector3<T
     v.norm_squared() <= tol2
 }
 
+/// A tetrahedron face whose closest point may be the simplex's: squared distance, the point,
+/// the face's vertex indices, and which of them span the closest feature.
+type FaceCandidate<T> = (T, Vector3<T>, [usize; 3], [bool; 3]);
+
 /// Up to four points of `A ⊖ B`.
 #[derive(Clone, Copy, Debug, Default)]
 struct Simplex<T: Real> {
@@ -151,8 +155,13 @@ impl<T: Real> Simplex<T> {
         let [a, b, c, d] = self.p;
         // Faces with the opposite vertex; the origin is outside a face when it lies on the
         // other side of the face plane from the opposite vertex.
-        let faces = [(a, b, c, d, [0, 1, 2]), (a, c, d, b, [0, 2, 3]), (a, d, b, c, [0, 3, 1]), (b, d, c, a, [1, 3, 2])];
-        let mut best: Option<(T, Vector3<T>, [usize; 3], [bool; 3])> = None;
+        let faces = [
+            (a, b, c, d, [0, 1, 2]),
+            (a, c, d, b, [0, 2, 3]),
+            (a, d, b, c, [0, 3, 1]),
+            (b, d, c, a, [1, 3, 2]),
+        ];
+        let mut best: Option<FaceCandidate<T>> = None;
         for (p, q, r, opp, idx) in faces {
             let n = (q - p).cross(&(r - p));
             let sign_origin = -p.dot(&n);
@@ -227,10 +236,18 @@ fn closest_on_triangle<T: Real>(
     if denom <= zero {
         // Degenerate (collinear) triangle: fall back to the best of its edges.
         let mut best = (a, [true, false, false]);
-        for (p, q, keep) in [(a, b, [true, true, false]), (a, c, [true, false, true]), (b, c, [false, true, true])] {
+        for (p, q, keep) in [
+            (a, b, [true, true, false]),
+            (a, c, [true, false, true]),
+            (b, c, [false, true, true]),
+        ] {
             let pq = q - p;
             let l = pq.norm_squared();
-            let t = if l > zero { (-p.dot(&pq) / l).max(zero).min(T::one()) } else { zero };
+            let t = if l > zero {
+                (-p.dot(&pq) / l).max(zero).min(T::one())
+            } else {
+                zero
+            };
             let x = p + pq * t;
             if x.norm_squared() < best.0.norm_squared() {
                 best = (x, keep);

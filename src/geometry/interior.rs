@@ -67,7 +67,11 @@ pub fn chebyshev_centre<T: Real>(
         }
     }
     if m == 0 {
-        return ChebyshevCentre { point: start, radius: T::zero(), steps: 0 };
+        return ChebyshevCentre {
+            point: start,
+            radius: T::zero(),
+            steps: 0,
+        };
     }
     z.w = t_min;
     let objective = Vector4::new(T::zero(), T::zero(), T::zero(), T::one());
@@ -173,5 +177,9 @@ pub fn chebyshev_centre<T: Real>(
     for i in 0..m {
         radius = radius.min(plane(i).offset - plane(i).normal.dot(&point));
     }
-    ChebyshevCentre { point, radius, steps }
+    ChebyshevCentre {
+        point,
+        radius,
+        steps,
+    }
 }

@@ -173,7 +173,10 @@ fn overlap_about<T: Real>(
         scale = scale.max(ws.delta[i]);
         radius = radius.min(ws.delta[i]);
     }
-    let none = Overlap { depth: radius, ..Overlap::default() };
+    let none = Overlap {
+        depth: radius,
+        ..Overlap::default()
+    };
     for i in 0..m {
         ws.area[i] = T::zero();
     }
@@ -341,9 +344,18 @@ pub fn overlap_pair<T: Real>(
         let origin = origin + widen(&centre.point);
         ws.a.place(ta, sa, pose_a, &origin);
         ws.b.place(tb, sb, pose_b, &origin);
-        overlap_about(&mut ws.overlap, ws.a.planes(), ws.b.planes(), Vector3::zeros())?.to_world(&origin)
+        overlap_about(
+            &mut ws.overlap,
+            ws.a.planes(),
+            ws.b.planes(),
+            Vector3::zeros(),
+        )?
+        .to_world(&origin)
     } else {
         Overlap::default()
     };
-    Ok(PairGeometry { intersects, overlap })
+    Ok(PairGeometry {
+        intersects,
+        overlap,
+    })
 }

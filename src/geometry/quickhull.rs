@@ -148,8 +148,7 @@ impl<T: Real> DualHull<T> {
             // Expand from the globally farthest outside point (most robust choice).
             let mut best: Option<usize> = None;
             for (s, t) in self.tri[..self.n_tri].iter().enumerate() {
-                if t.alive && t.far >= 0 && best.is_none_or(|b| t.far_dist > self.tri[b].far_dist)
-                {
+                if t.alive && t.far >= 0 && best.is_none_or(|b| t.far_dist > self.tri[b].far_dist) {
                     best = Some(s);
                 }
             }
@@ -204,7 +203,11 @@ impl<T: Real> DualHull<T> {
         let len = n.norm();
         // A zero-area triangle gets a zero normal: no point is ever outside it, and the
         // overlap computation gives it no area. It only arises from exactly collinear points.
-        let normal = if len > T::zero() { n / len } else { Vector3::zeros() };
+        let normal = if len > T::zero() {
+            n / len
+        } else {
+            Vector3::zeros()
+        };
         let offset = normal.dot(&p0);
         self.tri[s] = HullTriangle {
             v: [a, b, c],
@@ -306,7 +309,11 @@ impl<T: Real> DualHull<T> {
 
     /// The candidate triangle that point `p` is farthest outside of, beyond the tolerance
     /// (seed Alg. IV).
-    fn farthest_outside(&self, p: usize, candidates: impl Iterator<Item = usize>) -> Option<(usize, T)> {
+    fn farthest_outside(
+        &self,
+        p: usize,
+        candidates: impl Iterator<Item = usize>,
+    ) -> Option<(usize, T)> {
         let mut best: Option<(usize, T)> = None;
         for s in candidates {
             if !self.tri[s].alive {

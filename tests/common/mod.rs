@@ -24,7 +24,10 @@ pub struct Shape {
 /// The shapes of the geometry acceptance tests: the seed's cases plus plates, needles and a
 /// 1:20 size ratio.
 pub fn test_shapes() -> Vec<Shape> {
-    let g = |name: &'static str, generator: Generator| Shape { name, template: generator.build().unwrap() };
+    let g = |name: &'static str, generator: Generator| Shape {
+        name,
+        template: generator.build().unwrap(),
+    };
     let file = |name: &'static str, f: &str| Shape {
         name,
         template: ConvexTemplate::from_file(&repo_root().join("meshes/particles").join(f))
@@ -40,8 +43,22 @@ pub fn test_shapes() -> Vec<Shape> {
         file("cylinder_42", "cylinder_42.stl"),
         file("catalyst_cylinder", "catalyst_cylinder.stl"),
         file("mineral_grain", "mineral_grain.stl"),
-        g("plate", Generator::Cuboid { a: 1.0, b: 0.8, c: 0.04 }),
-        g("needle", Generator::Prism { sides: 6, diameter: 0.05, height: 1.0 }),
+        g(
+            "plate",
+            Generator::Cuboid {
+                a: 1.0,
+                b: 0.8,
+                c: 0.04,
+            },
+        ),
+        g(
+            "needle",
+            Generator::Prism {
+                sides: 6,
+                diameter: 0.05,
+                height: 1.0,
+            },
+        ),
         g("small_dodecahedron", Generator::Dodecahedron { size: 0.05 }),
     ]
 }
@@ -97,7 +114,9 @@ pub fn oracle_intersection(planes: &[(Vector3<f64>, f64)], scale: f64) -> Oracle
                     continue;
                 }
                 let (ni, nj, nk) = (planes[i].0, planes[j].0, planes[k].0);
-                let x = (nj.cross(&nk) * planes[i].1 + nk.cross(&ni) * planes[j].1 + cij * planes[k].1) / det;
+                let x =
+                    (nj.cross(&nk) * planes[i].1 + nk.cross(&ni) * planes[j].1 + cij * planes[k].1)
+                        / det;
                 // Vertices where more than three planes meet come out several times; keep one
                 // copy so the hull below sees distinct points.
                 if planes.iter().all(|(n, h)| n.dot(&x) <= h + tol)
@@ -109,7 +128,10 @@ pub fn oracle_intersection(planes: &[(Vector3<f64>, f64)], scale: f64) -> Oracle
         }
     }
     if pts.len() < 4 {
-        return OracleOverlap { volume: 0.0, centroid: Vector3::zeros() };
+        return OracleOverlap {
+            volume: 0.0,
+            centroid: Vector3::zeros(),
+        };
     }
     // Shift to the mean for a well-conditioned hull and tetrahedra.
     let mean = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
@@ -121,17 +143,35 @@ pub fn oracle_intersection(planes: &[(Vector3<f64>, f64)], scale: f64) -> Oracle
     let mut vol = 0.0;
     let mut cen = Vector3::zeros();
     for t in &ht {
-        let a = Vector3::new(hv[t[0] as usize].x, hv[t[0] as usize].y, hv[t[0] as usize].z);
-        let b = Vector3::new(hv[t[1] as usize].x, hv[t[1] as usize].y, hv[t[1] as usize].z);
-        let c = Vector3::new(hv[t[2] as usize].x, hv[t[2] as usize].y, hv[t[2] as usize].z);
+        let a = Vector3::new(
+            hv[t[0] as usize].x,
+            hv[t[0] as usize].y,
+            hv[t[0] as usize].z,
+        );
+        let b = Vector3::new(
+            hv[t[1] as usize].x,
+            hv[t[1] as usize].y,
+            hv[t[1] as usize].z,
+        );
+        let c = Vector3::new(
+            hv[t[2] as usize].x,
+            hv[t[2] as usize].y,
+            hv[t[2] as usize].z,
+        );
         let v = a.dot(&b.cross(&c)) / 6.0;
         vol += v;
         cen += (a + b + c) * (v / 4.0);
     }
     if vol.abs() <= 0.0 {
-        return OracleOverlap { volume: 0.0, centroid: mean };
+        return OracleOverlap {
+            volume: 0.0,
+            centroid: mean,
+        };
     }
-    OracleOverlap { volume: vol.abs(), centroid: cen / vol + mean }
+    OracleOverlap {
+        volume: vol.abs(),
+        centroid: cen / vol + mean,
+    }
 }
 
 /// Point `p` placed with an f64 `Point3` convenience.
@@ -146,7 +186,11 @@ pub fn polydem_bin() -> PathBuf {
         return PathBuf::from(p);
     }
     let built = PathBuf::from(env!("CARGO_BIN_EXE_polydem"));
-    if built.exists() { built } else { PathBuf::from("polydem") }
+    if built.exists() {
+        built
+    } else {
+        PathBuf::from("polydem")
+    }
 }
 
 /// A fresh temporary directory for one test.
