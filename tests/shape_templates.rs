@@ -507,7 +507,7 @@ fn scaled_template() {
     .build()
     .unwrap();
     let s = 2.5;
-    let u = t.scaled(s);
+    let u = t.scaled(s).unwrap();
     assert!(rel(u.volume, t.volume * s.powi(3)) < 1e-14);
     for k in 0..3 {
         assert!(rel(u.principal_inertia[k], t.principal_inertia[k] * s.powi(5)) < 1e-14);
@@ -526,9 +526,11 @@ fn scaled_template() {
     .map(|p| p * s)
     .collect();
     check_file_to_body(&u, &pts, 1e-12);
-    // Invalid factors leave it unchanged instead of panicking.
-    assert_eq!(t.scaled(-1.0).volume, t.volume);
-    assert_eq!(t.scaled(f64::NAN).volume, t.volume);
+    // Invalid factors are errors that name the template and the value.
+    for bad in [-1.0, 0.0, f64::NAN, f64::INFINITY] {
+        let e = t.scaled(bad).unwrap_err().to_string();
+        assert!(e.contains("prism7") && e.contains("scale factor"), "{e}");
+    }
 }
 
 // ---------------------------------------------------------------------------------------------

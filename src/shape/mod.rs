@@ -212,15 +212,13 @@ impl ConvexTemplate {
 
     /// The template scaled uniformly by `s` about its centroid: lengths × s, volume × s³,
     /// inertia per unit density × s⁵. `file_to_body` then maps the input coordinates scaled by
-    /// `s` (its translation is scaled). `s` must be positive and finite; any other value leaves
-    /// the template unchanged, with a warning.
-    pub fn scaled(&self, s: f64) -> ConvexTemplate {
+    /// `s` (its translation is scaled). `s` must be positive and finite.
+    pub fn scaled(&self, s: f64) -> Result<ConvexTemplate, ShapeError> {
         if !(s > 0.0 && s.is_finite()) {
-            tracing::warn!(
-                "{}: scale factor {s} is not positive and finite; not scaled",
-                self.name
-            );
-            return self.clone();
+            return Err(ShapeError::BadParameter {
+                source_name: self.name.clone(),
+                message: format!("scale factor {s} must be a positive finite number"),
+            });
         }
         let mut t = self.clone();
         for v in &mut t.vertices {
@@ -234,7 +232,7 @@ impl ConvexTemplate {
         t.file_to_body.translation.vector *= s;
         t.circumscribed_radius *= s;
         t.equivalent_radius *= s;
-        t
+        Ok(t)
     }
 
     /// Largest number of vertices on one face (sizes the clipping buffers).

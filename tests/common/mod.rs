@@ -32,7 +32,8 @@ pub fn test_shapes() -> Vec<Shape> {
         name,
         template: ConvexTemplate::from_file(&repo_root().join("meshes/particles").join(f))
             .unwrap_or_else(|e| panic!("{e}"))
-            .scaled(1000.0), // mm-sized files → unit-ish sizes keep the tolerances readable
+            .scaled(1000.0) // mm-sized files → unit-ish sizes keep the tolerances readable
+            .unwrap(),
     };
     vec![
         g("tetrahedron", Generator::Tetrahedron { size: 1.0 }),
