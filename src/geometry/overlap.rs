@@ -339,11 +339,17 @@ pub fn overlap_pair<T: Real>(
         // the planes that bound the overlap then have offsets of the overlap's size, so their
         // distances δ keep full relative precision in f32 even for a shallow contact of bodies
         // large compared with it.
-        let start = (ws.a.centre + ws.b.centre) * T::of(0.5);
-        let centre = chebyshev_centre(ws.a.planes(), ws.b.planes(), start);
+        ws.a.retain_planes_cutting(ws.b.vertices());
+        ws.b.retain_planes_cutting(ws.a.vertices());
+        // Start the LP at the frame origin, which is near the contact: its steps are then on the
+        // scale of the overlap, and so is their round-off (which matters in f32 when one body is
+        // much smaller than the distance between the centres).
+        let centre = chebyshev_centre(ws.a.planes(), ws.b.planes(), Vector3::zeros());
         let origin = origin + widen(&centre.point);
         ws.a.place(ta, sa, pose_a, &origin);
         ws.b.place(tb, sb, pose_b, &origin);
+        ws.a.retain_planes_cutting(ws.b.vertices());
+        ws.b.retain_planes_cutting(ws.a.vertices());
         overlap_about(
             &mut ws.overlap,
             ws.a.planes(),

@@ -86,6 +86,24 @@ impl<T: Real> PosedPolytope<T> {
         self.centre = centre;
     }
 
+    /// Drops the planes that cannot bound the intersection with a body whose vertices are
+    /// `other`: a half-space that contains all of the other body contains the whole
+    /// intersection. This is exact, and for a shallow contact it leaves only the few faces near
+    /// it, which is what the dual hull's cost grows with. Planes within round-off of touching the
+    /// other body are kept.
+    pub fn retain_planes_cutting(&mut self, other: &[Vector3<T>]) {
+        let tol = T::of(64.0) * T::EPSILON * self.radius();
+        let mut kept = 0;
+        for i in 0..self.n_planes {
+            let p = self.planes[i];
+            if other.iter().any(|v| p.distance(v) > -tol) {
+                self.planes[kept] = p;
+                kept += 1;
+            }
+        }
+        self.n_planes = kept;
+    }
+
     /// The placed vertices.
     pub fn vertices(&self) -> &[Vector3<T>] {
         &self.vertices[..self.n_vertices]
