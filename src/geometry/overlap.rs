@@ -346,10 +346,8 @@ pub fn overlap_pair<T: Real>(
         // much smaller than the distance between the centres).
         let centre = chebyshev_centre(ws.a.planes(), ws.b.planes(), Vector3::zeros());
         let origin = origin + widen(&centre.point);
-        ws.a.place(ta, sa, pose_a, &origin);
-        ws.b.place(tb, sb, pose_b, &origin);
-        ws.a.retain_planes_cutting(ws.b.vertices());
-        ws.b.retain_planes_cutting(ws.a.vertices());
+        ws.a.reposition_planes(ta, sa, pose_a, &origin);
+        ws.b.reposition_planes(tb, sb, pose_b, &origin);
         overlap_about(
             &mut ws.overlap,
             ws.a.planes(),

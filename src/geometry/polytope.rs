@@ -29,6 +29,9 @@ pub struct PosedPolytope<T: Real> {
     vertices: [Vector3<T>; MAX_TEMPLATE_VERTICES],
     n_vertices: usize,
     planes: [Plane<T>; MAX_TEMPLATE_FACES],
+    /// Template face of each plane slot (planes can be culled, see
+    /// [`PosedPolytope::retain_planes_cutting`]).
+    face: [u16; MAX_TEMPLATE_FACES],
     n_planes: usize,
     /// The body's centroid (reference point of its pose) in the pair frame.
     pub centre: Vector3<T>,
@@ -40,6 +43,7 @@ impl<T: Real> Default for PosedPolytope<T> {
             vertices: [Vector3::zeros(); MAX_TEMPLATE_VERTICES],
             n_vertices: 0,
             planes: [Plane::default(); MAX_TEMPLATE_FACES],
+            face: [0; MAX_TEMPLATE_FACES],
             n_planes: 0,
             centre: Vector3::zeros(),
         }
@@ -67,7 +71,26 @@ impl<T: Real> PosedPolytope<T> {
             *dst = cast(&(rot * (v.coords * scale) + shift));
         }
         self.n_planes = template.faces.len().min(MAX_TEMPLATE_FACES);
-        for (dst, f) in self.planes.iter_mut().zip(&template.faces) {
+        for (i, slot) in self.face[..self.n_planes].iter_mut().enumerate() {
+            *slot = i as u16;
+        }
+        self.reposition_planes(template, scale, pose, origin);
+    }
+
+    /// Recomputes the planes in use (after culling, only those kept) for the frame origin
+    /// `origin`; the vertices are left as they were.
+    pub fn reposition_planes(
+        &mut self,
+        template: &ConvexTemplate,
+        scale: f64,
+        pose: &Isometry3<f64>,
+        origin: &Vector3<f64>,
+    ) {
+        let rot = pose.rotation.to_rotation_matrix();
+        let shift = pose.translation.vector - origin;
+        self.centre = cast(&shift);
+        for (dst, &k) in self.planes.iter_mut().zip(&self.face[..self.n_planes]) {
+            let f = &template.faces[k as usize];
             let n = rot * f.normal;
             *dst = Plane {
                 normal: cast(&n),
@@ -83,6 +106,9 @@ impl<T: Real> PosedPolytope<T> {
         self.vertices[..self.n_vertices].copy_from_slice(&vertices[..self.n_vertices]);
         self.n_planes = planes.len().min(MAX_TEMPLATE_FACES);
         self.planes[..self.n_planes].copy_from_slice(&planes[..self.n_planes]);
+        for (i, slot) in self.face[..self.n_planes].iter_mut().enumerate() {
+            *slot = i as u16;
+        }
         self.centre = centre;
     }
 
@@ -98,6 +124,7 @@ impl<T: Real> PosedPolytope<T> {
             let p = self.planes[i];
             if other.iter().any(|v| p.distance(v) > -tol) {
                 self.planes[kept] = p;
+                self.face[kept] = self.face[i];
                 kept += 1;
             }
         }
