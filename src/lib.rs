@@ -4,6 +4,7 @@
 //! [`geometry`] holds the exact contact-geometry queries (GJK, overlap volume by dual-space
 //! Quickhull, wall clipping), and [`probe`] exposes those queries to users and tests.
 
+pub mod backend;
 pub mod geometry;
 pub mod probe;
 pub mod rng;

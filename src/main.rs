@@ -23,7 +23,9 @@ enum Command {
         #[command(subcommand)]
         query: ProbeQuery,
     },
-    /// Shape templates: mass properties and face counts, or export as STL.
+    /// Lists GPUs, the CUDA driver and NVRTC versions, as JSON.
+    Info,
+    /// Shape templates: mass properties and face counts.
     Shape {
         #[command(subcommand)]
         action: ShapeAction,
@@ -83,6 +85,12 @@ fn run(cli: Cli) -> Result<()> {
         Command::Probe {
             query: ProbeQuery::Wall { file, precision },
         } => probe_wall(&file, precision, &mut out),
+        Command::Info => {
+            use std::io::Write;
+            let info = polydem::backend::cuda_info();
+            writeln!(out, "{}", serde_json::to_string_pretty(&info)?)?;
+            Ok(())
+        }
         Command::Shape {
             action: ShapeAction::Info { shape, size },
         } => polydem::probe::shape_info(&shape, size, &mut out),
