@@ -5,7 +5,9 @@
 //! Quickhull, wall clipping), and [`probe`] exposes those queries to users and tests.
 
 pub mod backend;
+pub mod contact;
 pub mod geometry;
 pub mod probe;
 pub mod rng;
 pub mod shape;
+pub mod state;

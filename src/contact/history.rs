@@ -1,0 +1,89 @@
+//! Contact history: the per-contact state that outlives a step (tangential spring, normal
+//! approach), keyed by the pair of global ids so that it survives neighbour-list rebuilds,
+//! reordering and migration (DESIGN.md §3).
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// Bit set in [`ContactKey::b`] when the second member is a wall (the rest is the wall index).
+pub const WALL_BIT: u64 = 1 << 63;
+
+/// A contact's identity: particle global ids `a < b`, or a particle `a` and a wall
+/// `b = WALL_BIT | wall index`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct ContactKey {
+    pub a: u64,
+    pub b: u64,
+}
+
+impl ContactKey {
+    /// The key of a particle pair, lower id first (DESIGN.md §4).
+    pub fn particles(i: u64, j: u64) -> Self {
+        ContactKey { a: i.min(j), b: i.max(j) }
+    }
+
+    /// The key of a particle–wall contact.
+    pub fn wall(particle: u64, wall: usize) -> Self {
+        ContactKey { a: particle, b: WALL_BIT | wall as u64 }
+    }
+
+    /// The wall index, when the contact is with a wall.
+    pub fn wall_index(&self) -> Option<usize> {
+        (self.b & WALL_BIT != 0).then_some((self.b & !WALL_BIT) as usize)
+    }
+}
+
+/// State carried by one contact from step to step.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ContactState {
+    /// Tangential spring displacement ξ (Cundall–Strack), kept in the current tangent plane.
+    pub spring: Vector3<f64>,
+    /// Normal approach δ accumulated from the relative normal velocity since first contact.
+    pub approach: f64,
+}
+
+/// All live contacts, sorted by key: lookups are binary searches and iteration order is
+/// deterministic (checkpoints are byte-identical for identical states).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ContactHistory {
+    entries: Vec<(ContactKey, ContactState)>,
+}
+
+impl ContactHistory {
+    /// History from entries in any order (duplicates keep the last).
+    pub fn from_entries(mut entries: Vec<(ContactKey, ContactState)>) -> Self {
+        entries.sort_by_key(|e| e.0);
+        entries.dedup_by(|later, earlier| {
+            if later.0 == earlier.0 {
+                *earlier = *later;
+                true
+            } else {
+                false
+            }
+        });
+        ContactHistory { entries }
+    }
+
+    /// The entries, sorted by key.
+    pub fn entries(&self) -> &[(ContactKey, ContactState)] {
+        &self.entries
+    }
+
+    /// Number of live contacts.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// The state of contact `key`, if it was live.
+    pub fn get(&self, key: &ContactKey) -> Option<&ContactState> {
+        self.entries
+            .binary_search_by_key(key, |e| e.0)
+            .ok()
+            .map(|i| &self.entries[i].1)
+    }
+}

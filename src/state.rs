@@ -1,0 +1,115 @@
+//! Particle state, materials and particle types: the data every stage reads and writes.
+//!
+//! Particles are a structure of arrays indexed by a local index (DESIGN.md §3); each has a
+//! global id that never changes and names it in output and checkpoints. Positions, velocities,
+//! orientations and angular velocities are f64 on the CPU.
+
+use crate::shape::ConvexTemplate;
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Elastic and inertial properties of a material.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Material {
+    /// Name used by particle types, walls and material pairs.
+    pub name: String,
+    /// Young's modulus E [Pa].
+    pub youngs_modulus: f64,
+    /// Poisson's ratio ν.
+    pub poisson_ratio: f64,
+    /// Density ρ [kg/m³].
+    pub density: f64,
+}
+
+/// Interaction parameters of two materials.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PairParameters {
+    /// Coefficient of normal restitution e ∈ (0, 1].
+    pub restitution: f64,
+    /// Coulomb friction coefficient μ ≥ 0.
+    pub friction: f64,
+}
+
+/// A kind of particle: a template and a material.
+#[derive(Clone, Debug)]
+pub struct ParticleType {
+    /// Name used by insertions.
+    pub name: String,
+    /// Index into [`Particles::templates`] of the owning simulation.
+    pub template: usize,
+    /// Index into the material table.
+    pub material: usize,
+}
+
+/// Per-particle state, structure of arrays.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Particles {
+    /// Global id, unique and permanent.
+    pub id: Vec<u64>,
+    /// Particle type index.
+    pub kind: Vec<u32>,
+    /// Uniform scale applied to the type's template.
+    pub scale: Vec<f64>,
+    /// Centroid position (world).
+    pub position: Vec<Vector3<f64>>,
+    /// Centroid velocity (world).
+    pub velocity: Vec<Vector3<f64>>,
+    /// Rotation body → world.
+    pub orientation: Vec<UnitQuaternion<f64>>,
+    /// Angular velocity (world frame).
+    pub angular_velocity: Vec<Vector3<f64>>,
+    /// Total force of the last force evaluation (world).
+    pub force: Vec<Vector3<f64>>,
+    /// Total torque about the centroid of the last force evaluation (world).
+    pub torque: Vec<Vector3<f64>>,
+    /// Mass, from the type's material and template and the scale.
+    pub mass: Vec<f64>,
+    /// Principal moments of inertia (body frame).
+    pub inertia: Vec<Vector3<f64>>,
+}
+
+impl Particles {
+    /// Number of particles.
+    pub fn len(&self) -> usize {
+        self.id.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.id.is_empty()
+    }
+
+    /// Appends a particle at rest, with mass and inertia from its type, material and scale:
+    /// `m = ρ V s³`, `I = ρ I₁ s⁵` (the template's inertia is per unit density).
+    #[allow(clippy::too_many_arguments)]
+    pub fn push(
+        &mut self,
+        id: u64,
+        kind: u32,
+        scale: f64,
+        position: Vector3<f64>,
+        orientation: UnitQuaternion<f64>,
+        template: &ConvexTemplate,
+        density: f64,
+    ) {
+        self.id.push(id);
+        self.kind.push(kind);
+        self.scale.push(scale);
+        self.position.push(position);
+        self.velocity.push(Vector3::zeros());
+        self.orientation.push(orientation);
+        self.angular_velocity.push(Vector3::zeros());
+        self.force.push(Vector3::zeros());
+        self.torque.push(Vector3::zeros());
+        self.mass.push(density * template.volume * scale.powi(3));
+        self.inertia
+            .push(template.principal_inertia * (density * scale.powi(5)));
+    }
+
+    /// Translational plus rotational kinetic energy of particle `i`.
+    pub fn kinetic_energy(&self, i: usize) -> f64 {
+        let w_body = self.orientation[i].inverse_transform_vector(&self.angular_velocity[i]);
+        0.5 * self.mass[i] * self.velocity[i].norm_squared()
+            + 0.5 * w_body.component_mul(&self.inertia[i]).dot(&w_body)
+    }
+}
