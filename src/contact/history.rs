@@ -19,12 +19,18 @@ pub struct ContactKey {
 impl ContactKey {
     /// The key of a particle pair, lower id first (DESIGN.md §4).
     pub fn particles(i: u64, j: u64) -> Self {
-        ContactKey { a: i.min(j), b: i.max(j) }
+        ContactKey {
+            a: i.min(j),
+            b: i.max(j),
+        }
     }
 
     /// The key of a particle–wall contact.
     pub fn wall(particle: u64, wall: usize) -> Self {
-        ContactKey { a: particle, b: WALL_BIT | wall as u64 }
+        ContactKey {
+            a: particle,
+            b: WALL_BIT | wall as u64,
+        }
     }
 
     /// The wall index, when the contact is with a wall.

@@ -1,5 +1,9 @@
 //! Contact physics: the contact law, its history store, and wall contacts.
 
 pub mod history;
+pub mod law;
+pub mod restitution;
 
 pub use history::{ContactHistory, ContactKey, ContactState, WALL_BIT};
+pub use law::{ContactForces, ContactKinematics, ContactParameters, contact_forces};
+pub use restitution::DampingTable;
