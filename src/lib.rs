@@ -7,6 +7,9 @@
 pub mod backend;
 pub mod contact;
 pub mod geometry;
+pub mod io;
+pub mod integrate;
+pub mod neighbor;
 pub mod probe;
 pub mod rng;
 pub mod shape;
