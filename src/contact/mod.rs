@@ -3,7 +3,9 @@
 pub mod history;
 pub mod law;
 pub mod restitution;
+pub mod wall;
 
 pub use history::{ContactHistory, ContactKey, ContactState, WALL_BIT};
 pub use law::{ContactForces, ContactKinematics, ContactParameters, contact_forces};
 pub use restitution::DampingTable;
+pub use wall::WallMesh;

@@ -16,7 +16,7 @@
 //!    lets the two computations check each other.
 
 use super::Real;
-use super::overlap::{OverlapError, OverlapWorkspace, overlap_volume};
+use super::overlap::{Overlap, OverlapError, OverlapWorkspace, overlap_volume};
 use super::polytope::{Plane, PosedPolytope};
 use crate::shape::MAX_TEMPLATE_FACES;
 use nalgebra::{Vector2, Vector3};
@@ -214,6 +214,46 @@ pub struct FacetContact<T: Real> {
     pub cap_area: T,
 }
 
+/// The half-infinite prism under triangle `tri`: its plane (outward normal towards the side the
+/// particles are on) and a side plane through each edge, perpendicular to the facet, facing out.
+pub fn facet_prism<T: Real>(tri: &[Vector3<T>; 3]) -> Option<[Plane<T>; 4]> {
+    let frame = FacetFrame::of_triangle(tri)?;
+    let mut prism = [Plane {
+        normal: frame.normal,
+        offset: frame.normal.dot(&frame.origin),
+    }; 4];
+    for k in 0..3 {
+        let (p, q) = (tri[k], tri[(k + 1) % 3]);
+        let n = (q - p).cross(&frame.normal).normalize();
+        prism[k + 1] = Plane {
+            normal: n,
+            offset: n.dot(&p),
+        };
+    }
+    Some(prism)
+}
+
+/// Overlap of `body` with a facet's prism `[facet plane, side planes…]` (planes of B): the
+/// penetrating volume, its centroid, `S` (so `dV/dx_body = −S`) and the moment of the prism's
+/// part of the surface.
+pub fn prism_overlap<T: Real>(
+    ws: &mut OverlapWorkspace<T>,
+    body: &PosedPolytope<T>,
+    prism: &[Plane<T>; 4],
+) -> Result<Overlap<T>, OverlapError> {
+    let facet = &prism[0];
+    if body
+        .vertices()
+        .iter()
+        .all(|v| facet.distance(v) >= T::zero())
+    {
+        return Ok(Overlap::default());
+    }
+    // Start the interior-point search on the facet plane under the body's centre.
+    let start = body.centre - facet.normal * facet.distance(&body.centre);
+    overlap_volume(ws, body.planes(), prism, start)
+}
+
 /// Contact of `body` with triangle `tri` (counter-clockwise seen from the side the particles
 /// are on). Returns a zero contact for a degenerate triangle or when the body lies entirely in
 /// front of the facet plane.
@@ -239,21 +279,10 @@ pub fn facet_contact<T: Real>(
     let clipped = sutherland_hodgman(&section, &tri2);
     let (area, c2) = clipped.area_centroid();
     // 2. Penetrating volume: body ∩ prism below the triangle.
-    let mut prism = [Plane {
-        normal: frame.normal,
-        offset: h,
-    }; 4];
-    for k in 0..3 {
-        let (p, q) = (tri[k], tri[(k + 1) % 3]);
-        let n = (q - p).cross(&frame.normal).normalize();
-        prism[k + 1] = Plane {
-            normal: n,
-            offset: n.dot(&p),
-        };
-    }
-    let centroid_tri = (tri[0] + tri[1] + tri[2]) / T::of(3.0);
-    let start = (body.centre + centroid_tri) * T::of(0.5);
-    let ov = overlap_volume(ws, body.planes(), &prism, start)?;
+    let Some(prism) = facet_prism(tri) else {
+        return Ok(FacetContact::default());
+    };
+    let ov = prism_overlap(ws, body, &prism)?;
     let n_body = body.planes().len();
     Ok(FacetContact {
         area: area.max(T::zero()),
