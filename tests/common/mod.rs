@@ -201,3 +201,51 @@ pub fn temp_dir(name: &str) -> PathBuf {
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
+
+/// A scene with one material pair and, optionally, the unit square wall `plane.stl` scaled by
+/// `wall_scale` at z = 0 (facing +z); particle types given as TOML `[[particle_types]]` blocks.
+pub fn scene_text(
+    e_modulus: f64,
+    poisson: f64,
+    density: f64,
+    restitution: f64,
+    friction: f64,
+    gravity: f64,
+    dt: f64,
+    wall_scale: Option<f64>,
+    types: &str,
+) -> String {
+    let root = repo_root();
+    let wall = match wall_scale {
+        Some(s) => format!(
+            "[[walls]]\nname = \"floor\"\nmesh = \"{}\"\nmaterial = \"m\"\nscale = {s:e}\n",
+            root.join("meshes/walls/plane.stl").display()
+        ),
+        None => String::new(),
+    };
+    format!(
+        r#"gravity = [0.0, 0.0, {gravity:e}]
+[simulation]
+dt = {dt:e}
+end_time = 1.0
+seed = 1
+[domain]
+min = [-10.0, -10.0, -10.0]
+max = [10.0, 10.0, 10.0]
+[[materials]]
+name = "m"
+youngs_modulus = {e_modulus:e}
+poisson_ratio = {poisson}
+density = {density:e}
+[[material_pairs]]
+materials = ["m", "m"]
+restitution = {restitution}
+friction = {friction}
+{types}
+{wall}
+[output]
+dir = "{}"
+"#,
+        std::env::temp_dir().join("polydem-validation").display()
+    )
+}
