@@ -107,7 +107,7 @@ impl PairList {
         }
         let r_max = radii.iter().cloned().fold(0.0, f64::max);
         let cutoff = 2.0 * r_max + skin;
-        let grid = Grid::new(bounds, cutoff);
+        let grid = Grid::new(bounds, cutoff, 4 * n);
         // Bin: cell of each particle, then particles sorted by cell (counting sort).
         let cell: Vec<usize> = positions.par_iter().map(|x| grid.cell_of(x)).collect();
         let mut start = vec![0u32; grid.cells() + 1];
@@ -231,8 +231,7 @@ impl PairList {
     }
 }
 
-/// A uniform grid of cells at least `cutoff` wide over the domain box (at most 128 per axis
-/// outside periodic axes is not imposed: very large domains just get many cells).
+/// A uniform grid of cells at least one cutoff wide over the domain box.
 struct Grid {
     min: Vector3<f64>,
     size: Vector3<f64>,
@@ -241,23 +240,29 @@ struct Grid {
 }
 
 impl Grid {
-    fn new(bounds: &Bounds, cutoff: f64) -> Self {
+    /// Cells at least `cutoff` wide, enlarged when needed so that there are at most about
+    /// `max(max_cells, 4096)` of them: the counting sort walks every cell, so a big domain with
+    /// few particles must not get millions of empty cells.
+    fn new(bounds: &Bounds, cutoff: f64, max_cells: usize) -> Self {
         let extent = bounds.max - bounds.min;
+        let limit = max_cells.max(4096) as f64;
+        let mut width = cutoff.max(f64::MIN_POSITIVE);
+        let count = |w: f64| (0..3).map(|k| (extent[k] / w).floor().max(1.0)).product::<f64>();
+        if count(width) > limit {
+            width *= (count(width) / limit).cbrt();
+            while count(width) > limit {
+                width *= 1.01;
+            }
+        }
         let mut dims = [1usize; 3];
         let mut size = Vector3::zeros();
         for k in 0..3 {
-            // Cap the cell count so that a tiny cutoff in a huge box cannot exhaust memory.
-            let d = ((extent[k] / cutoff).floor() as usize).clamp(1, 1 << 10);
+            let d = ((extent[k] / width).floor() as usize).max(1);
             // Periodic axes need at least 3 cells for the 27-cell stencil to be distinct.
             dims[k] = if bounds.periodic[k] && d < 3 { 1 } else { d };
             size[k] = extent[k] / dims[k] as f64;
         }
-        Grid {
-            min: bounds.min,
-            size,
-            dims,
-            periodic: bounds.periodic,
-        }
+        Grid { min: bounds.min, size, dims, periodic: bounds.periodic }
     }
 
     fn cells(&self) -> usize {

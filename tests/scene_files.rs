@@ -1,0 +1,832 @@
+//! Scene files: parsing, validation errors that name their key, wall meshes and motion,
+//! insertion (placement, rate, determinism, checkpoint round trip), time-step report.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use polydem::scene::{
+    Inserter, InsertionMode, OrientationMode, Region, Scene, SceneError, TimeStep, WallMotion,
+    WallPlacement, check_report, critical_time_step, load_scene, load_wall_mesh, parse_scene,
+    rayleigh_step,
+};
+use polydem::shape::MeshFile;
+use polydem::state::Particles;
+use std::f64::consts::{PI, TAU};
+use std::path::PathBuf;
+
+/// The repository root: `POLYDEM_ROOT` when set, else the current directory.
+fn repo_root() -> PathBuf {
+    std::env::var_os("POLYDEM_ROOT")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| std::env::current_dir().expect("current directory"))
+}
+
+/// A valid scene with every section; paths relative to the repository root.
+const BASE: &str = r#"
+gravity = [0.0, 0.0, -9.81]
+
+[simulation]
+dt = 1.0e-5
+end_time = 0.5
+seed = 11
+
+[domain]
+min = [-0.5, -0.5, -0.1]
+max = [0.5, 0.5, 0.5]
+
+[[materials]]
+name = "glass"
+youngs_modulus = 5.0e7
+poisson_ratio = 0.25
+density = 2500.0
+
+[[materials]]
+name = "steel"
+youngs_modulus = 2.0e11
+poisson_ratio = 0.3
+density = 7800.0
+
+[[material_pairs]]
+materials = ["glass", "glass"]
+restitution = 0.5
+friction = 0.4
+
+[[material_pairs]]
+materials = ["glass", "steel"]
+restitution = 0.6
+friction = 0.3
+
+[[particle_types]]
+name = "grain"
+material = "glass"
+generator = { kind = "cube", size = 1.0 }
+scale = 0.01
+
+[[insertions]]
+type = "grain"
+region = { kind = "box", min = [-0.1, -0.1, 0.1], max = [0.1, 0.1, 0.3] }
+count = 50
+
+[[walls]]
+name = "floor"
+mesh = "meshes/walls/plane.stl"
+material = "steel"
+
+[[walls]]
+name = "paddle"
+mesh = "meshes/walls/plane.stl"
+material = "steel"
+scale = 0.1
+translate = [0.0, 0.0, 0.4]
+motion = { kind = "rotate", axis = [0.0, 0.0, 1.0], rpm = 30.0 }
+
+[output]
+formats = ["vtu"]
+fields = ["id", "velocity"]
+"#;
+
+fn parse(text: &str) -> Result<Scene, SceneError> {
+    parse_scene(text, &repo_root(), "test.toml")
+}
+
+/// The error of `text`, which must be invalid; its message must name `key`.
+fn error_naming(text: &str, key: &str) -> String {
+    match parse(text) {
+        Ok(_) => panic!("scene should be rejected for {key}"),
+        Err(e) => {
+            let msg = e.to_string();
+            assert!(
+                msg.contains("test.toml"),
+                "error does not name the file: {msg}"
+            );
+            assert!(
+                e.keys().contains(&key),
+                "error does not name key {key}: keys {:?}, message:\n{msg}",
+                e.keys()
+            );
+            msg
+        }
+    }
+}
+
+fn replace(from: &str, to: &str) -> String {
+    assert!(BASE.contains(from), "BASE lacks {from:?}");
+    BASE.replacen(from, to, 1)
+}
+
+#[test]
+fn base_and_example_scenes_load() {
+    let s = parse(BASE).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.walls.len(), 2);
+    assert_eq!(s.walls[0].triangles.len(), 2);
+    assert_eq!(s.pairs.get(1, 0).restitution, 0.6);
+    assert_eq!(s.output.series_interval, 100.0 * 1e-5);
+    assert!((s.simulation.neighbor.skin - 0.1 * 0.01).abs() < 1e-15);
+
+    let dir = repo_root().join("launch/examples");
+    let pour = load_scene(&dir.join("pour_box.toml")).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(pour.simulation.dt, TimeStep::FractionOfCritical(0.2));
+    assert_eq!(pour.walls[0].triangles.len(), 10);
+    assert!(pour.output.formats.vtu && pour.output.formats.csv);
+    assert!(pour.output.dir.ends_with("out/pour_box"));
+    assert!(matches!(
+        pour.insertions[0].mode,
+        InsertionMode::Rate {
+            total: Some(800),
+            ..
+        }
+    ));
+    let report = check_report(&pour);
+    assert_eq!(report["particles_to_insert"], 800);
+    assert_eq!(report["walls"][0]["facets"], 10);
+    assert_eq!(report["templates"][0]["faces"], 12);
+    let f = report["time_step"]["fraction_of_rayleigh"]
+        .as_f64()
+        .unwrap();
+    assert!((f - 0.2).abs() < 1e-12);
+
+    for name in ["hopper.toml", "shaker.toml"] {
+        let s = load_scene(&dir.join(name)).unwrap_or_else(|e| panic!("{e}"));
+        assert!(!s.insertions.is_empty() && !s.walls.is_empty(), "{name}");
+    }
+}
+
+#[test]
+fn unknown_keys_are_errors_naming_the_full_key() {
+    let msg = error_naming(&format!("colour = 1\n{BASE}"), "colour");
+    assert!(
+        msg.contains("allowed keys") && msg.contains("simulation"),
+        "{msg}"
+    );
+    error_naming(
+        &replace("seed = 11", "seed = 11\ndtt = 3"),
+        "simulation.dtt",
+    );
+    error_naming(
+        &replace("density = 2500.0", "density = 2500.0\nhue = 2"),
+        "materials[0].hue",
+    );
+    let text = replace("rpm = 30.0 }", "rpm = 30.0, rpmm = 2 }");
+    let msg = error_naming(&text, "walls[1].motion.rpmm");
+    let line = text.lines().position(|l| l.contains("rpmm")).unwrap() + 1;
+    assert!(
+        msg.contains(&format!("test.toml:{line}: walls[1].motion.rpmm")),
+        "line {line}: {msg}"
+    );
+    error_naming(
+        &replace(
+            "region = { kind = \"box\",",
+            "region = { kind = \"box\", radius = 1.0,",
+        ),
+        "insertions[0].region.radius",
+    );
+    error_naming(
+        &format!("{BASE}gravity = [0, 0, -9.81]\n"),
+        "output.gravity",
+    );
+    error_naming(
+        &replace(
+            "scale = 0.01",
+            "scale = { distribution = \"uniform\", min = 0.01, max = 0.02, mode = 1 }",
+        ),
+        "particle_types[0].scale.mode",
+    );
+    error_naming(
+        &replace(
+            "count = 50",
+            "count = 50\norientation = { axis = [1, 0, 0], angle = 3, spin = 1 }",
+        ),
+        "insertions[0].orientation.spin",
+    );
+    // Wrong types and missing keys name the key too.
+    error_naming(
+        &replace("end_time = 0.5", "end_time = \"soon\""),
+        "simulation.end_time",
+    );
+    error_naming(&replace("end_time = 0.5\n", ""), "simulation.end_time");
+}
+
+#[test]
+fn material_values_are_checked() {
+    let msg = error_naming(
+        &replace("youngs_modulus = 5.0e7", "youngs_modulus = -5.0e7"),
+        "materials[0].youngs_modulus",
+    );
+    assert!(msg.contains("positive"), "{msg}");
+    for nu in ["0.5", "-1.0", "0.7"] {
+        let msg = error_naming(
+            &replace("poisson_ratio = 0.25", &format!("poisson_ratio = {nu}")),
+            "materials[0].poisson_ratio",
+        );
+        assert!(msg.contains("(-1, 0.5)"), "{msg}");
+    }
+    error_naming(
+        &replace("density = 7800.0", "density = 0"),
+        "materials[1].density",
+    );
+    for e in ["0.0", "1.2", "-0.1"] {
+        let msg = error_naming(
+            &replace("restitution = 0.6", &format!("restitution = {e}")),
+            "material_pairs[1].restitution",
+        );
+        assert!(msg.contains("(0, 1]"), "{msg}");
+    }
+    assert!(parse(&replace("restitution = 0.6", "restitution = 1.0")).is_ok());
+    error_naming(
+        &replace("friction = 0.3", "friction = -0.3"),
+        "material_pairs[1].friction",
+    );
+}
+
+#[test]
+fn missing_pairs_and_unknown_names_are_errors() {
+    // Without glass–steel, particles cannot meet the steel walls.
+    let text = replace(
+        "materials = [\"glass\", \"steel\"]",
+        "materials = [\"steel\", \"steel\"]",
+    );
+    let msg = error_naming(&text, "material_pairs");
+    assert!(
+        msg.contains("[\"glass\", \"steel\"]") && msg.contains("walls"),
+        "{msg}"
+    );
+    let msg = error_naming(
+        &replace("material = \"glass\"", "material = \"glas\""),
+        "particle_types[0].material",
+    );
+    assert!(
+        msg.contains("\"glass\", \"steel\""),
+        "lists the defined names: {msg}"
+    );
+    error_naming(
+        &replace("type = \"grain\"", "type = \"sand\""),
+        "insertions[0].type",
+    );
+    error_naming(
+        &replace(
+            "material = \"steel\"\n\n[[walls]]",
+            "material = \"iron\"\n\n[[walls]]",
+        ),
+        "walls[0].material",
+    );
+    error_naming(
+        &replace(
+            "materials = [\"glass\", \"glass\"]",
+            "materials = [\"glass\", \"gold\"]",
+        ),
+        "material_pairs[0].materials",
+    );
+}
+
+#[test]
+fn missing_files_and_bad_motions_are_errors() {
+    let msg = error_naming(
+        &replace("meshes/walls/plane.stl", "meshes/walls/nope.stl"),
+        "walls[0].mesh",
+    );
+    assert!(msg.contains("nope.stl"), "{msg}");
+    let msg = error_naming(
+        &replace(
+            "generator = { kind = \"cube\", size = 1.0 }",
+            "mesh = \"meshes/particles/missing.stl\"",
+        ),
+        "particle_types[0].mesh",
+    );
+    assert!(msg.contains("missing.stl"), "{msg}");
+    error_naming(&replace("rpm = 30.0 }", "}"), "walls[1].motion.rpm");
+    error_naming(
+        &replace("axis = [0.0, 0.0, 1.0], rpm", "axis = [0.0, 0.0, 0.0], rpm"),
+        "walls[1].motion.axis",
+    );
+    let msg = error_naming(
+        &replace("kind = \"rotate\"", "kind = \"spin\""),
+        "walls[1].motion.kind",
+    );
+    assert!(
+        msg.contains("rotate") && msg.contains("sinusoidal"),
+        "{msg}"
+    );
+    let msg = error_naming(
+        &replace("kind = \"rotate\"", "kind = \"translate\""),
+        "walls[1].motion.rpm",
+    );
+    assert!(msg.contains("not allowed"), "{msg}");
+    let sin = "motion = { kind = \"sinusoidal\", direction = [0, 0, 1], amplitude = -0.01, frequency = 5 }";
+    error_naming(
+        &replace(
+            "motion = { kind = \"rotate\", axis = [0.0, 0.0, 1.0], rpm = 30.0 }",
+            sin,
+        ),
+        "walls[1].motion.amplitude",
+    );
+    let sin = "motion = { kind = \"sinusoidal\", direction = [0, 0, 1], amplitude = 0.01, frequency = 0 }";
+    error_naming(
+        &replace(
+            "motion = { kind = \"rotate\", axis = [0.0, 0.0, 1.0], rpm = 30.0 }",
+            sin,
+        ),
+        "walls[1].motion.frequency",
+    );
+    error_naming(&replace("scale = 0.1", "scale = -0.1"), "walls[1].scale");
+}
+
+#[test]
+fn simulation_domain_insertion_and_output_values_are_checked() {
+    error_naming(
+        &replace("dt = 1.0e-5", "dt = 1.0e-5\ndt_fraction = 0.1"),
+        "simulation.dt_fraction",
+    );
+    error_naming(
+        &replace("dt = 1.0e-5", "dt_fraction = 1.5"),
+        "simulation.dt_fraction",
+    );
+    error_naming(
+        &replace("max = [0.5, 0.5, 0.5]", "max = [0.5, -0.6, 0.5]"),
+        "domain.max",
+    );
+    error_naming(
+        &replace("max = [0.1, 0.1, 0.3]", "max = [0.1, 0.1, 0.9]"),
+        "insertions[0].region",
+    );
+    error_naming(
+        &replace("count = 50", "count = 50\nrate = 10.0"),
+        "insertions[0].count",
+    );
+    error_naming(
+        &replace("count = 50", "count = 50\ntotal = 3"),
+        "insertions[0].total",
+    );
+    let msg = error_naming(
+        &replace("formats = [\"vtu\"]", "formats = []"),
+        "output.formats",
+    );
+    assert!(msg.contains("vtu, csv"), "{msg}");
+    error_naming(
+        &replace("formats = [\"vtu\"]", "formats = [\"vtk\"]"),
+        "output.formats[0]",
+    );
+    let msg = error_naming(
+        &replace(
+            "fields = [\"id\", \"velocity\"]",
+            "fields = [\"id\", \"speed\"]",
+        ),
+        "output.fields[1]",
+    );
+    assert!(
+        msg.contains("angular_velocity") && msg.contains("rank"),
+        "lists allowed fields: {msg}"
+    );
+    error_naming(
+        &replace(
+            "formats = [\"vtu\"]",
+            "formats = [\"vtu\"]\nframe_interval = -1",
+        ),
+        "output.frame_interval",
+    );
+    // Several problems are reported together.
+    let text =
+        replace("density = 7800.0", "density = -1").replace("friction = 0.3", "friction = -1");
+    let e = parse(&text).unwrap_err();
+    assert!(
+        e.keys().contains(&"materials[1].density")
+            && e.keys().contains(&"material_pairs[1].friction")
+    );
+}
+
+#[test]
+fn toml_syntax_error_names_file_and_line() {
+    let text = replace("seed = 11", "seed = = 11");
+    match parse(&text) {
+        Err(SceneError::Syntax { file, line, .. }) => {
+            assert_eq!(file, "test.toml");
+            assert_eq!(line, 7);
+        }
+        other => panic!("expected a syntax error, got {other:?}"),
+    }
+    let msg = parse(&text).unwrap_err().to_string();
+    assert!(msg.starts_with("test.toml:7:"), "{msg}");
+}
+
+/// Asserts no two bounding spheres overlap and every particle is inside `region`.
+fn assert_separated(scene: &Scene, p: &Particles) {
+    let r: Vec<f64> = (0..p.len())
+        .map(|i| {
+            scene.templates[scene.particle_types[p.kind[i] as usize].template].circumscribed_radius
+                * p.scale[i]
+        })
+        .collect();
+    for i in 0..p.len() {
+        for j in i + 1..p.len() {
+            let d = (p.position[i] - p.position[j]).norm();
+            assert!(
+                d >= r[i] + r[j],
+                "particles {i} and {j} overlap: {d} < {}",
+                r[i] + r[j]
+            );
+        }
+    }
+}
+
+#[test]
+fn count_insertion_places_separated_deterministic_particles() {
+    let scene = parse(BASE).unwrap();
+    let run = |scene: &Scene| {
+        let mut p = Particles::default();
+        let mut next_id = 100;
+        let mut ins = Inserter::new(scene);
+        let rep = ins.insert(0.0, &mut p, scene, &mut next_id).unwrap();
+        assert_eq!(rep.inserted, 50);
+        assert_eq!(next_id, 150);
+        // A count insertion runs once.
+        assert_eq!(
+            ins.insert(0.1, &mut p, scene, &mut next_id)
+                .unwrap()
+                .inserted,
+            0
+        );
+        p
+    };
+    let a = run(&scene);
+    assert_eq!(a.len(), 50);
+    assert_separated(&scene, &a);
+    let (lo, hi) = scene.insertions[0].region.aabb();
+    let r = scene.max_bounding_radius();
+    for x in &a.position {
+        assert!(
+            (0..3).all(|k| x[k] - r >= lo[k] && x[k] + r <= hi[k]),
+            "outside region: {x}"
+        );
+    }
+    assert!(
+        a.mass
+            .iter()
+            .all(|m| (m - 2500.0 * 1e-6 * (1.0 / 3f64.sqrt()).powi(3)).abs() < 1e-12)
+    );
+    let b = run(&scene);
+    assert_eq!(a, b, "same seed, same particles");
+    let other = parse(&replace("seed = 11", "seed = 12")).unwrap();
+    assert_ne!(a.position, run(&other).position);
+    // Velocity and fixed orientation are applied.
+    let text = replace(
+        "count = 50",
+        "count = 5\nvelocity = [0, 0, -1]\norientation = \"identity\"",
+    );
+    let s = parse(&text).unwrap();
+    assert_eq!(
+        s.insertions[0].orientation,
+        OrientationMode::Fixed(UnitQuaternion::identity())
+    );
+    let mut p = Particles::default();
+    Inserter::new(&s).insert(0.0, &mut p, &s, &mut 0).unwrap();
+    assert!(
+        p.velocity
+            .iter()
+            .all(|v| *v == Vector3::new(0.0, 0.0, -1.0))
+    );
+    assert!(
+        p.orientation
+            .iter()
+            .all(|q| *q == UnitQuaternion::identity())
+    );
+}
+
+#[test]
+fn count_insertion_that_does_not_fit_says_how_many_fit() {
+    let text = replace("count = 50", "count = 100000\nmax_attempts = 50");
+    let s = parse(&text).unwrap();
+    let mut p = Particles::default();
+    let err = Inserter::new(&s)
+        .insert(0.0, &mut p, &s, &mut 0)
+        .unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("insertions[0].count") && msg.contains(&format!("only {} of 100000", p.len())),
+        "{msg}"
+    );
+}
+
+#[test]
+fn particles_are_not_placed_across_walls() {
+    // The region straddles the floor plane (z = 0): no bounding sphere may cross it.
+    let text = replace("min = [-0.1, -0.1, 0.1]", "min = [-0.1, -0.1, -0.05]");
+    let s = parse(&text).unwrap();
+    let mut p = Particles::default();
+    Inserter::new(&s).insert(0.0, &mut p, &s, &mut 0).unwrap();
+    let r = s.max_bounding_radius();
+    assert!(
+        p.position.iter().all(|x| x.z.abs() >= r),
+        "a particle crosses the floor"
+    );
+    assert!(p.position.iter().any(|x| x.z < 0.0), "both sides used");
+}
+
+fn rate_scene() -> Scene {
+    let text = replace(
+        "count = 50",
+        "rate = 200.0\nstart = 0.1\nend = 0.4\ntotal = 50",
+    );
+    parse(&text).unwrap()
+}
+
+#[test]
+fn rate_insertion_feeds_the_expected_count() {
+    let s = rate_scene();
+    let mut p = Particles::default();
+    let mut ins = Inserter::new(&s);
+    let mut id = 0;
+    let dt = 1e-3;
+    for step in 0..=500 {
+        let t = step as f64 * dt;
+        ins.insert(t, &mut p, &s, &mut id).unwrap();
+        let expected = (((t.min(0.4) - 0.1) * 200.0).floor().max(0.0) as usize).min(50);
+        assert_eq!(p.len(), expected, "at t = {t}");
+    }
+    assert_eq!(p.len(), 50);
+    assert_separated(&s, &p);
+    assert_eq!(ins.inserted(), &[50]);
+    // Without a total the end time limits it: 0.3 s × 200/s.
+    let s2 = parse(&replace(
+        "count = 50",
+        "rate = 200.0\nstart = 0.1\nend = 0.4",
+    ))
+    .unwrap();
+    assert_eq!(s2.insertions[0].planned_count(0.5), 60);
+    assert_eq!(check_report(&s2)["particles_to_insert"], 60);
+}
+
+#[test]
+fn inserter_state_round_trip_gives_identical_insertions() {
+    let s = rate_scene();
+    let mut p = Particles::default();
+    let mut ins = Inserter::new(&s);
+    let mut id = 0;
+    for step in 0..200 {
+        ins.insert(step as f64 * 1e-3, &mut p, &s, &mut id).unwrap();
+    }
+    let state = ins.state();
+    let json = serde_json::to_string(&state).unwrap();
+    let restored_state = serde_json::from_str(&json).unwrap();
+    assert_eq!(state, restored_state);
+    let mut restored = Inserter::try_restore(&s, &restored_state).unwrap();
+    let (mut p2, mut id2) = (p.clone(), id);
+    for step in 200..500 {
+        let t = step as f64 * 1e-3;
+        ins.insert(t, &mut p, &s, &mut id).unwrap();
+        restored.insert(t, &mut p2, &s, &mut id2).unwrap();
+    }
+    assert_eq!(p, p2);
+    assert_eq!(ins.state(), restored.state());
+    assert!(!p.is_empty() && id == id2);
+}
+
+#[test]
+fn wall_motion_matches_closed_forms() {
+    let axis = Vector3::new(1.0, 2.0, 2.0).normalize();
+    let origin = Vector3::new(0.3, -0.2, 0.1);
+    let rot = WallMotion::Rotate {
+        axis: nalgebra::Unit::new_normalize(axis),
+        origin,
+        rpm: 45.0,
+    };
+    let w = TAU * 45.0 / 60.0;
+    let p0 = Vector3::new(1.0, 0.5, -0.25);
+    for t in [0.0, 0.1, 0.37, 2.0] {
+        let pt = rot.transform(t).transform_point(&p0.into()).coords;
+        let expect = origin
+            + UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), w * t)
+                * (p0 - origin);
+        assert!((pt - expect).norm() < 1e-12);
+        let v = rot.velocity_at(t, &pt);
+        assert!((v - (axis * w).cross(&(pt - origin))).norm() < 1e-12);
+        // Finite difference of the pose agrees with the velocity.
+        let h = 1e-6;
+        let fd = (rot.transform(t + h).transform_point(&p0.into()).coords
+            - rot.transform(t - h).transform_point(&p0.into()).coords)
+            / (2.0 * h);
+        assert!((fd - v).norm() < 1e-6);
+        // Points on the axis stay put.
+        assert!(
+            (rot.transform(t)
+                .transform_point(&(origin + axis).into())
+                .coords
+                - origin
+                - axis)
+                .norm()
+                < 1e-12
+        );
+    }
+    let dir = Vector3::new(0.0, 0.6, 0.8);
+    let (a, f) = (0.002, 15.0);
+    let sin = WallMotion::Sinusoidal {
+        direction: nalgebra::Unit::new_normalize(dir),
+        amplitude: a,
+        frequency: f,
+    };
+    for t in [0.0, 0.013, 0.05, 1.234] {
+        let x = sin.transform(t).translation.vector;
+        assert!((x - dir * (a * (TAU * f * t).sin())).norm() < 1e-15);
+        assert!(
+            (sin.velocity_at(t, &p0) - dir * (TAU * f * a * (TAU * f * t).cos())).norm() < 1e-12
+        );
+        assert_eq!(sin.transform(t).rotation, UnitQuaternion::identity());
+    }
+    let tr = WallMotion::Translate {
+        velocity: Vector3::new(0.1, 0.0, -0.2),
+    };
+    assert!((tr.transform(2.0).translation.vector - Vector3::new(0.2, 0.0, -0.4)).norm() < 1e-15);
+    assert_eq!(WallMotion::Fixed.velocity_at(1.0, &p0), Vector3::zeros());
+    // The scene's rotating paddle resolves to ω = 2π·30/60 about z.
+    let s = parse(BASE).unwrap();
+    assert!((s.walls[1].motion.angular_velocity() - Vector3::new(0.0, 0.0, PI)).norm() < 1e-15);
+}
+
+#[test]
+fn wall_mesh_scale_rotate_translate_and_flip() {
+    let path = repo_root().join("meshes/walls/plane.stl");
+    let plain = load_wall_mesh(&path, &WallPlacement::default())
+        .unwrap()
+        .triangles;
+    let normal = |t: &[Vector3<f64>; 3]| (t[1] - t[0]).cross(&(t[2] - t[0])).normalize();
+    assert!(
+        plain
+            .iter()
+            .all(|t| (normal(t) - Vector3::z()).norm() < 1e-12)
+    );
+    let placement = WallPlacement {
+        scale: 2.0,
+        rotation: UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 90f64.to_radians()),
+        translation: Vector3::new(0.0, 0.0, 1.0),
+        flip_normals: true,
+    };
+    let placed = load_wall_mesh(&path, &placement).unwrap().triangles;
+    for (a, b) in plain.iter().zip(&placed) {
+        // Flip swaps the last two vertices; the first maps as translate + R (2 p).
+        let p = a[0] * 2.0;
+        assert!((b[0] - Vector3::new(p.x, -p.z, p.y + 1.0)).norm() < 1e-6);
+        // +z turned to −y by the rotation, then flipped to +y.
+        assert!((normal(b) - Vector3::y()).norm() < 1e-9);
+    }
+    // Via the scene: rotate = { axis, angle } in degrees.
+    let text = replace(
+        "scale = 0.1\n",
+        "scale = 0.1\nrotate = { axis = [1, 0, 0], angle = 90 }\n",
+    );
+    let s = parse(&text).unwrap();
+    let t = &s.walls[1].triangles[0];
+    assert!((normal(t) + Vector3::y()).norm() < 1e-9);
+    assert!(
+        t.iter()
+            .all(|p| (p.z - 0.4).abs() <= 0.05 + 1e-9 && p.y.abs() < 1e-9)
+    );
+}
+
+#[test]
+fn committed_wall_meshes_face_the_particles() {
+    let dir = repo_root().join("meshes/walls");
+    let load = |f: &str| {
+        load_wall_mesh(&dir.join(f), &WallPlacement::default())
+            .unwrap()
+            .triangles
+    };
+    let normal = |t: &[Vector3<f64>; 3]| (t[1] - t[0]).cross(&(t[2] - t[0])).normalize();
+    let centroid = |t: &[Vector3<f64>; 3]| (t[0] + t[1] + t[2]) / 3.0;
+    let box_tris = load("box_open_top.stl");
+    assert_eq!(box_tris.len(), 10);
+    let inside = Vector3::new(0.0, 0.0, 0.05);
+    assert!(
+        box_tris
+            .iter()
+            .all(|t| normal(t).dot(&(inside - centroid(t))) > 0.0)
+    );
+    let hopper = load("hopper.stl");
+    assert_eq!(hopper.len(), 4 * HOPPER_SEGMENTS);
+    for t in &hopper {
+        let c = centroid(t);
+        let n = normal(t);
+        assert!(
+            n.dot(&Vector3::new(-c.x, -c.y, 0.0)) > 0.0,
+            "hopper normals face the axis"
+        );
+        assert!(n.z >= -1e-6, "and never downwards");
+    }
+    assert_eq!(load("plane.stl").len(), 2);
+}
+
+#[test]
+fn rayleigh_step_matches_the_formula() {
+    let s = parse(&replace("dt = 1.0e-5", "dt_fraction = 0.25")).unwrap();
+    let ts = critical_time_step(&s);
+    // Cube of circumscribed diameter 1 scaled by 0.01: edge 0.01/√3, R = (3V/4π)^(1/3).
+    let edge = 0.01 / 3f64.sqrt();
+    let r = (3.0 * edge.powi(3) / (4.0 * PI)).cbrt();
+    let g: f64 = 5.0e7 / (2.0 * 1.25);
+    let expect = PI * r * (2500.0 / g).sqrt() / (0.1631 * 0.25 + 0.8766);
+    assert!((ts.rayleigh - expect).abs() < 1e-12 * expect);
+    assert!((rayleigh_step(&s.materials[0], r) - expect).abs() < 1e-12 * expect);
+    assert_eq!(ts.per_material.len(), 1, "only particle materials count");
+    assert!((ts.dt - 0.25 * expect).abs() < 1e-15);
+    assert!((s.time_step() - ts.dt).abs() < 1e-20);
+    assert_eq!(ts.contact_time, None);
+}
+
+#[test]
+fn scale_distributions_and_cylinder_regions() {
+    let text = replace("scale = 0.01", "scale = { distribution = \"normal\", mean = 0.01, std = 0.002, min = 0.008, max = 0.012 }")
+        .replace("region = { kind = \"box\", min = [-0.1, -0.1, 0.1], max = [0.1, 0.1, 0.3] }", "region = { kind = \"cylinder\", base = [0, 0, 0.1], axis = [0, 0, 1], radius = 0.1, height = 0.2 }");
+    let s = parse(&text).unwrap();
+    assert!(matches!(s.insertions[0].region, Region::Cylinder { .. }));
+    let mut p = Particles::default();
+    Inserter::new(&s).insert(0.0, &mut p, &s, &mut 0).unwrap();
+    assert_eq!(p.len(), 50);
+    assert!(p.scale.iter().all(|x| (0.008..=0.012).contains(x)));
+    assert!(p.scale.iter().any(|x| *x != p.scale[0]));
+    assert_separated(&s, &p);
+    for (x, sc) in p.position.iter().zip(&p.scale) {
+        let r = s.templates[0].circumscribed_radius * sc;
+        assert!(x.xy().norm() + r <= 0.1 + 1e-12 && x.z - r >= 0.1 && x.z + r <= 0.3 + 1e-12);
+    }
+    error_naming(
+        &replace(
+            "scale = 0.01",
+            "scale = { distribution = \"uniform\", min = 0.02, max = 0.01 }",
+        ),
+        "particle_types[0].scale.max",
+    );
+    error_naming(
+        &replace("scale = 0.01", "scale = { distribution = \"gamma\" }"),
+        "particle_types[0].scale.distribution",
+    );
+}
+
+// ---- wall meshes (meshes/walls): written by `regenerate_wall_meshes` -------------------------
+
+/// Segments around the hopper's circumference.
+const HOPPER_SEGMENTS: usize = 64;
+
+/// Appends the quad `p, p+u, p+u+v, p+v` as two triangles wound so that `u × v` is their normal.
+fn quad(m: &mut MeshFile, p: [f64; 3], u: [f64; 3], v: [f64; 3]) {
+    let p = Vector3::from(p);
+    let (u, v) = (Vector3::from(u), Vector3::from(v));
+    tri(m, [p, p + u, p + u + v]);
+    tri(m, [p, p + u + v, p + v]);
+}
+
+fn tri(m: &mut MeshFile, t: [Vector3<f64>; 3]) {
+    let base = m.vertices.len() as u32;
+    m.vertices
+        .extend(t.iter().map(|x| nalgebra::Point3::from(*x)));
+    m.triangles.push([base, base + 1, base + 2]);
+}
+
+/// Open-top box, 0.1 m cube: x, y ∈ [−0.05, 0.05], z ∈ [0, 0.1], normals inwards.
+fn box_open_top() -> MeshFile {
+    let (h, l) = (0.05, 0.1);
+    let mut m = MeshFile::default();
+    quad(&mut m, [-h, -h, 0.0], [l, 0.0, 0.0], [0.0, l, 0.0]); // floor, +z
+    quad(&mut m, [-h, -h, 0.0], [0.0, l, 0.0], [0.0, 0.0, l]); // x = −h, +x
+    quad(&mut m, [h, -h, 0.0], [0.0, 0.0, l], [0.0, l, 0.0]); // x = +h, −x
+    quad(&mut m, [-h, -h, 0.0], [0.0, 0.0, l], [l, 0.0, 0.0]); // y = −h, +y
+    quad(&mut m, [-h, h, 0.0], [l, 0.0, 0.0], [0.0, 0.0, l]); // y = +h, −y
+    m
+}
+
+/// Conical hopper with a cylindrical bin: outlet radius 10 mm at z = 0, cone at 30° from the
+/// vertical up to radius 50 mm, then a cylinder to z = 0.15 m; normals face the axis.
+fn hopper() -> MeshFile {
+    let (r0, r1, top) = (0.01, 0.05, 0.15);
+    let zc = (r1 - r0) / 30f64.to_radians().tan();
+    let rings = [(r0, 0.0), (r1, zc), (r1, top)];
+    let mut m = MeshFile::default();
+    let at = |r: f64, z: f64, k: usize| {
+        let a = TAU * k as f64 / HOPPER_SEGMENTS as f64;
+        Vector3::new(r * a.cos(), r * a.sin(), z)
+    };
+    for w in rings.windows(2) {
+        let ((ra, za), (rb, zb)) = (w[0], w[1]);
+        for k in 0..HOPPER_SEGMENTS {
+            let (a, b) = (at(ra, za, k), at(ra, za, k + 1));
+            let (c, d) = (at(rb, zb, k + 1), at(rb, zb, k));
+            // (d − a) × (c − a): up-the-wall × around = towards the axis.
+            tri(&mut m, [a, d, c]);
+            tri(&mut m, [a, c, b]);
+        }
+    }
+    m
+}
+
+/// Square of side 1 m in z = 0 centred at the origin, normal +z.
+fn plane() -> MeshFile {
+    let mut m = MeshFile::default();
+    quad(&mut m, [-0.5, -0.5, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+    m
+}
+
+#[test]
+#[ignore = "writes meshes/walls/*.stl; run by hand to regenerate them"]
+fn regenerate_wall_meshes() {
+    let dir = repo_root().join("meshes/walls");
+    std::fs::create_dir_all(&dir).unwrap();
+    box_open_top()
+        .write_stl(&dir.join("box_open_top.stl"))
+        .unwrap();
+    hopper().write_stl(&dir.join("hopper.stl")).unwrap();
+    plane().write_stl(&dir.join("plane.stl")).unwrap();
+}
