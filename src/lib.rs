@@ -13,6 +13,7 @@ pub mod neighbor;
 pub mod pipeline;
 pub mod probe;
 pub mod rng;
+pub mod run;
 pub mod scene;
 pub mod shape;
 pub mod state;

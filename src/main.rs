@@ -3,6 +3,7 @@
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use polydem::probe::{Precision, probe_overlap, probe_wall};
+use polydem::run::{BackendChoice, RunOptions};
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -23,6 +24,24 @@ enum Command {
         #[command(subcommand)]
         query: ProbeQuery,
     },
+    /// Runs a scene: frames, series, checkpoints, and summary.json in the output directory.
+    Run {
+        /// Scene file (TOML, see docs/scene.md).
+        scene: PathBuf,
+        #[arg(long, value_enum, default_value = "auto")]
+        backend: BackendChoice,
+        /// Output directory (overrides the scene's output.dir).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Continue from a checkpoint of the same scene.
+        #[arg(long)]
+        restart: Option<PathBuf>,
+        /// Stop after this many steps.
+        #[arg(long)]
+        max_steps: Option<u64>,
+    },
+    /// Validates a scene and prints the critical time step, the chosen dt and counts.
+    Check { scene: PathBuf },
     /// Lists GPUs, the CUDA driver and NVRTC versions, as JSON.
     Info,
     /// Shape templates: mass properties and face counts.
@@ -85,6 +104,33 @@ fn run(cli: Cli) -> Result<()> {
         Command::Probe {
             query: ProbeQuery::Wall { file, precision },
         } => probe_wall(&file, precision, &mut out),
+        Command::Run {
+            scene,
+            backend,
+            out: dir,
+            restart,
+            max_steps,
+        } => {
+            let summary = polydem::run::run(&RunOptions {
+                scene,
+                backend,
+                out: dir,
+                restart,
+                max_steps,
+            })?;
+            use std::io::Write;
+            writeln!(out, "{}", serde_json::to_string_pretty(&summary)?)?;
+            Ok(())
+        }
+        Command::Check { scene } => {
+            use std::io::Write;
+            writeln!(
+                out,
+                "{}",
+                serde_json::to_string_pretty(&polydem::run::check(&scene)?)?
+            )?;
+            Ok(())
+        }
         Command::Info => {
             use std::io::Write;
             let info = polydem::backend::cuda_info();

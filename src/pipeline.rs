@@ -198,14 +198,10 @@ impl Simulation {
         sim.step = step;
         sim.next_id = next_id;
         sim.dirty = true;
-        // Forces are recomputed from the restored state exactly as the uninterrupted run had
-        // them: the force evaluation is a pure function of positions, velocities and history,
-        // except that the contact law advances the history, so the history is evaluated on a
-        // copy and restored afterwards.
-        let saved = sim.history.clone();
+        // The checkpoint holds the forces and torques of the last evaluation, which the next
+        // half kick uses: they are kept as stored (re-evaluating them would advance the
+        // tangential springs a second time), so the restarted run continues bitwise.
         sim.refresh_radii();
-        sim.forces_with_history_step(0.0)?;
-        sim.history = saved;
         Ok(sim)
     }
 

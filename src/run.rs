@@ -1,0 +1,406 @@
+//! `polydem run` and `polydem check`: the driver around [`Simulation::step`] — output frames,
+//! time series, checkpoints and restarts, progress, Ctrl-C, and the closing `summary.json`
+//! (stage 10 of DESIGN.md §1).
+
+use crate::backend;
+use crate::io::checkpoint::fnv1a64;
+use crate::io::{
+    Checkpoint, FrameView, FrameWriter, SeriesRow, SeriesWriter, WallView, read_checkpoint,
+    write_atomic, write_checkpoint, write_particle_csv,
+};
+use crate::pipeline::{Simulation, SimulationError};
+use crate::scene::{Inserter, InserterState, Scene, check_report, load_scene};
+use anyhow::{Context, Result, anyhow, bail};
+use nalgebra::Vector3;
+use serde_json::json;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// Which backend a run asks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendChoice {
+    /// CUDA when a usable GPU is present, else the CPU.
+    Auto,
+    /// The CPU (rayon).
+    Cpu,
+    /// CUDA.
+    Cuda,
+}
+
+/// Options of `polydem run`.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub scene: PathBuf,
+    pub backend: BackendChoice,
+    pub out: Option<PathBuf>,
+    pub restart: Option<PathBuf>,
+    /// Stop after this many steps (for tests and benchmarks); `None`: run to the end time.
+    pub max_steps: Option<u64>,
+}
+
+/// Hash identifying a scene for restarts: the scene file's bytes.
+fn scene_hash(path: &Path) -> Result<u64> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    Ok(fnv1a64(&bytes))
+}
+
+/// Picks the backend; only the CPU backend exists so far, so `cuda` is refused with the reason
+/// and `auto` says why it uses the CPU.
+fn choose_backend(choice: BackendChoice) -> Result<&'static str> {
+    let info = backend::cuda_info();
+    match choice {
+        BackendChoice::Cpu => Ok("cpu"),
+        BackendChoice::Cuda => bail!(
+            "--backend cuda: the CUDA backend is not available in this build yet{}; use --backend cpu",
+            info.gpus
+                .first()
+                .map(|g| format!(" (GPU found: {})", g.name))
+                .unwrap_or_default()
+        ),
+        BackendChoice::Auto => {
+            match (&info.unavailable, info.gpus.first()) {
+                (None, Some(g)) => tracing::info!(
+                    "GPU {} found, but the CUDA backend is not built yet: running on the CPU",
+                    g.name
+                ),
+                (Some(why), _) => tracing::info!("running on the CPU: {why}"),
+                _ => tracing::info!("running on the CPU"),
+            }
+            Ok("cpu")
+        }
+    }
+}
+
+/// Events that happen every so many seconds of simulated time.
+struct Schedule {
+    interval: Option<f64>,
+    next: f64,
+}
+
+impl Schedule {
+    fn new(interval: Option<f64>, now: f64) -> Self {
+        let next = match interval {
+            Some(i) if i > 0.0 => (now / i).floor() * i + i,
+            _ => f64::INFINITY,
+        };
+        Schedule { interval, next }
+    }
+
+    /// True once per interval, at the first step at or past each multiple (half a step early
+    /// counts, so round-off in the accumulated time never skips a frame).
+    fn due(&mut self, t: f64, dt: f64) -> bool {
+        match self.interval {
+            Some(i) if i > 0.0 && t + 0.5 * dt >= self.next => {
+                while self.next <= t + 0.5 * dt {
+                    self.next += i;
+                }
+                true
+            }
+            _ => false,
+        }
+    }
+}
+
+/// Output of a run in progress.
+struct Outputs {
+    dir: PathBuf,
+    frames: Option<FrameWriter>,
+    series: SeriesWriter,
+    type_template: Vec<usize>,
+    wall_names: Vec<String>,
+}
+
+impl Outputs {
+    fn frame(&mut self, sim: &Simulation) -> Result<()> {
+        let s = &sim.scene;
+        let view = FrameView {
+            particles: &sim.particles,
+            templates: &s.templates,
+            type_template: &self.type_template,
+            rank: 0,
+            fields: &s.output.fields,
+        };
+        if let Some(fw) = self.frames.as_mut() {
+            let placed: Vec<Vec<[Vector3<f64>; 3]>> = s
+                .walls
+                .iter()
+                .map(|w| {
+                    let pose = w.motion.transform(sim.time);
+                    w.triangles
+                        .iter()
+                        .map(|t| t.map(|v| (pose * nalgebra::Point3::from(v)).coords))
+                        .collect()
+                })
+                .collect();
+            let walls: Vec<WallView> = s
+                .walls
+                .iter()
+                .zip(&placed)
+                .zip(&sim.wall_forces)
+                .map(|((w, tris), f)| WallView {
+                    name: &w.name,
+                    triangles: tris,
+                    force: *f,
+                })
+                .collect();
+            fw.write_frame(sim.step, sim.time, &[view], &walls)?;
+        }
+        if s.output.formats.csv {
+            let view = FrameView {
+                particles: &sim.particles,
+                templates: &s.templates,
+                type_template: &self.type_template,
+                rank: 0,
+                fields: &s.output.fields,
+            };
+            let particles_dir = self.dir.join("particles");
+            std::fs::create_dir_all(&particles_dir)
+                .with_context(|| format!("{}: cannot create", particles_dir.display()))?;
+            let path = particles_dir.join(format!("step_{:010}.csv", sim.step));
+            write_particle_csv(&path, sim.time, &view)?;
+        }
+        Ok(())
+    }
+
+    fn series(&mut self, sim: &Simulation) -> Result<()> {
+        let (kt, kr, pg) = sim.energies();
+        self.series.append(&SeriesRow {
+            step: sim.step,
+            time: sim.time,
+            kinetic_translational: kt,
+            kinetic_rotational: kr,
+            potential_gravity: pg,
+            elastic: sim.stats.elastic_energy,
+            contacts: sim.stats.contacts,
+            wall_contacts: sim.stats.wall_contacts,
+            wall_forces: sim.wall_forces.clone(),
+        })?;
+        let _ = &self.wall_names;
+        Ok(())
+    }
+}
+
+/// The checkpoint of the current state.
+fn checkpoint_of(sim: &Simulation, hash: u64) -> Result<Checkpoint> {
+    let inserter = serde_json::to_vec(&sim.inserter.state())?;
+    Ok(Checkpoint {
+        step: sim.step,
+        time: sim.time,
+        particles: sim.particles.clone(),
+        history: sim.history.clone(),
+        rng_state: sim.inserter.state().rng,
+        inserter,
+        next_id: sim.next_id,
+        scene_hash: hash,
+        extra: vec![("removed".into(), sim.stats.removed.to_le_bytes().to_vec())],
+    })
+}
+
+fn save_checkpoint(sim: &Simulation, dir: &Path, hash: u64) -> Result<PathBuf> {
+    let ckdir = dir.join("checkpoints");
+    std::fs::create_dir_all(&ckdir)
+        .with_context(|| format!("{}: cannot create", ckdir.display()))?;
+    let path = ckdir.join(format!("step_{:010}.ckpt", sim.step));
+    write_checkpoint(&path, &checkpoint_of(sim, hash)?)?;
+    // The newest is also `latest.ckpt`, so that a restart needs no step number.
+    write_checkpoint(&ckdir.join("latest.ckpt"), &checkpoint_of(sim, hash)?)?;
+    Ok(path)
+}
+
+/// `polydem run`: returns the summary it also writes to `summary.json`.
+pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
+    let mut scene = load_scene(&opts.scene).map_err(|e| anyhow!("{e}"))?;
+    if let Some(out) = &opts.out {
+        scene.output.dir = out.clone();
+    }
+    let backend_name = choose_backend(opts.backend)?;
+    let hash = scene_hash(&opts.scene)?;
+    let dir = scene.output.dir.clone();
+    std::fs::create_dir_all(&dir)
+        .with_context(|| format!("{}: cannot create the output directory", dir.display()))?;
+    let type_template: Vec<usize> = scene.particle_types.iter().map(|t| t.template).collect();
+    let wall_names: Vec<String> = scene.walls.iter().map(|w| w.name.clone()).collect();
+    let series_path = dir.join("series.csv");
+
+    let (mut sim, resumed) = match &opts.restart {
+        Some(path) => {
+            let c = read_checkpoint(path)?;
+            c.check_scene(hash, path)?;
+            let state: InserterState = serde_json::from_slice(&c.inserter)
+                .with_context(|| format!("{}: insertion state", path.display()))?;
+            let inserter = Inserter::try_restore(&scene, &state)
+                .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+            let mut sim = Simulation::restore(
+                scene,
+                c.particles,
+                c.history,
+                inserter,
+                c.time,
+                c.step,
+                c.next_id,
+            )?;
+            if let Some((_, b)) = c.extra.iter().find(|(k, _)| k == "removed") {
+                sim.stats.removed = b.as_slice().try_into().map(u64::from_le_bytes).unwrap_or(0);
+            }
+            tracing::info!(
+                "restarted from {} at step {} (t = {} s)",
+                path.display(),
+                sim.step,
+                sim.time
+            );
+            (sim, true)
+        }
+        None => (Simulation::new(scene)?, false),
+    };
+    let s = &sim.scene;
+    let frames = if s.output.formats.vtu && s.output.frame_interval.is_some() {
+        Some(if resumed {
+            FrameWriter::resume(&dir, 1, sim.time)?
+        } else {
+            FrameWriter::new(&dir, 1)?
+        })
+    } else {
+        None
+    };
+    let series = if resumed {
+        SeriesWriter::resume(&series_path, &wall_names, sim.time)?
+    } else {
+        SeriesWriter::new(&series_path, &wall_names)?
+    };
+    let mut out = Outputs {
+        dir: dir.clone(),
+        frames,
+        series,
+        type_template,
+        wall_names,
+    };
+    let mut frame_at = Schedule::new(s.output.frame_interval, sim.time);
+    let mut series_at = Schedule::new(Some(s.output.series_interval), sim.time);
+    let mut checkpoint_at = Schedule::new(s.output.checkpoint_interval, sim.time);
+    let end_time = s.simulation.end_time;
+    let log_every = s.output.log_interval_steps.max(1);
+    if !resumed {
+        out.frame(&sim)?;
+        out.series(&sim)?;
+    }
+
+    let interrupted = Arc::new(AtomicBool::new(false));
+    {
+        let flag = interrupted.clone();
+        // A second handler registration (several runs in one process, as in tests) is refused;
+        // the first one's flag then never fires for this run, which only loses Ctrl-C handling.
+        let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
+    }
+    let total_steps = ((end_time - sim.time) / sim.dt).ceil().max(0.0) as u64;
+    let bar = std::io::stderr().is_terminal().then(|| {
+        let b = indicatif::ProgressBar::new(total_steps);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:40} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b
+    });
+    let start = Instant::now();
+    let (step0, mut particle_steps) = (sim.step, 0u64);
+    let mut stopped_by_user = false;
+    while sim.time + 0.5 * sim.dt < end_time {
+        if opts.max_steps.is_some_and(|m| sim.step - step0 >= m) {
+            break;
+        }
+        sim.step().map_err(|e: SimulationError| anyhow!("{e}"))?;
+        particle_steps += sim.particles.len() as u64;
+        let (t, dt) = (sim.time, sim.dt);
+        if frame_at.due(t, dt) {
+            out.frame(&sim)?;
+        }
+        if series_at.due(t, dt) {
+            out.series(&sim)?;
+        }
+        if checkpoint_at.due(t, dt) {
+            save_checkpoint(&sim, &dir, hash)?;
+        }
+        let done = sim.step - step0;
+        if let Some(b) = &bar {
+            b.set_position(done);
+            if done % 100 == 0 {
+                b.set_message(format!(
+                    "t = {t:.4} s, {} particles, {} contacts",
+                    sim.particles.len(),
+                    sim.stats.contacts + sim.stats.wall_contacts
+                ));
+            }
+        } else if done % log_every == 0 {
+            let elapsed = start.elapsed().as_secs_f64();
+            let rate = done as f64 / elapsed.max(1e-9);
+            let eta = (total_steps.saturating_sub(done)) as f64 / rate.max(1e-9);
+            tracing::info!(
+                "step {} t = {:.5} s  {:.0} steps/s  {} particles  {} contacts  ETA {:.0} s",
+                sim.step,
+                t,
+                rate,
+                sim.particles.len(),
+                sim.stats.contacts + sim.stats.wall_contacts,
+                eta
+            );
+        }
+        if interrupted.load(Ordering::SeqCst) {
+            let path = save_checkpoint(&sim, &dir, hash)?;
+            tracing::warn!(
+                "interrupted: checkpoint written to {}; resume with --restart {}",
+                path.display(),
+                path.display()
+            );
+            stopped_by_user = true;
+            break;
+        }
+    }
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let wall = start.elapsed().as_secs_f64();
+    if !stopped_by_user {
+        out.frame(&sim)?;
+        out.series(&sim)?;
+        if sim.scene.output.checkpoint_interval.is_some() {
+            save_checkpoint(&sim, &dir, hash)?;
+        }
+    }
+    let (kt, kr, pg) = sim.energies();
+    let threads = rayon::current_num_threads();
+    let summary = json!({
+        "scene": opts.scene.display().to_string(),
+        "backend": backend_name,
+        "threads": threads,
+        "steps": sim.step - step0,
+        "final_step": sim.step,
+        "simulated_time": sim.time,
+        "dt": sim.dt,
+        "wall_seconds": wall,
+        "particle_steps_per_second": particle_steps as f64 / wall.max(1e-12),
+        "particle_steps_per_second_per_thread": particle_steps as f64 / wall.max(1e-12) / threads as f64,
+        "particles": sim.particles.len(),
+        "particles_removed": sim.stats.removed,
+        "contacts": sim.stats.contacts,
+        "wall_contacts": sim.stats.wall_contacts,
+        "energy": {"kinetic_translational": kt, "kinetic_rotational": kr, "potential_gravity": pg, "elastic": sim.stats.elastic_energy},
+        "stage_seconds": sim.timers,
+        "interrupted": stopped_by_user,
+    });
+    write_atomic(
+        &dir.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )
+    .with_context(|| format!("{}: cannot write summary.json", dir.display()))?;
+    Ok(summary)
+}
+
+/// `polydem check`: validates the scene and reports the time-step estimates and counts.
+pub fn check(scene_path: &Path) -> Result<serde_json::Value> {
+    let scene: Scene = load_scene(scene_path).map_err(|e| anyhow!("{e}"))?;
+    Ok(check_report(&scene))
+}
