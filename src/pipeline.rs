@@ -512,6 +512,7 @@ impl Simulation {
                             dv_dxb: rot * o.dv_dxb,
                             moment_b: rot * o.moment_b,
                             depth: o.depth,
+                            thickness: o.thickness,
                         };
                         let (params, table) = self.contact_parameters(i, None, s.walls[k].material);
                         let key = ContactKey::wall(p.id[i], k);

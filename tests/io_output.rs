@@ -471,14 +471,12 @@ fn checkpoint() -> Checkpoint {
             ContactKey::particles(91, 77),
             ContactState {
                 spring: Vector3::new(1e-9, -2e-9, 1.0 / 3.0),
-                approach: 5e-6,
             },
         ),
         (
             ContactKey::wall(84, 3),
             ContactState {
                 spring: Vector3::new(0.0, -0.0, 1e-300),
-                approach: 0.0,
             },
         ),
     ]);

@@ -1,5 +1,4 @@
-//! Contact history: the per-contact state that outlives a step (tangential spring, normal
-//! approach), keyed by the pair of global ids so that it survives neighbour-list rebuilds,
+//! Contact history: the per-contact state that outlives a step (the tangential spring), keyed by the pair of global ids so that it survives neighbour-list rebuilds,
 //! reordering and migration (DESIGN.md §3).
 
 use nalgebra::Vector3;
@@ -44,8 +43,6 @@ impl ContactKey {
 pub struct ContactState {
     /// Tangential spring displacement ξ (Cundall–Strack), kept in the current tangent plane.
     pub spring: Vector3<f64>,
-    /// Normal approach δ accumulated from the relative normal velocity since first contact.
-    pub approach: f64,
 }
 
 /// All live contacts, sorted by key: lookups are binary searches and iteration order is

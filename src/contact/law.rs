@@ -8,8 +8,8 @@
 //! limit, for any shapes.
 //!
 //! Normal, damping: `F_d = −γ(e, p) √(m_eff k_loc) (v_r · n) n` with `k_loc = p F_e / δ` the local
-//! stiffness of the power law `F_e ∝ δ^p`, where `δ` is the approach accumulated in the contact
-//! history and `p = (4q + 1)/3` follows from the area exponent `q` of `A_n ∝ δ^q`, measured as
+//! stiffness of the power law `F_e ∝ δ^p`, where `δ` is the overlap's thickness along the normal
+//! and `p = (4q + 1)/3` follows from the area exponent `q` of `A_n ∝ δ^q`, measured as
 //! `q = A_n δ / V − 1` (since `dV/dδ = A_n`). `γ(e, p)` comes from [`super::restitution`]; this
 //! makes the restitution the prescribed `e` for vertex, edge and face impacts alike, where seed
 //! Eq. 15 (tuned for a linear spring) does not.
@@ -94,14 +94,22 @@ pub fn contact_forces(
     let torque_b_el = -(overlap.moment_b + (c - kin.x_b).cross(&overlap.dv_dxb)) * u_prime;
     let torque_a_el = -(-overlap.moment_b + (c - kin.x_a).cross(&(-overlap.dv_dxb))) * u_prime;
 
-    // Approach δ from the history (positive while closing).
-    state.approach = (state.approach - vn * dt).max(0.0);
-    let delta = state.approach.max(volume / area * 1e-3);
+    // Penetration δ and the exponent of F ∝ δ^p from the geometry: with V ∝ δ^{q+1} and
+    // A_n ∝ δ^q, q = A_n δ / V − 1 (0 face, 1 edge, 2 vertex) and p = (4q + 1)/3.
+    let delta = overlap.thickness.max(volume / area);
     let q = (area * delta / volume - 1.0).max(0.0);
     let p = (4.0 * q + 1.0) / 3.0;
     let k_loc = p * f_elastic / delta;
     let gamma = damping.gamma(p);
-    let f_damp = -gamma * (kin.effective_mass * k_loc).sqrt() * vn;
+    let mut f_damp = -gamma * (kin.effective_mass * k_loc).sqrt() * vn;
+    // The face–face stiffness, and with it the damping coefficient, grows without bound as
+    // δ → 0; an explicit step must not let the dashpot reverse the normal approach on its own
+    // (its impulse is at most the normal momentum m*|v_n|), or it over-damps the first steps of
+    // a flat impact.
+    if dt > 0.0 {
+        let limit = kin.effective_mass * vn.abs() / dt;
+        f_damp = f_damp.clamp(-limit, limit);
+    }
     // The contact pushes, never pulls.
     let f_normal = (f_elastic + f_damp).max(0.0);
     let mut force_b = n * f_normal;

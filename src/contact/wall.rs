@@ -121,6 +121,7 @@ impl WallMesh {
                 total.dv_dxb += o.dv_dxb;
                 moment_origin += o.moment_b + o.centroid.cross(&o.dv_dxb);
                 total.depth = total.depth.max(o.depth);
+                total.thickness = total.thickness.max(o.thickness);
             }
         }
         if total.volume > 0.0 {

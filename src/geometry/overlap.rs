@@ -47,6 +47,9 @@ pub struct Overlap<T: Real> {
     /// Radius of the largest ball inside the overlap (half-thickness of a thin lens); negative
     /// when the bodies are apart.
     pub depth: T,
+    /// Extent of the overlap region along the normal `−S/|S|`: the penetration δ of a vertex,
+    /// edge or face into the other body, measured from the geometry rather than from history.
+    pub thickness: T,
 }
 
 impl<T: Real> Overlap<T> {
@@ -69,6 +72,7 @@ impl<T: Real> Overlap<T> {
             dv_dxb: widen(&self.dv_dxb),
             moment_b: widen(&self.moment_b),
             depth: self.depth.f64(),
+            thickness: self.thickness.f64(),
         }
     }
 }
@@ -281,12 +285,28 @@ fn overlap_about<T: Real>(
     centroid /= volume;
     // Moment about the overlap centroid rather than x₀.
     moment_b -= centroid.cross(&dv_dxb);
+    let mut thickness = T::zero();
+    let area = dv_dxb.norm();
+    if area > T::zero() {
+        let n = dv_dxb / area;
+        let (mut lo, mut hi) = (
+            T::max_value().unwrap_or(T::one()),
+            -T::max_value().unwrap_or(T::one()),
+        );
+        for (s, _) in ws.hull.triangles() {
+            let h = n.dot(&ws.vertex[s]);
+            lo = lo.min(h);
+            hi = hi.max(h);
+        }
+        thickness = (hi - lo).max(T::zero());
+    }
     Ok(Overlap {
         volume,
         centroid: centroid + x0,
         dv_dxb,
         moment_b,
         depth: radius,
+        thickness,
     })
 }
 

@@ -11,7 +11,7 @@
 //!   n u64; then per field, all particles: id u64, kind u32, scale f64, position 3×f64,
 //!     velocity 3×f64, orientation 4×f64 (nalgebra storage order i, j, k, w; not renormalised),
 //!     angular_velocity 3×f64, force 3×f64, torque 3×f64, mass f64, inertia 3×f64
-//!   contacts u64; per contact: a u64, b u64, spring 3×f64, approach f64 (sorted by key)
+//!   contacts u64; per contact: a u64, b u64, spring 3×f64 (sorted by key)
 //!   inserter: len u64, bytes
 //!   extra: count u64; per entry: name len u64, UTF-8 name, data len u64, bytes
 //! checksum: u64         FNV-1a 64 of everything before it
@@ -168,7 +168,6 @@ pub fn encode_checkpoint(c: &Checkpoint, path: &Path) -> Result<Vec<u8>, Checkpo
         u(&mut b, k.a);
         u(&mut b, k.b);
         v3(&mut b, std::slice::from_ref(&s.spring));
-        f(&mut b, s.approach);
     }
     u(&mut b, c.inserter.len() as u64);
     b.extend_from_slice(&c.inserter);
@@ -383,7 +382,6 @@ fn decode_payload(r: &mut Reader) -> Result<Checkpoint, ReadFail> {
         };
         let state = ContactState {
             spring: r.v3(w)?,
-            approach: r.f64(w)?,
         };
         Ok((key, state))
     })?;

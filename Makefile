@@ -1,0 +1,66 @@
+# polydem: `make run` (the main job) and `make test` (the test suite) work on a fresh
+# Debian/Ubuntu machine: both first run scripts/setup.sh, which installs what is missing (apt
+# packages for Open MPI and bindgen, the Python virtual environment .venv) and checks for cargo.
+#
+#   make run     build the release CLI and run the example probes in launch/probe/
+#   make test    cargo test --release, with the oracles' Python in POLYDEM_PYTHON
+#   make lint    cargo fmt --check, clippy -D warnings on every target, rustdoc -D warnings
+#   make setup   only the installation step
+#   make clean-venv   remove .venv (the next setup recreates it)
+#
+# `make lint` is not part of `make test`: clippy builds every target a second time in check mode
+# (on a 2-core machine about two minutes more from cold, criterion included), and formatting or
+# lint findings are review findings, not failed tests, so they should not stop a user's
+# `make test` or CI from reporting what the tests say. Run `make lint` before committing.
+
+SHELL := /bin/bash
+.SHELLFLAGS := -eu -o pipefail -c
+.DEFAULT_GOAL := help
+
+ROOT := $(abspath $(dir $(lastword $(MAKEFILE_LIST))))
+# rustup installs into ~/.cargo/bin; a shell opened before the install may not have it yet.
+export PATH := $(HOME)/.cargo/bin:$(PATH)
+
+CARGO ?= cargo
+TARGET_DIR := $(or $(CARGO_TARGET_DIR),$(ROOT)/target)
+POLYDEM := $(TARGET_DIR)/release/polydem
+VENV_PYTHON := $(ROOT)/.venv/bin/python
+PROBE_OUT := $(ROOT)/out/probe
+
+.PHONY: help setup build run test lint clean-venv
+
+help:
+	@sed -n '1,/^$$/p' $(ROOT)/Makefile | sed 's/^# \{0,1\}//'
+
+setup:
+	@bash $(ROOT)/scripts/setup.sh
+
+# Built together with one integration test so that dependencies get the same features as under
+# `cargo test` (dev-dependencies unify features): `make run` and `make test` then share every
+# compiled artifact instead of building the dependency graph twice (minutes on 2 cores).
+build: setup
+	cd $(ROOT) && $(CARGO) build --release --bin polydem --test probe_manifold
+
+# Temporary main job until the quickstart scene and `polydem run` exist: the contact-geometry
+# probe on the example pairs and wall cases of launch/probe/ (see launch/probe/README.md).
+run: build
+	@mkdir -p $(PROBE_OUT)
+	@cd $(ROOT) && for q in overlap:pairs wall:wall; do \
+	    query=$${q%%:*}; input=launch/probe/$${q#*:}.json; \
+	    echo; echo "== polydem probe $$query $$input"; \
+	    $(POLYDEM) probe $$query $$input | tee $(PROBE_OUT)/$$query.jsonl; \
+	    echo "-- summary"; \
+	    $(VENV_PYTHON) scripts/probe_report.py $$query $$input $(PROBE_OUT)/$$query.jsonl; \
+	done
+	@echo; echo "Results also in out/probe/*.jsonl; what they mean: launch/probe/README.md"
+
+test: setup
+	cd $(ROOT) && POLYDEM_PYTHON=$(VENV_PYTHON) $(CARGO) test --release
+
+lint: setup
+	cd $(ROOT) && $(CARGO) fmt --check
+	cd $(ROOT) && $(CARGO) clippy --release --all-targets -- -D warnings
+	cd $(ROOT) && RUSTDOCFLAGS=-Dwarnings $(CARGO) doc --no-deps
+
+clean-venv:
+	rm -rf $(ROOT)/.venv
