@@ -1,0 +1,184 @@
+//! `polydem run` end to end: a run stopped at step k and restarted from its checkpoint ends
+//! bitwise equal to the uninterrupted run; the summary and output files are written.
+
+mod common;
+
+use common::*;
+use polydem::io::read_checkpoint;
+use std::path::Path;
+use std::process::Command;
+
+/// 60 frictional dodecahedra dropped into an open box and onto each other, with a rate insertion
+/// still running at the restart point, so that the checkpoint must carry contacts with
+/// tangential history, the insertion state and the random state.
+fn scene(dir: &Path) -> std::path::PathBuf {
+    let root = repo_root();
+    let text = format!(
+        r#"gravity = [0.0, 0.0, -9.81]
+[simulation]
+dt = 2e-5
+end_time = 10.0
+seed = 11
+[domain]
+min = [-0.06, -0.06, -0.01]
+max = [0.06, 0.06, 0.2]
+[[materials]]
+name = "grain"
+youngs_modulus = 1e6
+poisson_ratio = 0.3
+density = 2500.0
+[[materials]]
+name = "steel"
+youngs_modulus = 2e11
+poisson_ratio = 0.3
+density = 7800.0
+[[material_pairs]]
+materials = ["grain", "grain"]
+restitution = 0.5
+friction = 0.5
+[[material_pairs]]
+materials = ["grain", "steel"]
+restitution = 0.5
+friction = 0.4
+[[particle_types]]
+name = "d"
+material = "grain"
+generator = {{ kind = "dodecahedron", size = 0.012 }}
+scale = {{ distribution = "uniform", min = 0.8, max = 1.2 }}
+[[insertions]]
+type = "d"
+region = {{ kind = "box", min = [-0.04, -0.04, 0.005], max = [0.04, 0.04, 0.05] }}
+count = 40
+velocity = [0.0, 0.0, -2.0]
+[[insertions]]
+type = "d"
+region = {{ kind = "box", min = [-0.04, -0.04, 0.06], max = [0.04, 0.04, 0.1] }}
+rate = 2000.0
+total = 20
+[[walls]]
+name = "box"
+mesh = "{}"
+material = "steel"
+[output]
+dir = "out"
+frame_interval = 0.002
+formats = ["vtu", "csv"]
+checkpoint_interval = 0.004
+"#,
+        root.join("meshes/walls/box_open_top.stl").display()
+    );
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn run(args: &[&str]) {
+    let out = Command::new(polydem_bin())
+        .arg("run")
+        .args(args)
+        .output()
+        .expect("run polydem");
+    assert!(
+        out.status.success(),
+        "polydem run {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn restart_continues_bitwise_and_outputs_are_written() {
+    let dir = temp_dir("restart");
+    let scene = scene(&dir);
+    let s = scene.to_str().unwrap();
+    let (full, first, second) = (dir.join("full"), dir.join("first"), dir.join("second"));
+    run(&[
+        s,
+        "--backend",
+        "cpu",
+        "--out",
+        full.to_str().unwrap(),
+        "--max-steps",
+        "800",
+    ]);
+    run(&[
+        s,
+        "--backend",
+        "cpu",
+        "--out",
+        first.to_str().unwrap(),
+        "--max-steps",
+        "400",
+    ]);
+    let ckpt = first.join("checkpoints/latest.ckpt");
+    let c = read_checkpoint(&ckpt).unwrap();
+    assert_eq!(c.step, 400);
+    assert!(
+        !c.history.is_empty(),
+        "the restart point should have live contacts"
+    );
+    std::fs::create_dir_all(&second).unwrap();
+    run(&[
+        s,
+        "--backend",
+        "cpu",
+        "--out",
+        second.to_str().unwrap(),
+        "--restart",
+        ckpt.to_str().unwrap(),
+        "--max-steps",
+        "400",
+    ]);
+    let a = read_checkpoint(&full.join("checkpoints/latest.ckpt")).unwrap();
+    let b = read_checkpoint(&second.join("checkpoints/latest.ckpt")).unwrap();
+    assert_eq!((a.step, a.time.to_bits()), (b.step, b.time.to_bits()));
+    assert_eq!(a.particles.len(), 60);
+    assert!(
+        a.particles == b.particles,
+        "particle state differs after the restart"
+    );
+    assert!(
+        a.history == b.history,
+        "contact history differs after the restart"
+    );
+    assert_eq!(a.inserter, b.inserter);
+    // Outputs: summary, frames collection, series, particle CSV.
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(full.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["steps"], 800);
+    assert_eq!(summary["particles"], 60);
+    assert!(summary["particle_steps_per_second"].as_f64().unwrap() > 0.0);
+    for k in [
+        "pairs",
+        "walls",
+        "neighbor",
+        "integrate",
+        "reduce",
+        "exchange",
+    ] {
+        assert!(summary["stage_seconds"][k].is_number(), "stage {k} missing");
+    }
+    let pvd = std::fs::read_to_string(full.join("frames.pvd")).unwrap();
+    assert_eq!(pvd.matches("<DataSet").count(), 9, "{pvd}"); // t = 0, 0.002 … 0.016 (the last is the end)
+    let series = std::fs::read_to_string(full.join("series.csv")).unwrap();
+    assert!(series.lines().count() > 5);
+    assert!(full.join("particles").read_dir().unwrap().count() >= 9);
+}
+
+#[test]
+fn check_reports_time_steps_and_counts() {
+    let dir = temp_dir("check");
+    let scene = scene(&dir);
+    let out = Command::new(polydem_bin())
+        .arg("check")
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    println!("{v:#}");
+    assert!(v.to_string().contains("rayleigh"));
+}
