@@ -123,7 +123,7 @@ fn base_and_example_scenes_load() {
 
     let dir = repo_root().join("launch/examples");
     let pour = load_scene(&dir.join("pour_box.toml")).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(pour.simulation.dt, TimeStep::FractionOfCritical(0.2));
+    assert_eq!(pour.simulation.dt, TimeStep::FractionOfCritical(0.05));
     assert_eq!(pour.walls[0].triangles.len(), 10);
     assert!(pour.output.formats.vtu && pour.output.formats.csv);
     assert!(pour.output.dir.ends_with("out/pour_box"));
@@ -138,10 +138,15 @@ fn base_and_example_scenes_load() {
     assert_eq!(report["particles_to_insert"], 800);
     assert_eq!(report["walls"][0]["facets"], 10);
     assert_eq!(report["templates"][0]["faces"], 12);
-    let f = report["time_step"]["fraction_of_rayleigh"]
-        .as_f64()
-        .unwrap();
-    assert!((f - 0.2).abs() < 1e-12);
+    // dt_fraction = 0.05 of the critical step, the face contact time, which is shorter than
+    // the Rayleigh step for this grain.
+    let ts = &report["time_step"];
+    let (dt, contact) = (
+        ts["dt"].as_f64().unwrap(),
+        ts["contact_time"].as_f64().unwrap(),
+    );
+    assert!(contact < ts["rayleigh"].as_f64().unwrap());
+    assert!((dt / contact - 0.05).abs() < 1e-12);
 
     for name in ["hopper.toml", "shaker.toml"] {
         let s = load_scene(&dir.join(name)).unwrap_or_else(|e| panic!("{e}"));
@@ -722,9 +727,23 @@ fn rayleigh_step_matches_the_formula() {
     assert!((ts.rayleigh - expect).abs() < 1e-12 * expect);
     assert!((rayleigh_step(&s.materials[0], r) - expect).abs() < 1e-12 * expect);
     assert_eq!(ts.per_material.len(), 1, "only particle materials count");
-    assert!((ts.dt - 0.25 * expect).abs() < 1e-15);
+    // Face-to-face contact time of two such cubes at the impact speed max(1, √(2 g H)):
+    // T = τ (m_eff v^{2/3} / (c A^{4/3}))^{3/4}, τ = 2 X_max Γ(7/4)Γ(1/2)/Γ(5/4) with
+    // X_max = (2/3)^{3/4} for F ∝ δ^{1/3} (closed form of the undamped impact).
+    let tau = 2.0 * (2.0f64 / 3.0).powf(0.75) * 0.919_062_526_848_883_5 * PI.sqrt()
+        / 0.906_402_477_055_477;
+    let m = 2500.0 * edge.powi(3);
+    let c = 2.0 * 5.0e7 / r;
+    let v = polydem::scene::impact_speed(&s);
+    let t_face =
+        tau * (0.5 * m * v.powf(2.0 / 3.0) / (c * (edge * edge).powf(4.0 / 3.0))).powf(0.75);
+    let contact = ts.contact_time.expect("contact time");
+    assert!(
+        (contact - t_face).abs() < 1e-6 * t_face,
+        "{contact} vs {t_face}"
+    );
+    assert!((ts.dt - 0.25 * expect.min(t_face)).abs() < 1e-6 * ts.dt);
     assert!((s.time_step() - ts.dt).abs() < 1e-20);
-    assert_eq!(ts.contact_time, None);
 }
 
 #[test]

@@ -368,7 +368,7 @@ impl Scene {
     pub fn time_step(&self) -> f64 {
         match self.simulation.dt {
             TimeStep::Fixed(dt) => dt,
-            TimeStep::FractionOfCritical(f) => f * critical_time_step(self).rayleigh,
+            TimeStep::FractionOfCritical(_) => critical_time_step(self).dt,
         }
     }
 
@@ -394,6 +394,50 @@ impl Scene {
     pub fn material_index(&self, name: &str) -> Option<usize> {
         self.materials.iter().position(|m| m.name == name)
     }
+}
+
+/// Face-to-face contact time of each particle type with itself at the impact speed `v`
+/// (validation.md §6; see [`face_contact_time`]): its largest face, its smallest scale.
+pub fn face_contact_times(scene: &Scene, v: f64) -> Vec<(String, f64)> {
+    scene
+        .particle_types
+        .iter()
+        .zip(&scene.scale_distributions)
+        .map(|(ty, dist)| {
+            let t = &scene.templates[ty.template];
+            let m = &scene.materials[ty.material];
+            let s = dist.min_scale();
+            let area = t
+                .faces
+                .iter()
+                .map(|f| {
+                    let v: Vec<_> = f
+                        .vertices
+                        .iter()
+                        .map(|&k| t.vertices[k as usize].coords)
+                        .collect();
+                    (1..v.len().saturating_sub(1))
+                        .map(|k| (v[k] - v[0]).cross(&(v[k + 1] - v[0])).norm() / 2.0)
+                        .sum::<f64>()
+                })
+                .fold(0.0, f64::max)
+                * s
+                * s;
+            let mass = m.density * t.volume * s.powi(3);
+            let c = 2.0 * m.youngs_modulus / (t.equivalent_radius * s);
+            (
+                ty.name.clone(),
+                crate::contact::restitution::face_contact_time(0.5 * mass, c, area, v),
+            )
+        })
+        .collect()
+}
+
+/// The impact speed the contact-time estimate assumes: free fall over the domain's height, at
+/// least 1 m/s.
+pub fn impact_speed(scene: &Scene) -> f64 {
+    let height = scene.domain.max.z - scene.domain.min.z;
+    (2.0 * scene.gravity.norm() * height).sqrt().max(1.0)
 }
 
 /// The Rayleigh step of one material.
@@ -457,14 +501,21 @@ pub fn critical_time_step(scene: &Scene) -> TimeStepReport {
         .iter()
         .map(|r| r.step)
         .fold(f64::INFINITY, f64::min);
+    // The volume law's face-to-face contact is far stiffer at first touch than the Rayleigh
+    // estimate assumes (it is derived for Hertzian spheres), so the critical step is the
+    // smaller of the two.
+    let contact = face_contact_times(scene, impact_speed(scene))
+        .iter()
+        .map(|t| t.1)
+        .fold(f64::INFINITY, f64::min);
     let dt = match scene.simulation.dt {
         TimeStep::Fixed(dt) => dt,
-        TimeStep::FractionOfCritical(f) => f * rayleigh,
+        TimeStep::FractionOfCritical(f) => f * rayleigh.min(contact),
     };
     TimeStepReport {
         rayleigh,
         per_material,
-        contact_time: None,
+        contact_time: contact.is_finite().then_some(contact),
         dt,
         fraction_of_rayleigh: dt / rayleigh,
     }
