@@ -2,7 +2,8 @@
 # Debian/Ubuntu machine: both first run scripts/setup.sh, which installs what is missing (apt
 # packages for Open MPI and bindgen, the Python virtual environment .venv) and checks for cargo.
 #
-#   make run     build the release CLI and run the example probes in launch/probe/
+#   make run     build the release CLI and run the quickstart scene (launch/quickstart/)
+#   make probe   the contact-geometry probe on the examples in launch/probe/
 #   make test    cargo test --release, with the oracles' Python in POLYDEM_PYTHON
 #   make lint    cargo fmt --check, clippy -D warnings on every target, rustdoc -D warnings
 #   make setup   only the installation step
@@ -27,7 +28,7 @@ POLYDEM := $(TARGET_DIR)/release/polydem
 VENV_PYTHON := $(ROOT)/.venv/bin/python
 PROBE_OUT := $(ROOT)/out/probe
 
-.PHONY: help setup build run test lint clean-venv
+.PHONY: help setup build run probe test lint clean-venv
 
 help:
 	@sed -n '1,/^$$/p' $(ROOT)/Makefile | sed 's/^# \{0,1\}//'
@@ -41,9 +42,15 @@ setup:
 build: setup
 	cd $(ROOT) && $(CARGO) build --release --bin polydem --test probe_manifold
 
-# Temporary main job until the quickstart scene and `polydem run` exist: the contact-geometry
-# probe on the example pairs and wall cases of launch/probe/ (see launch/probe/README.md).
+# The main job: the quickstart scene (about 2000 dodecahedra poured into a hopper), on the GPU
+# when one is present and the CUDA backend is built, else on the CPU; ParaView output and
+# summary.json go to out/quickstart/, and the summary is printed.
 run: build
+	@cd $(ROOT) && $(POLYDEM) run launch/quickstart/quickstart.toml --backend auto
+
+# The contact-geometry probe on the example pairs and wall cases of launch/probe/ (see
+# launch/probe/README.md).
+probe: build
 	@mkdir -p $(PROBE_OUT)
 	@cd $(ROOT) && for q in overlap:pairs wall:wall; do \
 	    query=$${q%%:*}; input=launch/probe/$${q#*:}.json; \
