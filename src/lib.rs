@@ -7,8 +7,8 @@
 pub mod backend;
 pub mod contact;
 pub mod geometry;
-pub mod io;
 pub mod integrate;
+pub mod io;
 pub mod neighbor;
 pub mod pipeline;
 pub mod probe;

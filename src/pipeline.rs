@@ -1,16 +1,16 @@
 //! The simulation and its step: every stage of DESIGN.md §1, in order.
 //!
 //! The translational and rotational integration is velocity Verlet: forces at the start of a
-//! step are those of the previous force evaluation, so [`Simulation::step`] is
+//! step are those of the previous force evaluation, so [`Simulation::step`] runs
 //!
-//! 9a. half kick and drift (integrate, first half),
-//! 1.  exchange (insertion of due particles, removal of those that left a closed domain,
-//!     periodic wrapping; migration between ranks comes with the MPI decomposition),
-//! 2.  neighbour list (rebuilt when some particle moved half the skin),
-//! 3–7. per pair: bounding-sphere broad phase, GJK, dual-space overlap, contact law;
-//!     per particle and wall: facet contacts and the contact law,
-//! 8.  deterministic per-particle reduction (pairs in partner-id order, then walls in order),
-//! 9b. second half kick (integrate, second half),
+//! - 9a: half kick and drift (integrate, first half);
+//! - 1: exchange (insertion of due particles, removal of those that left a closed domain,
+//!   periodic wrapping; migration between ranks comes with the MPI decomposition);
+//! - 2: neighbour list (rebuilt when some particle moved half the skin);
+//! - 3–7: per pair, bounding-sphere broad phase, GJK, dual-space overlap, contact law; per
+//!   particle and wall, facet contacts and the contact law;
+//! - 8: deterministic per-particle reduction (pairs in partner-id order, then walls in order);
+//! - 9b: second half kick (integrate, second half);
 //!
 //! and output (stage 10) is driven by the caller between steps ([`crate::run`]). Stages a scene
 //! does not need are skipped: no walls, no wall stage; μ = 0, no tangential history.
@@ -101,11 +101,11 @@ pub struct Simulation {
     pub history: ContactHistory,
     /// Wall meshes in their t = 0 frames.
     pub walls: Vec<WallMesh>,
-    /// Simulated time [s].
+    /// Simulated time (s).
     pub time: f64,
     /// Steps done.
     pub step: u64,
-    /// Time step [s].
+    /// Time step (s).
     pub dt: f64,
     /// Next global id to give.
     pub next_id: u64,

@@ -13,11 +13,11 @@ use serde::{Deserialize, Serialize};
 pub struct Material {
     /// Name used by particle types, walls and material pairs.
     pub name: String,
-    /// Young's modulus E [Pa].
+    /// Young's modulus E (Pa).
     pub youngs_modulus: f64,
     /// Poisson's ratio ν.
     pub poisson_ratio: f64,
-    /// Density ρ [kg/m³].
+    /// Density ρ (kg/m³).
     pub density: f64,
 }
 
@@ -35,7 +35,7 @@ pub struct PairParameters {
 pub struct ParticleType {
     /// Name used by insertions.
     pub name: String,
-    /// Index into [`Particles::templates`] of the owning simulation.
+    /// Index into the scene's templates (`Scene::templates`).
     pub template: usize,
     /// Index into the material table.
     pub material: usize,

@@ -19,7 +19,17 @@ fn simulation(e: f64, mu: f64, g: f64, dt: f64, floor: bool, generator: &str) ->
     let types = format!(
         "[[particle_types]]\nname = \"p\"\nmaterial = \"m\"\ngenerator = {generator}\nscale = 1.0\n"
     );
-    let text = scene_text(E, 0.3, RHO, e, mu, -g, dt, floor.then_some(0.5), &types);
+    let text = scene_text(&SceneSpec {
+        e_modulus: E,
+        poisson: 0.3,
+        density: RHO,
+        restitution: e,
+        friction: mu,
+        gravity: -g,
+        dt,
+        wall_scale: floor.then_some(0.5),
+        types: &types,
+    });
     let scene = parse_scene(&text, &repo_root(), "validation.toml").unwrap();
     Simulation::new(scene).unwrap()
 }
@@ -236,7 +246,17 @@ fn a_polyhedron_comes_to_rest_on_a_plane() {
         let types = format!(
             "[[particle_types]]\nname = \"p\"\nmaterial = \"m\"\ngenerator = {generator}\nscale = 1.0\n"
         );
-        let text = scene_text(e_soft, 0.3, RHO, 0.5, 0.5, -g, dt, Some(0.5), &types);
+        let text = scene_text(&SceneSpec {
+            e_modulus: e_soft,
+            poisson: 0.3,
+            density: RHO,
+            restitution: 0.5,
+            friction: 0.5,
+            gravity: -g,
+            dt,
+            wall_scale: Some(0.5),
+            types: &types,
+        });
         let mut s =
             Simulation::new(parse_scene(&text, &repo_root(), "rest.toml").unwrap()).unwrap();
         let t = s.scene.templates[0].clone();

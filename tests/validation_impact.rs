@@ -27,17 +27,17 @@ fn impact(theta_deg: f64) -> Impact {
         "[[particle_types]]\nname = \"cyl\"\nmaterial = \"m\"\nmesh = \"{}\"\nscale = 1.0\n",
         mesh.display()
     );
-    let text = scene_text(
-        1.15e9,
-        0.35,
-        1245.0,
-        0.85,
-        0.0,
-        0.0,
-        5e-7,
-        Some(0.1),
-        &types,
-    );
+    let text = scene_text(&SceneSpec {
+        e_modulus: 1.15e9,
+        poisson: 0.35,
+        density: 1245.0,
+        restitution: 0.85,
+        friction: 0.0,
+        gravity: 0.0,
+        dt: 5e-7,
+        wall_scale: Some(0.1),
+        types: &types,
+    });
     let scene = parse_scene(&text, &root, "impact.toml").unwrap();
     let mut sim = Simulation::new(scene).unwrap();
     let t = sim.scene.templates[0].clone();

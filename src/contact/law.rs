@@ -29,9 +29,9 @@ use nalgebra::Vector3;
 /// Parameters of one pair of materials and particle sizes.
 #[derive(Clone, Debug)]
 pub struct ContactParameters {
-    /// `c = E₁/R₁ + E₂/R₂` [Pa/m]: the elastic stiffness per unit contact area and V^{1/3}.
+    /// `c = E₁/R₁ + E₂/R₂` (Pa/m): the elastic stiffness per unit contact area and V^{1/3}.
     pub normal_stiffness: f64,
-    /// `E₁/(2(1+ν₁)R₁) + E₂/(2(1+ν₂)R₂)` [Pa/m]: tangential stiffness per unit area.
+    /// `E₁/(2(1+ν₁)R₁) + E₂/(2(1+ν₂)R₂)` (Pa/m): tangential stiffness per unit area.
     pub tangential_stiffness: f64,
     /// Restitution coefficient e.
     pub restitution: f64,

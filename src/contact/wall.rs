@@ -18,6 +18,9 @@ use crate::geometry::{Overlap, Plane, PosedPolytope};
 use nalgebra::Vector3;
 use std::collections::HashMap;
 
+/// A vertex's coordinates as bits, to find shared edges exactly.
+type VertexKey = [u64; 3];
+
 /// A wall mesh in its own (t = 0) frame, ready for contact queries.
 #[derive(Clone, Debug)]
 pub struct WallMesh {
@@ -44,7 +47,7 @@ impl WallMesh {
         // Edge → facets sharing it, by exact vertex coordinates (shared vertices of a mesh are
         // bitwise equal in STL and OBJ files).
         let key = |v: &Vector3<f64>| [v.x.to_bits(), v.y.to_bits(), v.z.to_bits()];
-        let mut edges: HashMap<([u64; 3], [u64; 3]), Vec<(usize, usize)>> = HashMap::new();
+        let mut edges: HashMap<(VertexKey, VertexKey), Vec<(usize, usize)>> = HashMap::new();
         for (f, t) in tris.iter().enumerate() {
             for k in 0..3 {
                 let (a, b) = (key(&t[k]), key(&t[(k + 1) % 3]));

@@ -380,9 +380,7 @@ fn decode_payload(r: &mut Reader) -> Result<Checkpoint, ReadFail> {
             a: r.u64(w)?,
             b: r.u64(w)?,
         };
-        let state = ContactState {
-            spring: r.v3(w)?,
-        };
+        let state = ContactState { spring: r.v3(w)? };
         Ok((key, state))
     })?;
     if entries.windows(2).any(|e| e[0].0 >= e[1].0) {

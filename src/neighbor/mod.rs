@@ -157,7 +157,8 @@ impl PairList {
         let total = offset[n];
         let mut pairs = vec![[0u32; 2]; total];
         let mut shifts = vec![Vector3::zeros(); total];
-        let mut chunks: Vec<(&mut [[u32; 2]], &mut [Vector3<f64>])> = Vec::with_capacity(n);
+        type Chunk<'a> = (&'a mut [[u32; 2]], &'a mut [Vector3<f64>]);
+        let mut chunks: Vec<Chunk> = Vec::with_capacity(n);
         {
             let (mut p_rest, mut s_rest) = (&mut pairs[..], &mut shifts[..]);
             for &c in &counts {
@@ -247,7 +248,11 @@ impl Grid {
         let extent = bounds.max - bounds.min;
         let limit = max_cells.max(4096) as f64;
         let mut width = cutoff.max(f64::MIN_POSITIVE);
-        let count = |w: f64| (0..3).map(|k| (extent[k] / w).floor().max(1.0)).product::<f64>();
+        let count = |w: f64| {
+            (0..3)
+                .map(|k| (extent[k] / w).floor().max(1.0))
+                .product::<f64>()
+        };
         if count(width) > limit {
             width *= (count(width) / limit).cbrt();
             while count(width) > limit {
@@ -262,7 +267,12 @@ impl Grid {
             dims[k] = if bounds.periodic[k] && d < 3 { 1 } else { d };
             size[k] = extent[k] / dims[k] as f64;
         }
-        Grid { min: bounds.min, size, dims, periodic: bounds.periodic }
+        Grid {
+            min: bounds.min,
+            size,
+            dims,
+            periodic: bounds.periodic,
+        }
     }
 
     fn cells(&self) -> usize {

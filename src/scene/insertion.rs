@@ -23,12 +23,12 @@ pub const DEFAULT_MAX_ATTEMPTS: u32 = 1000;
 /// Where particles are inserted. Whole bounding spheres are kept inside the region.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Region {
-    /// Axis-aligned box [m].
+    /// Axis-aligned box (m).
     Box {
         min: Vector3<f64>,
         max: Vector3<f64>,
     },
-    /// Cylinder from `base` along the unit `axis` for `height`, of `radius` [m].
+    /// Cylinder from `base` along the unit `axis` for `height`, of `radius` (m).
     Cylinder {
         base: Vector3<f64>,
         axis: Vector3<f64>,
@@ -56,7 +56,7 @@ impl Region {
         }
     }
 
-    /// Volume [m³].
+    /// Volume (m³).
     pub fn volume(&self) -> f64 {
         match self {
             Region::Box { min, max } => (max - min).product(),
@@ -146,9 +146,9 @@ pub struct Insertion {
     pub mode: InsertionMode,
     /// Orientation of each particle.
     pub orientation: OrientationMode,
-    /// Initial velocity [m/s].
+    /// Initial velocity (m/s).
     pub velocity: Vector3<f64>,
-    /// Initial angular velocity [rad/s].
+    /// Initial angular velocity (rad/s).
     pub angular_velocity: Vector3<f64>,
     /// Random positions tried per particle before it counts as not placed.
     pub max_attempts: u32,

@@ -110,7 +110,7 @@ pub struct Scene {
     pub simulation: SimulationSettings,
     /// `[domain]`.
     pub domain: Domain,
-    /// Gravitational acceleration [m/s²].
+    /// Gravitational acceleration (m/s²).
     pub gravity: Vector3<f64>,
     /// `[[materials]]`, in file order.
     pub materials: Vec<Material>,
@@ -136,7 +136,7 @@ pub struct Scene {
 pub struct SimulationSettings {
     /// Time step rule.
     pub dt: TimeStep,
-    /// Simulated end time [s].
+    /// Simulated end time (s).
     pub end_time: f64,
     /// Seed of all random choices.
     pub seed: u64,
@@ -147,7 +147,7 @@ pub struct SimulationSettings {
 /// How the time step is chosen.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum TimeStep {
-    /// This step [s].
+    /// This step (s).
     Fixed(f64),
     /// This fraction of the Rayleigh step ([`critical_time_step`]).
     FractionOfCritical(f64),
@@ -156,7 +156,7 @@ pub enum TimeStep {
 /// `[simulation.neighbor]`, resolved.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NeighborSettings {
-    /// Verlet skin, an absolute length [m]; default 0.1 × the largest circumscribed diameter.
+    /// Verlet skin, an absolute length (m); default 0.1 × the largest circumscribed diameter.
     pub skin: f64,
     /// Who builds the neighbour list (DESIGN.md §7).
     pub mode: NeighborMode,
@@ -178,9 +178,9 @@ pub enum NeighborMode {
 /// `[domain]`, resolved.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Domain {
-    /// Lower corner [m].
+    /// Lower corner (m).
     pub min: Vector3<f64>,
-    /// Upper corner [m].
+    /// Upper corner (m).
     pub max: Vector3<f64>,
     /// Periodic along x, y, z.
     pub periodic: [bool; 3],
@@ -364,7 +364,7 @@ pub fn parse_scene(text: &str, base_dir: &Path, file_name: &str) -> Result<Scene
 }
 
 impl Scene {
-    /// The time step [s]: the fixed one, or the fraction of the Rayleigh step.
+    /// The time step (s): the fixed one, or the fraction of the Rayleigh step.
     pub fn time_step(&self) -> f64 {
         match self.simulation.dt {
             TimeStep::Fixed(dt) => dt,
@@ -397,7 +397,8 @@ impl Scene {
 }
 
 /// Face-to-face contact time of each particle type with itself at the impact speed `v`
-/// (validation.md §6; see [`face_contact_time`]): its largest face, its smallest scale.
+/// (validation.md §6; see [`crate::contact::restitution::face_contact_time`]): its largest face,
+/// its smallest scale.
 pub fn face_contact_times(scene: &Scene, v: f64) -> Vec<(String, f64)> {
     scene
         .particle_types
@@ -446,22 +447,22 @@ pub struct RayleighStep {
     /// Material name.
     pub material: String,
     /// Smallest volume-equivalent radius of any particle type of this material at its smallest
-    /// scale [m].
+    /// scale (m).
     pub radius: f64,
-    /// `Δt_R = π R √(ρ/G) / (0.1631 ν + 0.8766)` with `G = E / (2 (1 + ν))` [s].
+    /// `Δt_R = π R √(ρ/G) / (0.1631 ν + 0.8766)` with `G = E / (2 (1 + ν))` (s).
     pub step: f64,
 }
 
 /// Time-step stability figures of a scene.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct TimeStepReport {
-    /// Smallest Rayleigh step over the particle materials [s] (infinite without particle types).
+    /// Smallest Rayleigh step over the particle materials (s) (infinite without particle types).
     pub rayleigh: f64,
     /// Rayleigh step per material that some particle type uses.
     pub per_material: Vec<RayleighStep>,
     /// Contact-time estimate (Hertz or linear spring); not computed here yet.
     pub contact_time: Option<f64>,
-    /// The chosen time step [s].
+    /// The chosen time step (s).
     pub dt: f64,
     /// `dt / rayleigh`.
     pub fraction_of_rayleigh: f64,

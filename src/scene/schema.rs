@@ -51,11 +51,11 @@ pub struct SceneFile {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SimulationSection {
-    /// Fixed time step [s]; exclusive with `dt_fraction`.
+    /// Fixed time step (s); exclusive with `dt_fraction`.
     pub dt: Option<f64>,
     /// Time step as a fraction of the Rayleigh step; exclusive with `dt`.
     pub dt_fraction: Option<f64>,
-    /// Simulated end time [s].
+    /// Simulated end time (s).
     pub end_time: f64,
     /// Seed of every random choice (insertion positions, orientations, scales).
     #[serde(default)]
@@ -69,7 +69,7 @@ pub struct SimulationSection {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NeighborSection {
-    /// Verlet skin [m].
+    /// Verlet skin (m).
     pub skin: Option<f64>,
     /// Who builds the list.
     pub mode: Option<NeighborModeName>,
@@ -89,9 +89,9 @@ pub enum NeighborModeName {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DomainSection {
-    /// Lower corner [m].
+    /// Lower corner (m).
     pub min: Vec3,
-    /// Upper corner [m].
+    /// Upper corner (m).
     pub max: Vec3,
     /// Periodic axes `[x, y, z]`.
     #[serde(default)]
@@ -103,11 +103,11 @@ pub struct DomainSection {
 #[serde(deny_unknown_fields)]
 pub struct MaterialSection {
     pub name: String,
-    /// E [Pa].
+    /// E (Pa).
     pub youngs_modulus: f64,
     /// ν.
     pub poisson_ratio: f64,
-    /// ρ [kg/m³].
+    /// ρ (kg/m³).
     pub density: f64,
 }
 
@@ -147,17 +147,17 @@ pub struct InsertionSection {
     pub count: Option<u64>,
     /// Particles per second; exclusive with `count`.
     pub rate: Option<f64>,
-    /// Start of feeding [s] (rate only).
+    /// Start of feeding (s) (rate only).
     pub start: Option<f64>,
-    /// End of feeding [s] (rate only).
+    /// End of feeding (s) (rate only).
     pub end: Option<f64>,
     /// Most particles fed (rate only).
     pub total: Option<u64>,
     /// `"random"`, `"identity"` or `{ axis, angle }`; parsed by the validator.
     pub orientation: Option<toml::Value>,
-    /// Initial velocity [m/s].
+    /// Initial velocity (m/s).
     pub velocity: Option<Vec3>,
-    /// Initial angular velocity [rad/s].
+    /// Initial angular velocity (rad/s).
     pub angular_velocity: Option<Vec3>,
     /// Random positions tried per particle before giving up.
     pub max_attempts: Option<u32>,
@@ -197,7 +197,7 @@ pub struct WallSection {
     pub scale: Option<f64>,
     /// Rotation applied after scaling.
     pub rotate: Option<AxisAngleSection>,
-    /// Translation applied last [m].
+    /// Translation applied last (m).
     pub translate: Option<Vec3>,
     /// Reverse every triangle's winding (for meshes wound with normals away from particles).
     #[serde(default)]

@@ -9,7 +9,7 @@ use crate::shape::ConvexTemplate;
 use nalgebra::Unit;
 use std::collections::HashMap;
 
-/// Default gravity [m/s²]: standard gravity along −z.
+/// Default gravity (m/s²): standard gravity along −z.
 pub const DEFAULT_GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
 /// Default per-particle output fields.
 pub const DEFAULT_FIELDS: [&str; 5] = ["id", "type", "velocity", "angular_velocity", "rank"];

@@ -49,20 +49,20 @@ pub enum WallMotion {
         origin: Vector3<f64>,
         rpm: f64,
     },
-    /// Constant velocity [m/s].
+    /// Constant velocity (m/s).
     Translate { velocity: Vector3<f64> },
     /// Oscillation `x(t) = amplitude · sin(2π·frequency·t) · direction`.
     Sinusoidal {
         direction: Unit<Vector3<f64>>,
-        /// [m]
+        /// (m)
         amplitude: f64,
-        /// [Hz]
+        /// (Hz)
         frequency: f64,
     },
 }
 
 impl WallMotion {
-    /// Angular speed ω [rad/s] of a rotation, from rpm.
+    /// Angular speed ω (rad/s) of a rotation, from rpm.
     pub fn omega(rpm: f64) -> f64 {
         TAU * rpm / 60.0
     }
@@ -113,7 +113,7 @@ impl WallMotion {
         }
     }
 
-    /// Angular velocity of the wall [rad/s] (zero except for rotation).
+    /// Angular velocity of the wall (rad/s) (zero except for rotation).
     pub fn angular_velocity(&self) -> Vector3<f64> {
         match self {
             WallMotion::Rotate { axis, rpm, .. } => axis.into_inner() * Self::omega(*rpm),
@@ -129,7 +129,7 @@ pub struct WallPlacement {
     pub scale: f64,
     /// Rotation applied after scaling.
     pub rotation: UnitQuaternion<f64>,
-    /// Translation applied last [m].
+    /// Translation applied last (m).
     pub translation: Vector3<f64>,
     /// Reverse the winding of every triangle.
     pub flip_normals: bool,

@@ -202,19 +202,35 @@ pub fn temp_dir(name: &str) -> PathBuf {
     dir
 }
 
-/// A scene with one material pair and, optionally, the unit square wall `plane.stl` scaled by
-/// `wall_scale` at z = 0 (facing +z); particle types given as TOML `[[particle_types]]` blocks.
-pub fn scene_text(
-    e_modulus: f64,
-    poisson: f64,
-    density: f64,
-    restitution: f64,
-    friction: f64,
-    gravity: f64,
-    dt: f64,
-    wall_scale: Option<f64>,
-    types: &str,
-) -> String {
+/// Parameters of [`scene_text`]: one material (E, ν, ρ) and its pair with itself (e, μ),
+/// gravity along −z, the time step, and optionally the unit square wall `plane.stl` scaled by
+/// `wall_scale` at z = 0 facing +z.
+pub struct SceneSpec<'a> {
+    pub e_modulus: f64,
+    pub poisson: f64,
+    pub density: f64,
+    pub restitution: f64,
+    pub friction: f64,
+    pub gravity: f64,
+    pub dt: f64,
+    pub wall_scale: Option<f64>,
+    /// `[[particle_types]]` blocks (TOML).
+    pub types: &'a str,
+}
+
+/// The TOML text of a scene described by `spec`.
+pub fn scene_text(spec: &SceneSpec) -> String {
+    let SceneSpec {
+        e_modulus,
+        poisson,
+        density,
+        restitution,
+        friction,
+        gravity,
+        dt,
+        wall_scale,
+        types,
+    } = *spec;
     let root = repo_root();
     let wall = match wall_scale {
         Some(s) => format!(
