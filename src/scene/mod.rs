@@ -15,10 +15,7 @@ pub use insertion::{
     OrientationMode, Region,
 };
 pub use validate::{DEFAULT_FIELDS, DEFAULT_GRAVITY, DEFAULT_LOG_INTERVAL};
-pub use walls::{
-    PlacedMesh, Wall, WallMotion, WallPlacement, load_wall_mesh, place_mesh,
-    point_triangle_distance_squared,
-};
+pub use walls::{PlacedMesh, Wall, WallMotion, WallPlacement, load_wall_mesh, place_mesh};
 
 use crate::rng::Rng;
 use crate::shape::ConvexTemplate;

@@ -207,45 +207,6 @@ pub fn place_mesh(mesh: &MeshFile, placement: &WallPlacement) -> Result<PlacedMe
     })
 }
 
-/// Squared distance from `p` to the triangle `tri` (Ericson, Real-Time Collision Detection
-/// §5.1.5), used by insertion to keep new particles clear of walls.
-pub fn point_triangle_distance_squared(p: &Vector3<f64>, tri: &[Vector3<f64>; 3]) -> f64 {
-    let [a, b, c] = tri;
-    let (ab, ac, ap) = (b - a, c - a, p - a);
-    let (d1, d2) = (ab.dot(&ap), ac.dot(&ap));
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return ap.norm_squared();
-    }
-    let bp = p - b;
-    let (d3, d4) = (ab.dot(&bp), ac.dot(&bp));
-    if d3 >= 0.0 && d4 <= d3 {
-        return bp.norm_squared();
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        let v = d1 / (d1 - d3);
-        return (ap - ab * v).norm_squared();
-    }
-    let cp = p - c;
-    let (d5, d6) = (ab.dot(&cp), ac.dot(&cp));
-    if d6 >= 0.0 && d5 <= d6 {
-        return cp.norm_squared();
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        let w = d2 / (d2 - d6);
-        return (ap - ac * w).norm_squared();
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return (bp - (c - b) * w).norm_squared();
-    }
-    let denom = 1.0 / (va + vb + vc);
-    let (v, w) = (vb * denom, vc * denom);
-    (ap - ab * v - ac * w).norm_squared()
-}
-
 /// Wall triangles at one time, each with its bounding box for a quick reject.
 pub(super) struct WallTriangles {
     tris: Vec<BoxedTriangle>,
@@ -272,7 +233,7 @@ impl WallTriangles {
     pub(super) fn is_free(&self, c: &Vector3<f64>, r: f64) -> bool {
         self.tris.iter().all(|(tri, lo, hi)| {
             let outside_box = (0..3).any(|a| c[a] + r < lo[a] || c[a] - r > hi[a]);
-            outside_box || point_triangle_distance_squared(c, tri) >= r * r
+            outside_box || crate::contact::wall::point_triangle_distance(c, tri) >= r
         })
     }
 }
