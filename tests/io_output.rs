@@ -493,6 +493,31 @@ fn checkpoint() -> Checkpoint {
     }
 }
 
+/// Many contacts and few particles: the reader's length checks must use the real record size
+/// (a dense packing has several contacts per particle).
+#[test]
+fn checkpoint_with_many_contacts_round_trips() {
+    let dir = scratch("ckpt-contacts");
+    let path = dir.join("dense.ckpt");
+    let mut c = checkpoint();
+    c.extra.clear();
+    c.inserter.clear();
+    c.history = ContactHistory::from_entries(
+        (0..5000u64)
+            .map(|k| {
+                let state = ContactState {
+                    spring: Vector3::new(k as f64, -1e-7, 0.5),
+                };
+                (ContactKey::particles(k, k + 1 + k % 7), state)
+            })
+            .collect(),
+    );
+    write_checkpoint(&path, &c).unwrap();
+    let back = read_checkpoint(&path).unwrap();
+    assert_eq!(back.history.len(), 5000);
+    assert!(back.history == c.history);
+}
+
 #[test]
 fn checkpoint_round_trip_is_bitwise() {
     let dir = scratch("ckpt");

@@ -129,7 +129,7 @@ pub fn encode_checkpoint(c: &Checkpoint, path: &Path) -> Result<Vec<u8>, Checkpo
         path: path.to_path_buf(),
         what,
     })?;
-    let mut b = Vec::with_capacity(HEADER_LEN + 64 + n * 260 + c.history.len() * 48);
+    let mut b = Vec::with_capacity(HEADER_LEN + 64 + n * 260 + c.history.len() * 40);
     b.extend_from_slice(MAGIC);
     b.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
     b.extend_from_slice(&0u64.to_le_bytes()); // payload length, patched below
@@ -374,7 +374,7 @@ fn decode_payload(r: &mut Reader) -> Result<Checkpoint, ReadFail> {
         mass: r.vec(n, "mass", |r, w| r.f64(w))?,
         inertia: r.vec(n, "inertia", v3)?,
     };
-    let m = r.count(48, "contact count")?;
+    let m = r.count(40, "contact count")?;
     let entries = r.vec(m, "contact", |r, w| {
         let key = ContactKey {
             a: r.u64(w)?,
