@@ -28,6 +28,9 @@
 //! provides both). Without Python the test fails rather than passing unchecked.
 //! Run with `--nocapture` to see the worst errors.
 
+mod common;
+
+use common::{polydem_bin, repo_root};
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use polydem::geometry::overlap::{PairWorkspace, overlap_pair};
 use polydem::rng::Rng;
@@ -42,25 +45,6 @@ const ALIGNED_PAIRS: usize = 50;
 const GRAZING_PAIRS: usize = 50;
 
 /// The repository root: `POLYDEM_ROOT`, else the current directory.
-fn repo_root() -> PathBuf {
-    std::env::var_os("POLYDEM_ROOT")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| std::env::current_dir().expect("current directory"))
-}
-
-/// `POLYDEM_BIN`, else the binary cargo built for this test run, else `polydem` on the PATH.
-fn polydem_bin() -> PathBuf {
-    if let Some(p) = std::env::var_os("POLYDEM_BIN") {
-        return PathBuf::from(p);
-    }
-    let built = PathBuf::from(env!("CARGO_BIN_EXE_polydem"));
-    if built.exists() {
-        built
-    } else {
-        PathBuf::from("polydem")
-    }
-}
-
 /// `POLYDEM_PYTHON`, else `<root>/.venv/bin/python`; fails the test when there is neither.
 fn python(root: &Path) -> PathBuf {
     if let Some(p) = std::env::var_os("POLYDEM_PYTHON") {
