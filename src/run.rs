@@ -112,7 +112,6 @@ struct Outputs {
     frames: Option<FrameWriter>,
     series: SeriesWriter,
     type_template: Vec<usize>,
-    wall_names: Vec<String>,
 }
 
 impl Outputs {
@@ -148,16 +147,9 @@ impl Outputs {
                     force: *f,
                 })
                 .collect();
-            fw.write_frame(sim.step, sim.time, &[view], &walls)?;
+            fw.write_frame(sim.step, sim.time, std::slice::from_ref(&view), &walls)?;
         }
         if s.output.formats.csv {
-            let view = FrameView {
-                particles: &sim.particles,
-                templates: &s.templates,
-                type_template: &self.type_template,
-                rank: 0,
-                fields: &s.output.fields,
-            };
             let particles_dir = self.dir.join("particles");
             std::fs::create_dir_all(&particles_dir)
                 .with_context(|| format!("{}: cannot create", particles_dir.display()))?;
@@ -180,7 +172,6 @@ impl Outputs {
             wall_contacts: sim.stats.wall_contacts,
             wall_forces: sim.wall_forces.clone(),
         })?;
-        let _ = &self.wall_names;
         Ok(())
     }
 }
@@ -206,9 +197,10 @@ fn save_checkpoint(sim: &Simulation, dir: &Path, hash: u64) -> Result<PathBuf> {
     std::fs::create_dir_all(&ckdir)
         .with_context(|| format!("{}: cannot create", ckdir.display()))?;
     let path = ckdir.join(format!("step_{:010}.ckpt", sim.step));
-    write_checkpoint(&path, &checkpoint_of(sim, hash)?)?;
+    let checkpoint = checkpoint_of(sim, hash)?;
+    write_checkpoint(&path, &checkpoint)?;
     // The newest is also `latest.ckpt`, so that a restart needs no step number.
-    write_checkpoint(&ckdir.join("latest.ckpt"), &checkpoint_of(sim, hash)?)?;
+    write_checkpoint(&ckdir.join("latest.ckpt"), &checkpoint)?;
     Ok(path)
 }
 
@@ -277,7 +269,6 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
         frames,
         series,
         type_template,
-        wall_names,
     };
     let mut frame_at = Schedule::new(s.output.frame_interval, sim.time);
     let mut series_at = Schedule::new(Some(s.output.series_interval), sim.time);

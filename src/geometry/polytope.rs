@@ -65,7 +65,6 @@ impl<T: Real> PosedPolytope<T> {
     ) {
         let rot = pose.rotation.to_rotation_matrix();
         let shift = pose.translation.vector - origin;
-        self.centre = cast(&shift);
         self.n_vertices = template.vertices.len().min(MAX_TEMPLATE_VERTICES);
         for (dst, v) in self.vertices.iter_mut().zip(&template.vertices) {
             *dst = cast(&(rot * (v.coords * scale) + shift));

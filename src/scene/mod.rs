@@ -23,17 +23,9 @@ use crate::state::{Material, PairParameters, ParticleType};
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 
-/// Per-particle output fields a scene may request in `output.fields`.
-pub const OUTPUT_FIELDS: [&str; 8] = [
-    "id",
-    "type",
-    "velocity",
-    "angular_velocity",
-    "force",
-    "torque",
-    "orientation",
-    "rank",
-];
+/// Per-particle output fields a scene may request in `output.fields`: exactly those the frame
+/// writer knows.
+pub use crate::io::FRAME_FIELDS as OUTPUT_FIELDS;
 
 /// Output formats a scene may request in `output.formats`.
 pub const OUTPUT_FORMATS: [&str; 2] = ["vtu", "csv"];
