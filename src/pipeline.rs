@@ -19,7 +19,7 @@ use crate::contact::{
     ContactForces, ContactHistory, ContactKey, ContactKinematics, ContactParameters, ContactState,
     DampingTable, WallMesh, contact_forces,
 };
-use crate::geometry::overlap::{PairWorkspace, overlap_pair};
+use crate::geometry::overlap::{PairWorkspace, axis_separates, overlap_pair};
 use crate::geometry::{Overlap, PosedPolytope};
 use crate::integrate::{drift, half_kick};
 use crate::neighbor::{Bounds, PairList};
@@ -77,6 +77,8 @@ pub enum SimulationError {
 /// The result of one pair's contact evaluation.
 #[derive(Clone, Copy, Debug, Default)]
 struct PairOutcome {
+    /// GJK's separating axis for a disjoint pair (zero otherwise).
+    separating_axis: Vector3<f64>,
     forces: ContactForces,
     state: Option<(ContactKey, ContactState)>,
 }
@@ -118,6 +120,9 @@ pub struct Simulation {
     /// Force on each wall from the last force evaluation.
     pub wall_forces: Vec<Vector3<f64>>,
     pairs: PairList,
+    /// Per pair of `pairs`, the axis that separated it at the last evaluation (zero: none
+    /// known), tried before GJK ([`axis_separates`]); cleared when the list is rebuilt.
+    separating_axes: Vec<Vector3<f64>>,
     bounds: Bounds,
     radius: Vec<f64>,
     damping: Vec<DampingTable>,
@@ -169,6 +174,7 @@ impl Simulation {
             stats: StepStats::default(),
             wall_forces: vec![Vector3::zeros(); n_walls],
             pairs: PairList::default(),
+            separating_axes: Vec::new(),
             bounds,
             radius: Vec::new(),
             damping,
@@ -306,6 +312,7 @@ impl Simulation {
                 &self.bounds,
                 skin,
             );
+            self.separating_axes = vec![Vector3::zeros(); self.pairs.pairs.len()];
             self.dirty = false;
         }
         self.timers.neighbor += t0.elapsed().as_secs_f64();
@@ -313,6 +320,9 @@ impl Simulation {
         // Stages 3–7 for particle pairs.
         let t0 = Instant::now();
         let outcomes = self.pair_contacts(dt)?;
+        for (axis, o) in self.separating_axes.iter_mut().zip(&outcomes) {
+            *axis = o.separating_axis;
+        }
         self.timers.pairs += t0.elapsed().as_secs_f64();
 
         // Stage 6 (walls) per particle.
@@ -414,7 +424,8 @@ impl Simulation {
             .pairs
             .par_iter()
             .zip(self.pairs.shifts.par_iter())
-            .map_init(PairWorkspace::<f64>::boxed, |ws, (pair, shift)| {
+            .zip(self.separating_axes.par_iter())
+            .map(|((pair, shift), axis)| {
                 let (a, b) = (pair[0] as usize, pair[1] as usize);
                 let xb = p.position[b] + shift;
                 let d = xb - p.position[a];
@@ -427,15 +438,28 @@ impl Simulation {
                 let tb = &s.templates[s.particle_types[p.kind[b] as usize].template];
                 let pose_a = Isometry3::from_parts(p.position[a].into(), p.orientation[a]);
                 let pose_b = Isometry3::from_parts(xb.into(), p.orientation[b]);
+                let (body_a, body_b) = ((ta, p.scale[a], &pose_a), (tb, p.scale[b], &pose_b));
+                // Stage 4 shortcut: last step's separating axis, with a margin far above GJK's
+                // touching tolerance (1e-12 of the size in f64), so the verdict is GJK's.
+                if *axis != Vector3::zeros() && axis_separates(body_a, body_b, axis, 1e-9 * reach) {
+                    return Ok(PairOutcome {
+                        separating_axis: *axis,
+                        ..PairOutcome::default()
+                    });
+                }
                 // Stages 4–5: GJK, then the overlap.
-                let g = overlap_pair(ws, (ta, p.scale[a], &pose_a), (tb, p.scale[b], &pose_b))
-                    .map_err(|e| SimulationError::Geometry {
+                let g = with_workspace(|ws| overlap_pair(ws, body_a, body_b)).map_err(|e| {
+                    SimulationError::Geometry {
                         step,
                         what: format!("particles {} and {}", p.id[a], p.id[b]),
                         message: e.to_string(),
-                    })?;
+                    }
+                })?;
                 if g.overlap.volume <= 0.0 {
-                    return Ok(PairOutcome::default());
+                    return Ok(PairOutcome {
+                        separating_axis: g.separating_axis.unwrap_or_default(),
+                        ..PairOutcome::default()
+                    });
                 }
                 // Stage 7: contact law.
                 let (params, table) = self.contact_parameters(a, Some(b), 0);
@@ -463,6 +487,7 @@ impl Simulation {
                     dt,
                 );
                 Ok(PairOutcome {
+                    separating_axis: Vector3::zeros(),
                     forces,
                     state: Some((key, state)),
                 })
@@ -480,9 +505,8 @@ impl Simulation {
         let poses: Vec<Isometry3<f64>> = s.walls.iter().map(|w| w.motion.transform(t)).collect();
         (0..p.len())
             .into_par_iter()
-            .map_init(
-                || (PairWorkspace::<f64>::boxed(), Vec::new()),
-                |(ws, facets), i| {
+            .map_init(Vec::new, |facets, i| {
+                with_workspace(|ws| {
                     let mut out = WallOutcome::default();
                     let tmpl = &s.templates[s.particle_types[p.kind[i] as usize].template];
                     let pose = Isometry3::from_parts(p.position[i].into(), p.orientation[i]);
@@ -542,8 +566,8 @@ impl Simulation {
                         out.states.push((key, state));
                     }
                     Ok(out)
-                },
-            )
+                })
+            })
             .collect()
     }
 
@@ -579,6 +603,22 @@ impl Simulation {
             })
             .reduce(|| (0.0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
     }
+}
+
+thread_local! {
+    /// One pair workspace per worker thread, made on first use: the workspace holds the
+    /// fixed-capacity overlap buffers (tens of kilobytes), too big to build per rayon job.
+    static WORKSPACE: std::cell::RefCell<Option<Box<PairWorkspace<f64>>>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// Runs `f` with this thread's pair workspace (a fresh one if it is already in use, which only
+/// a nested call could cause).
+fn with_workspace<R>(f: impl FnOnce(&mut PairWorkspace<f64>) -> R) -> R {
+    WORKSPACE.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut slot) => f(slot.get_or_insert_with(PairWorkspace::boxed)),
+        Err(_) => f(&mut PairWorkspace::boxed()),
+    })
 }
 
 /// The mass a contact's normal impulse sees: `1/m* = Σ 1/m + (r × n)·I⁻¹(r × n)` over the

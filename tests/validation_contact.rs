@@ -28,6 +28,7 @@ fn simulation(e: f64, mu: f64, g: f64, dt: f64, floor: bool, generator: &str) ->
         gravity: -g,
         dt,
         wall_scale: floor.then_some(0.5),
+        wall_motion: None,
         types: &types,
     });
     let scene = parse_scene(&text, &repo_root(), "validation.toml").unwrap();
@@ -255,6 +256,7 @@ fn a_polyhedron_comes_to_rest_on_a_plane() {
             gravity: -g,
             dt,
             wall_scale: Some(0.5),
+            wall_motion: None,
             types: &types,
         });
         let mut s =

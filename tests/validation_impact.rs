@@ -36,6 +36,7 @@ fn impact(theta_deg: f64) -> Impact {
         gravity: 0.0,
         dt: 5e-7,
         wall_scale: Some(0.1),
+        wall_motion: None,
         types: &types,
     });
     let scene = parse_scene(&text, &root, "impact.toml").unwrap();

@@ -242,11 +242,14 @@ pub fn prism_overlap<T: Real>(
     prism: &[Plane<T>; 4],
 ) -> Result<Overlap<T>, OverlapError> {
     let facet = &prism[0];
-    if body
-        .vertices()
-        .iter()
-        .all(|v| facet.distance(v) >= T::zero())
-    {
+    // A plane with every vertex of the body on its outer side separates the two: nothing to
+    // compute. This cheap test rejects most facets near a particle (those it passes over
+    // sideways, or hovers above).
+    if prism.iter().any(|plane| {
+        body.vertices()
+            .iter()
+            .all(|v| plane.distance(v) >= T::zero())
+    }) {
         return Ok(Overlap::default());
     }
     // Start the interior-point search on the facet plane under the body's centre.

@@ -33,8 +33,23 @@ fn support<T: Real>(points: &[Vector3<T>], dir: &Vector3<T>) -> Vector3<T> {
 /// within a distance of about `1e3 · ε · size`). `dir` is the initial search direction, usually
 /// the centre-to-centre vector (seed Alg. I line 1). Empty inputs never intersect.
 pub fn gjk_intersect<T: Real>(a: &[Vector3<T>], b: &[Vector3<T>], dir: Vector3<T>) -> bool {
+    gjk_separating_axis(a, b, dir).is_none()
+}
+
+/// GJK as [`gjk_intersect`], returning for disjoint hulls a separating axis `v` (a point of
+/// `A ⊖ B`, not normalised) with `v·a > v·b` for every `a ∈ A`, `b ∈ B`, and `None` when they
+/// intersect. Empty inputs are disjoint, with axis `x`.
+///
+/// The axis is what a caller keeps from one step to the next: bodies move little per step, so
+/// the last axis usually still separates and two support evaluations replace the whole GJK
+/// (frame coherence, van den Bergen 1999 §4).
+pub fn gjk_separating_axis<T: Real>(
+    a: &[Vector3<T>],
+    b: &[Vector3<T>],
+    dir: Vector3<T>,
+) -> Option<Vector3<T>> {
     if a.is_empty() || b.is_empty() {
-        return false;
+        return Some(Vector3::x());
     }
     // Length scale for the tolerances: the extent of A ⊖ B.
     let extent = |pts: &[Vector3<T>]| {
@@ -62,7 +77,7 @@ pub fn gjk_intersect<T: Real>(a: &[Vector3<T>], b: &[Vector3<T>], dir: Vector3<T
     for _ in 0..MAX_ITERATIONS {
         let vv = v.norm_squared();
         if vv <= tol2 {
-            return true; // the origin is (within tolerance) on the simplex
+            return None; // the origin is (within tolerance) on the simplex
         }
         d = -v;
         let w = support(a, &d) - support(b, &(-d));
@@ -70,19 +85,19 @@ pub fn gjk_intersect<T: Real>(a: &[Vector3<T>], b: &[Vector3<T>], dir: Vector3<T
         // Alg. I line 7). A gap below the tolerance is treated as touching and refined further.
         let vw = v.dot(&w);
         if vw > tol * vv.sqrt() {
-            return false;
+            return Some(v);
         }
         // No progress: w is already (numerically) the closest extent in this direction.
         if vv - vw <= T::of(64.0) * T::EPSILON * vv || simplex.contains(&w) {
-            return vv.sqrt() <= tol;
+            return (vv.sqrt() > tol).then_some(v);
         }
         simplex.push(w);
         match simplex.reduce() {
             Some(closest) => v = closest,
-            None => return true, // origin inside the tetrahedron
+            None => return None, // origin inside the tetrahedron
         }
     }
-    v.norm_squared() <= tol2
+    (v.norm_squared() > tol2).then_some(v)
 }
 
 /// A tetrahedron face whose closest point may be the simplex's: squared distance, the point,

@@ -204,7 +204,8 @@ pub fn temp_dir(name: &str) -> PathBuf {
 
 /// Parameters of [`scene_text`]: one material (E, ν, ρ) and its pair with itself (e, μ),
 /// gravity along −z, the time step, and optionally the unit square wall `plane.stl` scaled by
-/// `wall_scale` at z = 0 facing +z.
+/// `wall_scale` at z = 0 facing +z, moving by `wall_motion` (a TOML inline table, e.g.
+/// `{ kind = "translate", velocity = [0.1, 0.0, 0.0] }`; `None` is fixed).
 pub struct SceneSpec<'a> {
     pub e_modulus: f64,
     pub poisson: f64,
@@ -214,6 +215,7 @@ pub struct SceneSpec<'a> {
     pub gravity: f64,
     pub dt: f64,
     pub wall_scale: Option<f64>,
+    pub wall_motion: Option<&'a str>,
     /// `[[particle_types]]` blocks (TOML).
     pub types: &'a str,
 }
@@ -229,13 +231,15 @@ pub fn scene_text(spec: &SceneSpec) -> String {
         gravity,
         dt,
         wall_scale,
+        wall_motion,
         types,
     } = *spec;
     let root = repo_root();
     let wall = match wall_scale {
         Some(s) => format!(
-            "[[walls]]\nname = \"floor\"\nmesh = \"{}\"\nmaterial = \"m\"\nscale = {s:e}\n",
-            root.join("meshes/walls/plane.stl").display()
+            "[[walls]]\nname = \"floor\"\nmesh = \"{}\"\nmaterial = \"m\"\nscale = {s:e}\n{}",
+            root.join("meshes/walls/plane.stl").display(),
+            wall_motion.map_or(String::new(), |m| format!("motion = {m}\n"))
         ),
         None => String::new(),
     };
