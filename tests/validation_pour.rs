@@ -1,0 +1,116 @@
+//! Validation case 6 on the CPU: 1000 frictional dodecahedra poured into a box settle to a bulk
+//! packing fraction inside the experimental range for poured dodecahedra, with no particle lost,
+//! through a wall or non-finite. The scene is `launch/validation/pour.toml`.
+
+mod common;
+
+use common::*;
+use nalgebra::Vector3;
+use polydem::pipeline::Simulation;
+use polydem::scene::load_scene;
+
+/// Baker & Kudrolli (Phys. Rev. E 82, 061304, 2010), poured then tapped dodecahedra:
+/// ../shared/reference/validation.md §5.
+const PACKING_RANGE: (f64, f64) = (0.51, 0.63);
+/// Inner half-width of the box (m): `box_open_top.stl` × 0.4.
+const HALF_WIDTH: f64 = 0.02;
+/// Box height (m).
+const BOX_HEIGHT: f64 = 0.04;
+/// Particle size: circumscribed diameter (m).
+const DIAMETER: f64 = 0.004;
+
+/// The six planes `(n, h)` of the box `lo ≤ x ≤ hi`.
+fn box_planes(lo: &Vector3<f64>, hi: &Vector3<f64>) -> Vec<(Vector3<f64>, f64)> {
+    (0..3)
+        .flat_map(|k| {
+            let e = Vector3::ith(k, 1.0);
+            [(e, hi[k]), (-e, -lo[k])]
+        })
+        .collect()
+}
+
+#[test]
+fn poured_dodecahedra_settle_to_the_experimental_packing_fraction() {
+    let scene = load_scene(&repo_root().join("launch/validation/pour.toml")).unwrap();
+    let end = scene.simulation.end_time;
+    let mut sim = Simulation::new(scene).unwrap();
+    // `step` fails on a non-finite position or velocity, so reaching the end means no NaN.
+    while sim.time < end {
+        sim.step().unwrap();
+    }
+    let p = &sim.particles;
+
+    // Nothing lost, nothing through a wall: every centre strictly inside the box, below its rim.
+    assert_eq!(p.len(), 1000, "particles present at the end");
+    let mut ids = p.id.clone();
+    ids.sort_unstable();
+    ids.dedup();
+    assert_eq!(ids.len(), 1000, "global ids are unique");
+    for i in 0..p.len() {
+        let x = p.position[i];
+        assert!(
+            x.x.abs() < HALF_WIDTH && x.y.abs() < HALF_WIDTH && x.z > 0.0 && x.z < BOX_HEIGHT,
+            "particle {} at {x:?} is outside the box",
+            p.id[i]
+        );
+    }
+
+    // Settled: the kinetic energy per unit mass is below that of a 1 mm/s drift (a grain moving
+    // at 1 mm/s covers 1/4 of its size in a second).
+    let mass: f64 = p.mass.iter().sum();
+    let (kt, kr, _) = sim.energies();
+    let per_mass = (kt + kr) / mass;
+    println!("kinetic energy per unit mass {per_mass:.3e} J/kg");
+    assert!(
+        per_mass < 0.5 * 1e-3 * 1e-3,
+        "bed still moving: {per_mass:e} J/kg"
+    );
+
+    // Bulk packing fraction in the bed's core, one diameter away from the side walls, the floor
+    // and the surface. The surface height is the 90th percentile of the centre heights (the
+    // top layer is about one diameter thick and rough). Each particle counts with its exact
+    // volume inside the core box (an exact oracle independent of the overlap code: brute-force
+    // plane triples hulled by parry), not by centre: centre counting in a core of a few hundred
+    // particles carries a ±5 % boundary noise.
+    let mut z: Vec<f64> = p.position.iter().map(|x| x.z).collect();
+    z.sort_by(f64::total_cmp);
+    let surface = z[(0.9 * z.len() as f64) as usize];
+    let lo = Vector3::new(-HALF_WIDTH + DIAMETER, -HALF_WIDTH + DIAMETER, DIAMETER);
+    let hi = Vector3::new(
+        HALF_WIDTH - DIAMETER,
+        HALF_WIDTH - DIAMETER,
+        surface - DIAMETER,
+    );
+    assert!(
+        hi.z - lo.z > 2.0 * DIAMETER,
+        "bed too shallow: surface at {surface}"
+    );
+    let core = box_planes(&lo, &hi);
+    let template = &sim.scene.templates[0];
+    let mut solid = 0.0;
+    let mut total = 0.0;
+    for i in 0..p.len() {
+        let s = p.scale[i];
+        let q = p.orientation[i];
+        let x = p.position[i];
+        let mut planes = core.clone();
+        planes.extend(template.faces.iter().map(|f| {
+            let n = q * f.normal;
+            (n, s * f.offset + n.dot(&x))
+        }));
+        solid += oracle_intersection(&planes, DIAMETER).volume;
+        total += template.volume * s * s * s;
+    }
+    let core_volume = (hi - lo).product();
+    let phi = solid / core_volume;
+    println!(
+        "surface {surface:.4} m, core {:.1} cm³, solid {:.3} of all particle volume, \
+         packing fraction {phi:.4}",
+        core_volume * 1e6,
+        solid / total
+    );
+    assert!(
+        (PACKING_RANGE.0..=PACKING_RANGE.1).contains(&phi),
+        "packing fraction {phi:.4} outside {PACKING_RANGE:?}"
+    );
+}
