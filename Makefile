@@ -4,7 +4,8 @@
 #
 #   make run     build the release CLI and run the quickstart scene (launch/quickstart/)
 #   make probe   the contact-geometry probe on the examples in launch/probe/
-#   make test    cargo test --release, with the oracles' Python in POLYDEM_PYTHON
+#   make test    cargo test --release, with the oracles' Python in POLYDEM_PYTHON and
+#                PyPI's NVRTC on LD_LIBRARY_PATH (kernel compile check)
 #   make lint    cargo fmt --check, clippy -D warnings on every target, rustdoc -D warnings
 #   make setup   only the installation step
 #   make clean-venv   remove .venv (the next setup recreates it)
@@ -61,8 +62,13 @@ probe: build
 	done
 	@echo; echo "Results also in out/probe/*.jsonl; what they mean: launch/probe/README.md"
 
+# NVRTC from PyPI (python/requirements.txt), for the kernel compile check without a GPU; a
+# system CUDA install found first on the library path takes precedence.
+NVRTC_LIB = $(firstword $(wildcard $(ROOT)/.venv/lib/python3*/site-packages/nvidia/cu13/lib))
+
 test: setup
-	cd $(ROOT) && POLYDEM_PYTHON=$(VENV_PYTHON) $(CARGO) test --release
+	cd $(ROOT) && LD_LIBRARY_PATH=$${LD_LIBRARY_PATH:+$$LD_LIBRARY_PATH:}$(NVRTC_LIB) \
+	    POLYDEM_PYTHON=$(VENV_PYTHON) $(CARGO) test --release
 
 lint: setup
 	cd $(ROOT) && $(CARGO) fmt --check

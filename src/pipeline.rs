@@ -247,6 +247,17 @@ impl Simulation {
         self.check_finite()
     }
 
+    /// Whether insertions are due at the current time (see [`Inserter::pending`]).
+    pub fn inserter_pending(&self) -> bool {
+        self.inserter.pending(self.time, &self.scene)
+    }
+
+    /// Stage 1 on the host copy of another backend's state: insertion of due particles and
+    /// removal of those outside a closed domain ([`Simulation::exchange`]).
+    pub fn exchange_on_host(&mut self) -> Result<(), SimulationError> {
+        self.exchange()
+    }
+
     /// Stage 1: insert due particles, drop those outside a closed domain, wrap periodic axes.
     fn exchange(&mut self) -> Result<(), SimulationError> {
         let t0 = Instant::now();

@@ -5,6 +5,8 @@
 //! panics when a library it is asked to use is missing), and never panics itself: a machine
 //! without a usable GPU simply gets the CPU backend, with the reason in the log.
 
+pub mod cuda;
+
 use serde::Serialize;
 
 /// A GPU as the driver reports it.

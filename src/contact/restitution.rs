@@ -22,7 +22,8 @@ use std::sync::{Mutex, OnceLock};
 /// Exponents of the table: 1/3 … 3.
 const P_MIN: f64 = 1.0 / 3.0;
 const P_MAX: f64 = 3.0;
-const TABLE_SIZE: usize = 25;
+/// Number of exponents tabulated in a [`DampingTable`] (`cuda/contact_law.cuh` has the same).
+pub const TABLE_SIZE: usize = 25;
 
 /// Restitution of the dimensionless impact `X'' = −X^p − γ √p X^{(p−1)/2} X'`, `X(0) = 0`,
 /// `X'(0) = 1`: minus the velocity when X returns to zero (or when the net force would turn
@@ -152,6 +153,11 @@ impl DampingTable {
 
     fn exponent(k: usize) -> f64 {
         P_MIN + (P_MAX - P_MIN) * k as f64 / (TABLE_SIZE - 1) as f64
+    }
+
+    /// The tabulated values, at exponents evenly spaced over [1/3, 3] (for the GPU tables).
+    pub fn values(&self) -> &[f64; TABLE_SIZE] {
+        &self.gamma
     }
 
     /// `γ` at exponent `p` (clamped to the table's range [1/3, 3], the range of convex contacts).

@@ -95,6 +95,18 @@ impl WallMesh {
         self.triangles.is_empty()
     }
 
+    /// The facet grid as flat arrays, for the GPU backend.
+    pub fn grid_parts(&self) -> FacetGridParts<'_> {
+        let g = &self.grid;
+        FacetGridParts {
+            min: g.min,
+            size: g.size,
+            dims: g.dims,
+            start: &g.start,
+            items: &g.items,
+        }
+    }
+
     /// Facets within `reach` of point `x` (wall frame), in increasing index order.
     pub fn facets_near(&self, x: &Vector3<f64>, reach: f64, out: &mut Vec<u32>) {
         out.clear();
@@ -133,6 +145,17 @@ impl WallMesh {
         }
         Ok(total)
     }
+}
+
+/// A wall's facet grid as flat arrays: cell `(x, y, z)` is
+/// `(z · dims[1] + y) · dims[0] + x`, of width `size` from `min`, and holds the facets
+/// `items[start[c] .. start[c + 1]]`.
+pub struct FacetGridParts<'a> {
+    pub min: Vector3<f64>,
+    pub size: f64,
+    pub dims: [usize; 3],
+    pub start: &'a [u32],
+    pub items: &'a [u32],
 }
 
 /// Distance from `x` to triangle `t` (Ericson, "Real-Time Collision Detection" §5.1.5).

@@ -232,6 +232,13 @@ impl PairList {
     }
 }
 
+/// Cell widths and counts of the neighbour grid for `bounds` and cells at least `cutoff` wide
+/// (at most about `max(max_cells, 4096)` cells): the layout the GPU backend bins with too.
+pub fn grid_layout(bounds: &Bounds, cutoff: f64, max_cells: usize) -> (Vector3<f64>, [usize; 3]) {
+    let g = Grid::new(bounds, cutoff, max_cells);
+    (g.size, g.dims)
+}
+
 /// A uniform grid of cells at least one cutoff wide over the domain box.
 struct Grid {
     min: Vector3<f64>,

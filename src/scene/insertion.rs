@@ -278,6 +278,17 @@ impl Inserter {
         self.last_insertion_time
     }
 
+    /// Whether [`Inserter::insert`] at time `t` would place particles (some are due), without
+    /// placing them: the GPU backend syncs the state to the host only then.
+    pub fn pending(&self, t: f64, scene: &Scene) -> bool {
+        let n_ins = scene.insertions.len().min(self.inserted.len());
+        (0..n_ins).any(|k| {
+            let ins = &scene.insertions[k];
+            let done = matches!(ins.mode, InsertionMode::Count(_)) && self.count_done[k];
+            !done && ins.due_by(t) > self.inserted[k]
+        })
+    }
+
     /// Inserts every particle due by time `t`: count insertions on the first call, rate
     /// insertions as they fall due. New particles overlap no existing or new particle and no
     /// wall (at its pose at `t`), judged by bounding spheres, and lie inside their region and

@@ -238,6 +238,11 @@ impl PairTable {
         }
     }
 
+    /// Whether some given pair has friction (μ > 0): the tangential history is needed.
+    pub fn any_friction(&self) -> bool {
+        self.entries.iter().flatten().any(|p| p.friction > 0.0)
+    }
+
     /// The parameters of `(m1, m2)` if given.
     pub fn try_get(&self, m1: usize, m2: usize) -> Option<PairParameters> {
         if m1 < self.n && m2 < self.n {
