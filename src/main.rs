@@ -39,6 +39,10 @@ enum Command {
         /// Stop after this many steps.
         #[arg(long)]
         max_steps: Option<u64>,
+        /// Pair-geometry arithmetic on the GPU: all f64, or f32 in the contact-centred pair
+        /// frame with f64 state (the CPU is always f64).
+        #[arg(long, value_enum, default_value = "double")]
+        gpu_precision: polydem::backend::cuda::Precision,
     },
     /// Validates a scene and prints the critical time step, the chosen dt and counts.
     Check { scene: PathBuf },
@@ -110,6 +114,7 @@ fn run(cli: Cli) -> Result<()> {
             out: dir,
             restart,
             max_steps,
+            gpu_precision,
         } => {
             let summary = polydem::run::run(&RunOptions {
                 scene,
@@ -117,6 +122,7 @@ fn run(cli: Cli) -> Result<()> {
                 out: dir,
                 restart,
                 max_steps,
+                precision: gpu_precision,
             })?;
             use std::io::Write;
             writeln!(out, "{}", serde_json::to_string_pretty(&summary)?)?;

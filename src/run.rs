@@ -3,6 +3,7 @@
 //! (stage 10 of DESIGN.md §1).
 
 use crate::backend;
+use crate::backend::cuda::{CudaSimulation, Precision};
 use crate::io::checkpoint::fnv1a64;
 use crate::io::{
     Checkpoint, FrameView, FrameWriter, SeriesRow, SeriesWriter, WallView, read_checkpoint,
@@ -41,6 +42,8 @@ pub struct RunOptions {
     pub restart: Option<PathBuf>,
     /// Stop after this many steps (for tests and benchmarks); `None`: run to the end time.
     pub max_steps: Option<u64>,
+    /// Arithmetic of the pair geometry on the GPU (the CPU backend is always f64).
+    pub precision: Precision,
 }
 
 /// Hash identifying a scene for restarts: the scene file's bytes.
@@ -49,29 +52,65 @@ fn scene_hash(path: &Path) -> Result<u64> {
     Ok(fnv1a64(&bytes))
 }
 
-/// Picks the backend; only the CPU backend exists so far, so `cuda` is refused with the reason
-/// and `auto` says why it uses the CPU.
+/// Picks the backend (DESIGN.md §5): `cuda` needs a usable GPU and NVRTC, `auto` takes the GPU
+/// when there is one and says in the log why it does not.
 fn choose_backend(choice: BackendChoice) -> Result<&'static str> {
     let info = backend::cuda_info();
     match choice {
         BackendChoice::Cpu => Ok("cpu"),
-        BackendChoice::Cuda => bail!(
-            "--backend cuda: the CUDA backend is not available in this build yet{}; use --backend cpu",
-            info.gpus
-                .first()
-                .map(|g| format!(" (GPU found: {})", g.name))
-                .unwrap_or_default()
-        ),
-        BackendChoice::Auto => {
-            match (&info.unavailable, info.gpus.first()) {
-                (None, Some(g)) => tracing::info!(
-                    "GPU {} found, but the CUDA backend is not built yet: running on the CPU",
-                    g.name
-                ),
-                (Some(why), _) => tracing::info!("running on the CPU: {why}"),
-                _ => tracing::info!("running on the CPU"),
+        BackendChoice::Cuda => match (&info.unavailable, info.gpus.first()) {
+            (None, Some(g)) => {
+                tracing::info!("running on GPU 0: {}", g.name);
+                Ok("cuda")
             }
-            Ok("cpu")
+            (Some(why), _) => bail!("--backend cuda: {why}; use --backend cpu"),
+            _ => bail!("--backend cuda: no GPU found; use --backend cpu"),
+        },
+        BackendChoice::Auto => match (&info.unavailable, info.gpus.first()) {
+            (None, Some(g)) => {
+                tracing::info!("running on GPU 0: {}", g.name);
+                Ok("cuda")
+            }
+            (Some(why), _) => {
+                tracing::info!("running on the CPU: {why}");
+                Ok("cpu")
+            }
+            _ => {
+                tracing::info!("running on the CPU");
+                Ok("cpu")
+            }
+        },
+    }
+}
+
+/// The simulation a run steps: on the CPU, or on the GPU with a host copy synced for output.
+enum Engine {
+    Cpu(Simulation),
+    Cuda(Box<CudaSimulation>),
+}
+
+impl Engine {
+    fn step(&mut self) -> Result<()> {
+        match self {
+            Engine::Cpu(s) => s.step().map_err(|e: SimulationError| anyhow!("{e}")),
+            Engine::Cuda(c) => c.step().map_err(|e| anyhow!("{e}")),
+        }
+    }
+
+    /// The host simulation: time, step, dt, scene and particle count are always current; the
+    /// particle state and statistics only after [`Engine::synced`].
+    fn host(&self) -> &Simulation {
+        match self {
+            Engine::Cpu(s) => s,
+            Engine::Cuda(c) => &c.host,
+        }
+    }
+
+    /// The host simulation with the device state copied in.
+    fn synced(&mut self) -> Result<&Simulation> {
+        match self {
+            Engine::Cpu(s) => Ok(s),
+            Engine::Cuda(c) => c.sync_host().map_err(|e| anyhow!("{e}")),
         }
     }
 }
@@ -219,7 +258,7 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
     let wall_names: Vec<String> = scene.walls.iter().map(|w| w.name.clone()).collect();
     let series_path = dir.join("series.csv");
 
-    let (mut sim, resumed) = match &opts.restart {
+    let (sim, resumed) = match &opts.restart {
         Some(path) => {
             let c = read_checkpoint(path)?;
             c.check_scene(hash, path)?;
@@ -249,6 +288,18 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
         }
         None => (Simulation::new(scene)?, false),
     };
+    let mut engine = if backend_name == "cuda" {
+        let c = CudaSimulation::new(sim, 0, opts.precision).map_err(|e| anyhow!("{e}"))?;
+        tracing::info!(
+            "kernels compiled for {} ({:?} pair geometry)",
+            c.device,
+            c.precision
+        );
+        Engine::Cuda(Box::new(c))
+    } else {
+        Engine::Cpu(sim)
+    };
+    let sim = engine.host();
     let s = &sim.scene;
     let frames = if s.output.formats.vtu && s.output.frame_interval.is_some() {
         Some(if resumed {
@@ -276,8 +327,8 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
     let end_time = s.simulation.end_time;
     let log_every = s.output.log_interval_steps.max(1);
     if !resumed {
-        out.frame(&sim)?;
-        out.series(&sim)?;
+        out.frame(engine.synced()?)?;
+        out.series(engine.synced()?)?;
     }
 
     let interrupted = Arc::new(AtomicBool::new(false));
@@ -287,6 +338,7 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
         // the first one's flag then never fires for this run, which only loses Ctrl-C handling.
         let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
     }
+    let sim = engine.host();
     let total_steps = ((end_time - sim.time) / sim.dt).ceil().max(0.0) as u64;
     let bar = std::io::stderr().is_terminal().then(|| {
         let b = indicatif::ProgressBar::new(total_steps);
@@ -299,24 +351,28 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
         b
     });
     let start = Instant::now();
-    let (step0, mut particle_steps) = (sim.step, 0u64);
+    let (step0, mut particle_steps) = (engine.host().step, 0u64);
     let mut stopped_by_user = false;
-    while sim.time + 0.5 * sim.dt < end_time {
-        if opts.max_steps.is_some_and(|m| sim.step - step0 >= m) {
+    while engine.host().time + 0.5 * engine.host().dt < end_time {
+        if opts
+            .max_steps
+            .is_some_and(|m| engine.host().step - step0 >= m)
+        {
             break;
         }
-        sim.step().map_err(|e: SimulationError| anyhow!("{e}"))?;
-        particle_steps += sim.particles.len() as u64;
-        let (t, dt) = (sim.time, sim.dt);
+        engine.step()?;
+        particle_steps += engine.host().particles.len() as u64;
+        let (t, dt) = (engine.host().time, engine.host().dt);
         if frame_at.due(t, dt) {
-            out.frame(&sim)?;
+            out.frame(engine.synced()?)?;
         }
         if series_at.due(t, dt) {
-            out.series(&sim)?;
+            out.series(engine.synced()?)?;
         }
         if checkpoint_at.due(t, dt) {
-            save_checkpoint(&sim, &dir, hash)?;
+            save_checkpoint(engine.synced()?, &dir, hash)?;
         }
+        let sim = engine.host();
         let done = sim.step - step0;
         if let Some(b) = &bar {
             b.set_position(done);
@@ -342,7 +398,7 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
             );
         }
         if interrupted.load(Ordering::SeqCst) {
-            let path = save_checkpoint(&sim, &dir, hash)?;
+            let path = save_checkpoint(engine.synced()?, &dir, hash)?;
             tracing::warn!(
                 "interrupted: checkpoint written to {}; resume with --restart {}",
                 path.display(),
@@ -356,11 +412,12 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
         b.finish_and_clear();
     }
     let wall = start.elapsed().as_secs_f64();
+    let sim = engine.synced()?;
     if !stopped_by_user {
-        out.frame(&sim)?;
-        out.series(&sim)?;
+        out.frame(sim)?;
+        out.series(sim)?;
         if sim.scene.output.checkpoint_interval.is_some() {
-            save_checkpoint(&sim, &dir, hash)?;
+            save_checkpoint(sim, &dir, hash)?;
         }
     }
     let (kt, kr, pg) = sim.energies();

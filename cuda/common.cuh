@@ -1,0 +1,160 @@
+// Shared definitions of the kernels: the portability macros, a small 3-vector over the scalar
+// type T (double, or float for mixed-precision pair geometry), and the math wrappers.
+//
+// Every header in this folder compiles three ways:
+// - with NVRTC at run time (`__CUDACC_RTC__`), the production path (src/backend/cuda);
+// - with nvcc (`__CUDACC__`), for anyone building the kernels offline;
+// - as plain host C++17 (g++/clang++), so that the geometry can be tested against the Rust
+//   implementation on a machine without a GPU (tests/cuda_geometry_host.rs).
+// Functions are therefore `PD_HD` (host and device), use no dynamic allocation, no recursion
+// and no standard library beyond <cmath>/<cstdint> on the host.
+//
+// Floating-point contraction is off in all three builds (NVRTC `--fmad=false`, g++
+// `-ffp-contract=off`): the Rust reference never fuses a multiply and an add, and parity in
+// double mode is then limited only by the transcendental functions (cbrt, sin, cos).
+#pragma once
+
+#if defined(__CUDACC_RTC__) || defined(__CUDACC__)
+#define PD_HD __host__ __device__ __forceinline__
+#define PD_DEVICE __device__ __forceinline__
+typedef unsigned long long pd_u64;
+typedef long long pd_i64;
+typedef unsigned int pd_u32;
+#else
+#include <cmath>
+#include <cstdint>
+#define PD_HD inline
+#define PD_DEVICE inline
+typedef uint64_t pd_u64;
+typedef int64_t pd_i64;
+typedef uint32_t pd_u32;
+#endif
+
+namespace pd {
+
+// Math wrappers with one overload per precision: the device math library's C++ overloads and
+// <cmath>'s differ in which float overloads they declare, so everything goes through these.
+PD_HD double sqrt_(double x) { return sqrt(x); }
+PD_HD float sqrt_(float x) { return sqrtf(x); }
+PD_HD double abs_(double x) { return fabs(x); }
+PD_HD float abs_(float x) { return fabsf(x); }
+PD_HD double min_(double a, double b) { return a < b ? a : b; }
+PD_HD float min_(float a, float b) { return a < b ? a : b; }
+PD_HD double max_(double a, double b) { return a > b ? a : b; }
+PD_HD float max_(float a, float b) { return a > b ? a : b; }
+PD_HD double cbrt_(double x) { return cbrt(x); }
+PD_HD float cbrt_(float x) { return cbrtf(x); }
+PD_HD int min_(int a, int b) { return a < b ? a : b; }
+PD_HD int max_(int a, int b) { return a > b ? a : b; }
+
+// Machine epsilon and the largest finite value of T (Rust's f64::EPSILON / f32::EPSILON).
+template <class T> struct Limits;
+template <> struct Limits<double> {
+    static PD_HD double epsilon() { return 2.220446049250313080847e-16; }
+    static PD_HD double max() { return 1.7976931348623157e308; }
+};
+template <> struct Limits<float> {
+    static PD_HD float epsilon() { return 1.1920928955078125e-7f; }
+    static PD_HD float max() { return 3.40282346638528859812e38f; }
+};
+
+// A 3-vector. Operations are written component by component in the order nalgebra uses
+// (x, then y, then z; dot = x*x' + y*y' + z*z' summed left to right), so that double results
+// match the Rust reference bit for bit where no transcendental function intervenes.
+template <class T> struct V3 {
+    T x, y, z;
+    PD_HD T operator[](int k) const { return k == 0 ? x : (k == 1 ? y : z); }
+};
+
+template <class T> PD_HD V3<T> v3(T x, T y, T z) {
+    V3<T> v;
+    v.x = x;
+    v.y = y;
+    v.z = z;
+    return v;
+}
+template <class T> PD_HD V3<T> zero3() { return v3<T>(T(0), T(0), T(0)); }
+template <class T> PD_HD V3<T> operator+(V3<T> a, V3<T> b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
+template <class T> PD_HD V3<T> operator-(V3<T> a, V3<T> b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
+template <class T> PD_HD V3<T> operator-(V3<T> a) { return v3(-a.x, -a.y, -a.z); }
+template <class T> PD_HD V3<T> operator*(V3<T> a, T s) { return v3(a.x * s, a.y * s, a.z * s); }
+template <class T> PD_HD V3<T> operator/(V3<T> a, T s) { return v3(a.x / s, a.y / s, a.z / s); }
+template <class T> PD_HD V3<T>& operator+=(V3<T>& a, V3<T> b) {
+    a = a + b;
+    return a;
+}
+template <class T> PD_HD V3<T>& operator-=(V3<T>& a, V3<T> b) {
+    a = a - b;
+    return a;
+}
+template <class T> PD_HD bool operator==(V3<T> a, V3<T> b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+template <class T> PD_HD T dot(V3<T> a, V3<T> b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+template <class T> PD_HD V3<T> cross(V3<T> a, V3<T> b) {
+    return v3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+template <class T> PD_HD T norm2(V3<T> a) { return dot(a, a); }
+template <class T> PD_HD T norm(V3<T> a) { return sqrt_(norm2(a)); }
+template <class T> PD_HD V3<T> vmin(V3<T> a, V3<T> b) { return v3(min_(a.x, b.x), min_(a.y, b.y), min_(a.z, b.z)); }
+template <class T> PD_HD V3<T> vmax(V3<T> a, V3<T> b) { return v3(max_(a.x, b.x), max_(a.y, b.y), max_(a.z, b.z)); }
+template <class T> PD_HD T vmax_component(V3<T> a) { return max_(max_(a.x, a.y), a.z); }
+
+// Precision conversions: the pair frame is built in double and rounded to T once (DESIGN.md §3).
+template <class T, class S> PD_HD V3<T> cast3(V3<S> a) { return v3<T>(T(a.x), T(a.y), T(a.z)); }
+
+// A unit quaternion (w; x, y, z), body → world, as nalgebra's UnitQuaternion.
+template <class T> struct Quat {
+    T w, x, y, z;
+};
+
+// Rotates v by q: nalgebra's `UnitQuaternion * Vector3`, in its order of operations
+// (t = 2 q×v; v' = (t w + q×t) + v).
+template <class T> PD_HD V3<T> rotate(Quat<T> q, V3<T> v) {
+    V3<T> u = v3(q.x, q.y, q.z);
+    V3<T> t = cross(u, v) * T(2);
+    return t * q.w + cross(u, t) + v;
+}
+
+// Rotates v by q⁻¹ (world → body).
+template <class T> PD_HD V3<T> rotate_inverse(Quat<T> q, V3<T> v) {
+    Quat<T> c;
+    c.w = q.w;
+    c.x = -q.x;
+    c.y = -q.y;
+    c.z = -q.z;
+    return rotate(c, v);
+}
+
+// A 3×3 matrix, row-major (m[r][c]); only what the pair frame needs.
+template <class T> struct Mat3 {
+    T m[3][3];
+};
+
+// nalgebra's `UnitQuaternion::to_rotation_matrix`, in its order of operations
+// (ij = i·j·2 etc., diagonal ww + ii − jj − kk summed left to right).
+template <class T> PD_HD Mat3<T> to_rotation_matrix(Quat<T> q) {
+    T i = q.x, j = q.y, k = q.z, w = q.w;
+    T ww = w * w, ii = i * i, jj = j * j, kk = k * k;
+    T ij = i * j * T(2), wk = w * k * T(2), wj = w * j * T(2);
+    T ik = i * k * T(2), jk = j * k * T(2), wi = w * i * T(2);
+    Mat3<T> r;
+    r.m[0][0] = ww + ii - jj - kk;
+    r.m[0][1] = ij - wk;
+    r.m[0][2] = wj + ik;
+    r.m[1][0] = wk + ij;
+    r.m[1][1] = ww - ii + jj - kk;
+    r.m[1][2] = jk - wi;
+    r.m[2][0] = ik - wj;
+    r.m[2][1] = wi + jk;
+    r.m[2][2] = ww - ii - jj + kk;
+    return r;
+}
+
+// Matrix × vector as nalgebra's gemv: column by column, so row r is
+// (m[r][0] x + m[r][1] y) + m[r][2] z.
+template <class T> PD_HD V3<T> mul(const Mat3<T>& a, V3<T> v) {
+    return v3(a.m[0][0] * v.x + a.m[0][1] * v.y + a.m[0][2] * v.z,
+              a.m[1][0] * v.x + a.m[1][1] * v.y + a.m[1][2] * v.z,
+              a.m[2][0] * v.x + a.m[2][1] * v.y + a.m[2][2] * v.z);
+}
+
+} // namespace pd

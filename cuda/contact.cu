@@ -1,0 +1,447 @@
+// Stages 3–8 on the GPU: per pair, the bounding-sphere broad phase, last step's separating axis,
+// GJK and the dual-space overlap (overlap.cuh), the contact law (contact_law.cuh) with the
+// tangential spring carried in pair slots; per particle, the wall contacts (prism.cuh) and the
+// deterministic reduction in partner-id order. The GPU twin of `Simulation::pair_contacts`,
+// `wall_contacts` and the reduction in src/pipeline.rs. One thread per pair or per particle;
+// each thread's geometry workspace is sized by the scene's largest template
+// (PD_MAX_TEMPLATE_VERTICES/FACES), so a dodecahedron scene pays for 20 vertices and 12 faces.
+#include "common.cuh"
+#include "state.cuh"
+#include "overlap.cuh"
+#include "prism.cuh"
+#include "contact_law.cuh"
+
+using namespace pd;
+
+#if PD_DOUBLE_GEOMETRY
+typedef double GeomReal;
+#else
+typedef float GeomReal;
+#endif
+
+// Templates in constant memory (DESIGN.md §3), filled by the host after loading the module.
+__constant__ double pd_template_vertices[PD_TEMPLATES * PD_MAX_TEMPLATE_VERTICES * 3];
+__constant__ double pd_template_normals[PD_TEMPLATES * PD_MAX_TEMPLATE_FACES * 3];
+__constant__ double pd_template_offsets[PD_TEMPLATES * PD_MAX_TEMPLATE_FACES];
+__constant__ int pd_template_counts[PD_TEMPLATES * 2]; // vertices, faces
+__constant__ double pd_template_radius[PD_TEMPLATES];  // circumscribed radius
+
+PD_DEVICE TemplateView template_view(unsigned int t) {
+    TemplateView v;
+    v.vertices = pd_template_vertices + (size_t)t * PD_MAX_TEMPLATE_VERTICES * 3;
+    v.n_vertices = pd_template_counts[2 * t];
+    v.normals = pd_template_normals + (size_t)t * PD_MAX_TEMPLATE_FACES * 3;
+    v.offsets = pd_template_offsets + (size_t)t * PD_MAX_TEMPLATE_FACES;
+    v.n_faces = pd_template_counts[2 * t + 1];
+    v.circumscribed_radius = pd_template_radius[t];
+    return v;
+}
+
+PD_DEVICE V3<double> ld3(const double* a, size_t i) { return v3(a[3 * i], a[3 * i + 1], a[3 * i + 2]); }
+PD_DEVICE void st3(double* a, size_t i, V3<double> v) {
+    a[3 * i] = v.x;
+    a[3 * i + 1] = v.y;
+    a[3 * i + 2] = v.z;
+}
+PD_DEVICE Quat<double> ldq(const double* q, size_t i) {
+    Quat<double> r;
+    r.x = q[4 * i];
+    r.y = q[4 * i + 1];
+    r.z = q[4 * i + 2];
+    r.w = q[4 * i + 3];
+    return r;
+}
+
+// The particle state the contact stages read (device pointers, xyz-interleaved).
+struct ParticleView {
+    const double* position;
+    const double* velocity;
+    const double* angular_velocity;
+    const double* orientation; // x, y, z, w
+    const double* mass;
+    const double* inertia;
+    const double* scale;
+    const double* radius;      // bounding (circumscribed) radius
+    const double* cn;          // E / R (volume-equivalent radius): normal stiffness term
+    const double* ct;          // E / (2 (1 + ν) R): tangential stiffness term
+    const unsigned int* tmpl;  // template index
+    const unsigned int* material;
+};
+
+// Per-pair outputs: force on B, torque on A, torque on B (nine doubles), elastic energy.
+struct PairOutputs {
+    double* forces;
+    double* energy;
+    unsigned int* contact; // 1 when the pair is in contact (its spring is live history)
+};
+
+PD_DEVICE void clear_pair(const PairOutputs& out, size_t k) {
+    for (int c = 0; c < 9; ++c) out.forces[9 * k + c] = 0.0;
+    out.energy[k] = 0.0;
+    out.contact[k] = 0u;
+}
+
+// Records the first geometry error (status code and the pair or particle index) for the host.
+PD_DEVICE void report_error(unsigned int* error, int status, unsigned int where) {
+    if (atomicCAS(&error[0], 0u, (unsigned int)status) == 0u) {
+        error[1] = where;
+    }
+}
+
+// Stages 3–7 for the pairs of the list (Simulation::pair_contacts).
+extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const double* shift, double* axes,
+                                         ParticleView p, const PairMaterial* materials, int n_materials,
+                                         const double* spring_in, double* spring_out, PairOutputs out, double dt,
+                                         unsigned int* error) {
+    int kk = blockIdx.x * blockDim.x + threadIdx.x;
+    if (kk >= n_pairs) {
+        return;
+    }
+    size_t k = (size_t)kk;
+    int a = pairs[k].x, b = pairs[k].y;
+    V3<double> xa = ld3(p.position, a);
+    V3<double> xb = ld3(p.position, b);
+#if PD_PERIODIC
+    xb = xb + ld3(shift, k);
+#endif
+    V3<double> d = xb - xa;
+    double reach = p.radius[a] + p.radius[b];
+    clear_pair(out, k);
+    st3(spring_out, k, zero3<double>());
+    // Stage 3: bounding spheres.
+    if (norm2(d) >= reach * reach) {
+        st3(axes, k, zero3<double>());
+        return;
+    }
+    BodyRef A, B;
+    A.tpl = template_view(p.tmpl[a]);
+    A.scale = p.scale[a];
+    A.pos = xa;
+    A.rot = ldq(p.orientation, a);
+    B.tpl = template_view(p.tmpl[b]);
+    B.scale = p.scale[b];
+    B.pos = xb;
+    B.rot = ldq(p.orientation, b);
+    // Stage 4 shortcut: last step's separating axis, with a margin far above GJK's touching
+    // tolerance, so the verdict is GJK's.
+    V3<double> axis = ld3(axes, k);
+    if (!(axis == zero3<double>()) && axis_separates(A, B, axis, 1e-9 * reach)) {
+        return;
+    }
+    // Stages 4–5: GJK, then the overlap.
+    PairWorkspace<GeomReal> ws;
+    PairGeometry g;
+    int status = overlap_pair(ws, A, B, &g);
+    if (status != STATUS_OK) {
+        report_error(error, status, (unsigned int)k);
+        st3(axes, k, zero3<double>());
+        return;
+    }
+    if (g.overlap.volume <= 0.0) {
+        st3(axes, k, g.separating_axis);
+        return;
+    }
+    st3(axes, k, zero3<double>());
+    // Stage 7: the contact law.
+    unsigned int ma = p.material[a], mb = p.material[b];
+    const PairMaterial& pm = materials[ma * (unsigned int)n_materials + mb];
+    ContactParameters params;
+    params.normal_stiffness = p.cn[a] + p.cn[b];
+    params.tangential_stiffness = p.ct[a] + p.ct[b];
+    params.restitution = pm.restitution;
+    params.friction = pm.friction;
+    ContactKinematics kin;
+    kin.x_a = xa;
+    kin.x_b = xb;
+    kin.v_a = ld3(p.velocity, a);
+    kin.v_b = ld3(p.velocity, b);
+    kin.w_a = ld3(p.angular_velocity, a);
+    kin.w_b = ld3(p.angular_velocity, b);
+    double area = norm(g.overlap.dv_dxb);
+    if (area > 0.0) {
+        V3<double> nrm = (-g.overlap.dv_dxb) / area;
+        double inverse = 0.0;
+        inverse += inverse_mass_term(p.mass[a], ld3(p.inertia, a), A.rot, xa, g.overlap.centroid, nrm);
+        inverse += inverse_mass_term(p.mass[b], ld3(p.inertia, b), B.rot, xb, g.overlap.centroid, nrm);
+        kin.effective_mass = 1.0 / inverse;
+    } else {
+        kin.effective_mass = min_(p.mass[a], p.mass[b]);
+    }
+    V3<double> spring = zero3<double>();
+#if PD_FRICTION
+    spring = ld3(spring_in, k);
+#endif
+    ContactForces f = contact_forces(params, pm.damping, g.overlap, kin, &spring, dt);
+    st3(out.forces, 3 * k, f.force_b);
+    st3(out.forces, 3 * k + 1, f.torque_a);
+    st3(out.forces, 3 * k + 2, f.torque_b);
+    out.energy[k] = f.elastic_energy;
+    out.contact[k] = 1u;
+    st3(spring_out, k, spring);
+}
+
+#if PD_WALLS
+#ifndef PD_MAX_WALL_CANDIDATES
+#define PD_MAX_WALL_CANDIDATES 128
+#endif
+
+// One wall mesh in its own frame (src/contact/wall.rs `WallMesh`): facets
+// [facet_offset, facet_offset + n_facets) of the concatenated arrays, its facet grid, material.
+struct WallInfo {
+    int facet_offset;
+    int n_facets;
+    int cell_offset; // into the concatenated cell starts (each grid has cells + 1 entries)
+    int material;
+    double grid_min[3];
+    double grid_size;
+    int dims[3];
+    int pad;
+};
+
+// A wall's pose and velocity field at the current time (WallMotion::transform, velocity_at,
+// angular_velocity): a point c of the wall moves with v0 + omega × (c − origin).
+struct WallState {
+    double rotation[4]; // x, y, z, w
+    double translation[3];
+    double v0[3];
+    double omega[3];
+    double origin[3];
+};
+
+// Point–triangle distance (wall.rs point_triangle_distance, Ericson §5.1.5).
+PD_DEVICE double point_triangle_distance(V3<double> x, const double* t) {
+    V3<double> a = v3(t[0], t[1], t[2]), b = v3(t[3], t[4], t[5]), c = v3(t[6], t[7], t[8]);
+    V3<double> ab = b - a, ac = c - a, ap = x - a;
+    double d1 = dot(ab, ap), d2 = dot(ac, ap);
+    if (d1 <= 0.0 && d2 <= 0.0) return norm(ap);
+    V3<double> bp = x - b;
+    double d3 = dot(ab, bp), d4 = dot(ac, bp);
+    if (d3 >= 0.0 && d4 <= d3) return norm(bp);
+    double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
+        double v = d1 / (d1 - d3);
+        return norm(ap - ab * v);
+    }
+    V3<double> cp = x - c;
+    double d5 = dot(ab, cp), d6 = dot(ac, cp);
+    if (d6 >= 0.0 && d5 <= d6) return norm(cp);
+    double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
+        double w = d2 / (d2 - d6);
+        return norm(ap - ac * w);
+    }
+    double va = d3 * d6 - d5 * d4;
+    if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+        double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return norm(bp - (c - b) * w);
+    }
+    double denom = 1.0 / (va + vb + vc);
+    double v = vb * denom, w = vc * denom;
+    return norm(ap - (ab * v + ac * w));
+}
+
+PD_DEVICE int grid_coord(const WallInfo& w, double x, int k) {
+    double c = floor((x - w.grid_min[k]) / w.grid_size);
+    if (c - c != 0.0) return 0;
+    return c < 0.0 ? 0 : (int)min_(c, (double)(w.dims[k] - 1));
+}
+
+// Stage 6 per particle (Simulation::wall_contacts): for every wall, the facets within the
+// bounding radius, the summed penetrating volume of their prisms (WallMesh::contact) and the
+// contact law applied once to the total; the wall's spring per particle and wall.
+extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, const WallInfo* walls,
+                                         const WallState* states, const double* triangles, const double* prisms,
+                                         const unsigned int* cell_start, const unsigned int* cell_items,
+                                         const PairMaterial* materials, int n_materials, const double* spring_in,
+                                         double* spring_out, double* wall_force, double* wall_torque,
+                                         double* wall_energy, double* per_wall_force, unsigned int* wall_contact,
+                                         double dt, unsigned int* error) {
+    int ii = blockIdx.x * blockDim.x + threadIdx.x;
+    if (ii >= n) {
+        return;
+    }
+    size_t i = (size_t)ii;
+    V3<double> force = zero3<double>(), torque = zero3<double>();
+    double energy = 0.0;
+    V3<double> xp = ld3(p.position, i);
+    Quat<double> qp = ldq(p.orientation, i);
+    TemplateView tv = template_view(p.tmpl[i]);
+    double radius = p.radius[i];
+    PosedPolytope<double> body;
+    OverlapWorkspace<double> ws;
+    unsigned int cand[PD_MAX_WALL_CANDIDATES];
+    for (int k = 0; k < n_walls; ++k) {
+        size_t slot = i * (size_t)n_walls + (size_t)k;
+        st3(spring_out, slot, zero3<double>());
+        st3(per_wall_force, slot, zero3<double>());
+        wall_contact[slot] = 0u;
+        const WallInfo& w = walls[k];
+        const WallState& s = states[k];
+        Quat<double> qw;
+        qw.x = s.rotation[0];
+        qw.y = s.rotation[1];
+        qw.z = s.rotation[2];
+        qw.w = s.rotation[3];
+        V3<double> tw = v3(s.translation[0], s.translation[1], s.translation[2]);
+        // local = wall_pose⁻¹ · pose, in nalgebra's order: t = q⁻¹(−t_w) + q⁻¹ x_p.
+        V3<double> local_t = rotate_inverse(qw, -tw) + rotate_inverse(qw, xp);
+        Quat<double> qc;
+        qc.w = qw.w;
+        qc.x = -qw.x;
+        qc.y = -qw.y;
+        qc.z = -qw.z;
+        Quat<double> local_q;
+        local_q.w = qc.w * qp.w - qc.x * qp.x - qc.y * qp.y - qc.z * qp.z;
+        local_q.x = qc.w * qp.x + qc.x * qp.w + qc.y * qp.z - qc.z * qp.y;
+        local_q.y = qc.w * qp.y - qc.x * qp.z + qc.y * qp.w + qc.z * qp.x;
+        local_q.z = qc.w * qp.z + qc.x * qp.y - qc.y * qp.x + qc.z * qp.w;
+        // Facets near (WallMesh::facets_near): grid candidates, sorted, unique, within reach.
+        V3<double> lo = local_t - v3(radius, radius, radius), hi = local_t + v3(radius, radius, radius);
+        double top[3];
+        for (int c = 0; c < 3; ++c) top[c] = w.grid_min[c] + (double)w.dims[c] * w.grid_size;
+        if (hi.x < w.grid_min[0] || lo.x > top[0] || hi.y < w.grid_min[1] || lo.y > top[1] || hi.z < w.grid_min[2] ||
+            lo.z > top[2]) {
+            continue;
+        }
+        int ca[3] = {grid_coord(w, lo.x, 0), grid_coord(w, lo.y, 1), grid_coord(w, lo.z, 2)};
+        int cb[3] = {grid_coord(w, hi.x, 0), grid_coord(w, hi.y, 1), grid_coord(w, hi.z, 2)};
+        int nc = 0;
+        for (int z = ca[2]; z <= cb[2]; ++z) {
+            for (int y = ca[1]; y <= cb[1]; ++y) {
+                for (int x = ca[0]; x <= cb[0]; ++x) {
+                    int cell = (z * w.dims[1] + y) * w.dims[0] + x;
+                    const unsigned int* cs = cell_start + w.cell_offset;
+                    for (unsigned int m = cs[cell]; m < cs[cell + 1]; ++m) {
+                        unsigned int f = cell_items[m];
+                        // Insert sorted, skipping duplicates.
+                        int j = nc;
+                        bool dup = false;
+                        while (j > 0 && cand[j - 1] >= f) {
+                            if (cand[j - 1] == f) {
+                                dup = true;
+                                break;
+                            }
+                            --j;
+                        }
+                        if (dup) continue;
+                        if (nc == PD_MAX_WALL_CANDIDATES) {
+                            report_error(error, 100, (unsigned int)i);
+                            continue;
+                        }
+                        for (int q = nc; q > j; --q) cand[q] = cand[q - 1];
+                        cand[j] = f;
+                        ++nc;
+                    }
+                }
+            }
+        }
+        bool placed = false;
+        Overlap<double> total = overlap_zero<double>();
+        V3<double> first_moment = zero3<double>();
+        V3<double> moment_origin = zero3<double>();
+        for (int c = 0; c < nc; ++c) {
+            size_t f = (size_t)w.facet_offset + cand[c];
+            if (point_triangle_distance(local_t, triangles + 9 * f) > radius) continue;
+            if (!placed) {
+                place(body, tv, p.scale[i], local_t, local_q, zero3<double>());
+                placed = true;
+            }
+            Plane<double> prism[4];
+            for (int q = 0; q < 4; ++q) {
+                prism[q].normal = v3(prisms[16 * f + 4 * q], prisms[16 * f + 4 * q + 1], prisms[16 * f + 4 * q + 2]);
+                prism[q].offset = prisms[16 * f + 4 * q + 3];
+            }
+            Overlap<double> o;
+            int status = prism_overlap(ws, body, prism, &o);
+            if (status != STATUS_OK) {
+                report_error(error, status, (unsigned int)i);
+                continue;
+            }
+            if (o.volume > 0.0) {
+                total.volume += o.volume;
+                first_moment += o.centroid * o.volume;
+                total.dv_dxb += o.dv_dxb;
+                moment_origin += o.moment_b + cross(o.centroid, o.dv_dxb);
+                total.depth = max_(total.depth, o.depth);
+                total.thickness = max_(total.thickness, o.thickness);
+            }
+        }
+        if (!(total.volume > 0.0)) continue;
+        total.centroid = first_moment / total.volume;
+        total.moment_b = moment_origin - cross(total.centroid, total.dv_dxb);
+        // To world: centroid = R c + t; S and M rotated.
+        Overlap<double> world = total;
+        world.centroid = rotate(qw, total.centroid) + tw;
+        world.dv_dxb = rotate(qw, total.dv_dxb);
+        world.moment_b = rotate(qw, total.moment_b);
+        const PairMaterial& pm = materials[p.material[i] * (unsigned int)n_materials + (unsigned int)w.material];
+        ContactParameters params;
+        params.normal_stiffness = p.cn[i] + 0.0;
+        params.tangential_stiffness = p.ct[i] + 0.0;
+        params.restitution = pm.restitution;
+        params.friction = pm.friction;
+        V3<double> c = world.centroid;
+        ContactKinematics kin;
+        kin.x_a = xp;
+        kin.x_b = c;
+        kin.v_a = ld3(p.velocity, i);
+        V3<double> omega = v3(s.omega[0], s.omega[1], s.omega[2]);
+        kin.v_b = v3(s.v0[0], s.v0[1], s.v0[2]) + cross(omega, c - v3(s.origin[0], s.origin[1], s.origin[2]));
+        kin.w_a = ld3(p.angular_velocity, i);
+        kin.w_b = omega;
+        double area = norm(world.dv_dxb);
+        if (area > 0.0) {
+            V3<double> nrm = (-world.dv_dxb) / area;
+            double inverse = 0.0;
+            inverse += inverse_mass_term(p.mass[i], ld3(p.inertia, i), qp, xp, c, nrm);
+            kin.effective_mass = 1.0 / inverse;
+        } else {
+            kin.effective_mass = p.mass[i];
+        }
+        V3<double> spring = zero3<double>();
+#if PD_FRICTION
+        spring = ld3(spring_in, slot);
+#endif
+        ContactForces f = contact_forces(params, pm.damping, world, kin, &spring, dt);
+        force -= f.force_b;
+        torque += f.torque_a;
+        energy += f.elastic_energy;
+        st3(per_wall_force, slot, f.force_b);
+        st3(spring_out, slot, spring);
+        wall_contact[slot] = 1u;
+    }
+    st3(wall_force, i, force);
+    st3(wall_torque, i, torque);
+    wall_energy[i] = energy;
+}
+#endif
+
+// Stage 8: per particle, its pairs' forces and torques summed in partner-global-id order, then
+// its wall contribution (the reduction of Simulation::forces_with_history_step).
+extern "C" __global__ void reduce_forces(int n, const unsigned int* ref_offset, const unsigned int* refs,
+                                         const double* pair_forces, const double* wall_force,
+                                         const double* wall_torque, double* force, double* torque) {
+    int ii = blockIdx.x * blockDim.x + threadIdx.x;
+    if (ii >= n) {
+        return;
+    }
+    size_t i = (size_t)ii;
+    V3<double> f = zero3<double>(), t = zero3<double>();
+    for (unsigned int m = ref_offset[i]; m < ref_offset[i + 1]; ++m) {
+        unsigned int r = refs[m];
+        size_t k = r >> 1;
+        if (r & 1u) {
+            f += ld3(pair_forces, 3 * k);
+            t += ld3(pair_forces, 3 * k + 2);
+        } else {
+            f -= ld3(pair_forces, 3 * k);
+            t += ld3(pair_forces, 3 * k + 1);
+        }
+    }
+#if PD_WALLS
+    f += ld3(wall_force, i);
+    t += ld3(wall_torque, i);
+#endif
+    st3(force, i, f);
+    st3(torque, i, t);
+}

@@ -1,0 +1,226 @@
+// Host harness for the parity test tests/cuda_geometry_host.rs: runs the CUDA contact-geometry
+// headers as plain C++17 on the CPU, in double and in float, on cases written by the test.
+//
+// Build: c++ -O2 -std=c++17 -ffp-contract=off -I cuda cuda/host/geometry_harness.cpp
+// Usage: geometry_harness CASES_FILE      (results on stdout)
+//        geometry_harness --sizes          (workspace sizes in bytes for the compiled capacities)
+//
+// Input (whitespace-separated tokens; every floating-point number is the 16-hex-digit bit
+// pattern of an IEEE double, so that values cross the process boundary exactly):
+//   templates N
+//     N × { nv, nv × (x y z), nf, nf × (nx ny nz offset), circumscribed_radius }
+//   pairs N
+//     N × { ta sa pa(3) qa(w x y z)  tb sb pb(3) qb(w x y z)  axis(3) margin }
+//   facets N
+//     N × { t s p(3) q(w x y z) origin(3) tri(9, relative to origin) }
+// Output, one line per case, floats as hex bit patterns of doubles (float results widened):
+//   P i  {status intersects axis(3) volume centroid(3) S(3) M(3) depth thickness} for double,
+//        then the same for float, then axis_separates (0/1)
+//   F i  {prism_status status volume centroid(3) S(3) M(3) depth thickness} for double, then float
+
+#include "overlap.cuh"
+#include "prism.cuh"
+
+#include <cinttypes>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <vector>
+
+namespace {
+
+struct Template {
+    std::vector<double> vertices, normals, offsets;
+    double radius = 0.0;
+    pd::TemplateView view() const {
+        pd::TemplateView v;
+        v.vertices = vertices.data();
+        v.n_vertices = int(vertices.size() / 3);
+        v.normals = normals.data();
+        v.offsets = offsets.data();
+        v.n_faces = int(offsets.size());
+        v.circumscribed_radius = radius;
+        return v;
+    }
+};
+
+FILE* in = nullptr;
+
+[[noreturn]] void fail(const char* what) {
+    std::fprintf(stderr, "geometry_harness: bad input (%s)\n", what);
+    std::exit(2);
+}
+
+long read_int() {
+    long x;
+    if (std::fscanf(in, "%ld", &x) != 1) fail("integer");
+    return x;
+}
+
+double read_f64() {
+    char buf[64];
+    if (std::fscanf(in, "%63s", buf) != 1) fail("float");
+    uint64_t bits = std::strtoull(buf, nullptr, 16);
+    double x;
+    std::memcpy(&x, &bits, 8);
+    return x;
+}
+
+void read_word(const char* expect) {
+    char buf[64];
+    if (std::fscanf(in, "%63s", buf) != 1 || std::strcmp(buf, expect) != 0) fail(expect);
+}
+
+pd::V3<double> read_v3() {
+    double x = read_f64(), y = read_f64(), z = read_f64();
+    return pd::v3(x, y, z);
+}
+
+pd::Quat<double> read_quat() {
+    pd::Quat<double> q;
+    q.w = read_f64();
+    q.x = read_f64();
+    q.y = read_f64();
+    q.z = read_f64();
+    return q;
+}
+
+void put(double x) {
+    uint64_t bits;
+    std::memcpy(&bits, &x, 8);
+    std::printf(" %016" PRIx64, bits);
+}
+
+void put3(pd::V3<double> v) {
+    put(v.x);
+    put(v.y);
+    put(v.z);
+}
+
+void put_overlap(const pd::Overlap<double>& o) {
+    put(o.volume);
+    put3(o.centroid);
+    put3(o.dv_dxb);
+    put3(o.moment_b);
+    put(o.depth);
+    put(o.thickness);
+}
+
+template <class T> void run_pair(pd::PairWorkspace<T>& ws, const pd::BodyRef& a, const pd::BodyRef& b) {
+    pd::PairGeometry g;
+    int st = pd::overlap_pair(ws, a, b, &g);
+    std::printf(" %d %d", st, g.intersects);
+    put3(g.separating_axis);
+    put_overlap(g.overlap);
+}
+
+template <class T>
+void run_facet(pd::OverlapWorkspace<T>& ws, pd::PosedPolytope<T>& body, const pd::BodyRef& r, pd::V3<double> origin,
+               const pd::V3<double> tri[3]) {
+    pd::place(body, r.tpl, r.scale, r.pos, r.rot, origin);
+    pd::V3<T> t[3];
+    for (int k = 0; k < 3; ++k) t[k] = pd::cast3<T>(tri[k]);
+    pd::Plane<T> prism[4];
+    int pst = pd::facet_prism(t, prism);
+    pd::Overlap<T> o = pd::overlap_zero<T>();
+    int st = 0;
+    if (pst == pd::STATUS_OK) st = pd::prism_overlap(ws, body, prism, &o);
+    std::printf(" %d %d", pst, st);
+    put_overlap(pd::to_world(o, pd::zero3<double>()));
+}
+
+void print_sizes() {
+    std::printf("PD_MAX_TEMPLATE_VERTICES %d PD_MAX_TEMPLATE_FACES %d PD_MAX_HULL_POINTS %d PD_MAX_HULL_FACES %d\n",
+                PD_MAX_TEMPLATE_VERTICES, PD_MAX_TEMPLATE_FACES, PD_MAX_HULL_POINTS, PD_MAX_HULL_FACES);
+    std::printf("sizeof PairWorkspace<double> %zu (PosedPolytope %zu, OverlapWorkspace %zu, DualHull %zu)\n",
+                sizeof(pd::PairWorkspace<double>), sizeof(pd::PosedPolytope<double>),
+                sizeof(pd::OverlapWorkspace<double>), sizeof(pd::DualHull<double>));
+    std::printf("sizeof PairWorkspace<float> %zu (PosedPolytope %zu, OverlapWorkspace %zu, DualHull %zu)\n",
+                sizeof(pd::PairWorkspace<float>), sizeof(pd::PosedPolytope<float>),
+                sizeof(pd::OverlapWorkspace<float>), sizeof(pd::DualHull<float>));
+}
+
+} // namespace
+
+int main(int argc, char** argv) {
+    if (argc == 2 && std::strcmp(argv[1], "--sizes") == 0) {
+        print_sizes();
+        return 0;
+    }
+    if (argc != 2) {
+        std::fprintf(stderr, "usage: geometry_harness CASES_FILE | --sizes\n");
+        return 2;
+    }
+    in = std::fopen(argv[1], "r");
+    if (!in) {
+        std::perror(argv[1]);
+        return 2;
+    }
+    read_word("templates");
+    long nt = read_int();
+    std::vector<Template> templates(nt);
+    for (auto& t : templates) {
+        long nv = read_int();
+        for (long i = 0; i < 3 * nv; ++i) t.vertices.push_back(read_f64());
+        long nf = read_int();
+        for (long i = 0; i < nf; ++i) {
+            for (int k = 0; k < 3; ++k) t.normals.push_back(read_f64());
+            t.offsets.push_back(read_f64());
+        }
+        t.radius = read_f64();
+    }
+    auto body = [&](long ti, double s, pd::V3<double> p, pd::Quat<double> q) {
+        if (ti < 0 || ti >= nt) fail("template index");
+        pd::BodyRef b;
+        b.tpl = templates[ti].view();
+        b.scale = s;
+        b.pos = p;
+        b.rot = q;
+        return b;
+    };
+
+    // The workspaces are tens of kilobytes: on the heap, zero-initialised, reused for every case
+    // (as a kernel thread reuses its local workspace).
+    auto ws64 = std::make_unique<pd::PairWorkspace<double>>();
+    auto ws32 = std::make_unique<pd::PairWorkspace<float>>();
+
+    read_word("pairs");
+    long np = read_int();
+    for (long i = 0; i < np; ++i) {
+        long ta = read_int();
+        double sa = read_f64();
+        pd::V3<double> pa = read_v3();
+        pd::Quat<double> qa = read_quat();
+        long tb = read_int();
+        double sb = read_f64();
+        pd::V3<double> pb = read_v3();
+        pd::Quat<double> qb = read_quat();
+        pd::V3<double> axis = read_v3();
+        double margin = read_f64();
+        pd::BodyRef a = body(ta, sa, pa, qa), b = body(tb, sb, pb, qb);
+        std::printf("P %ld", i);
+        run_pair(*ws64, a, b);
+        run_pair(*ws32, a, b);
+        std::printf(" %d\n", pd::axis_separates(a, b, axis, margin) ? 1 : 0);
+    }
+
+    read_word("facets");
+    long nk = read_int();
+    for (long i = 0; i < nk; ++i) {
+        long t = read_int();
+        double s = read_f64();
+        pd::V3<double> p = read_v3();
+        pd::Quat<double> q = read_quat();
+        pd::V3<double> origin = read_v3();
+        pd::V3<double> tri[3];
+        for (int k = 0; k < 3; ++k) tri[k] = read_v3();
+        pd::BodyRef r = body(t, s, p, q);
+        std::printf("F %ld", i);
+        run_facet(ws64->overlap, ws64->a, r, origin, tri);
+        run_facet(ws32->overlap, ws32->a, r, origin, tri);
+        std::printf("\n");
+    }
+    std::fclose(in);
+    return 0;
+}

@@ -1,0 +1,250 @@
+// Stage 2, neighbours: the GPU twin of src/neighbor/mod.rs. Particles are binned in cells at
+// least one cutoff wide, sorted by cell (and by global id within a cell, so the order is
+// deterministic although the scatter uses atomics), and the particle arrays are reordered in
+// that order for locality. Each particle then scans the 27 surrounding cells for partners with a
+// higher global id within r_i + r_j + skin, and the 1D int2 pair list is built by count,
+// exclusive prefix sum (scan.cu) and fill (seed paper Sec. 2.2, Fig. 3c). Pairs of one particle
+// are contiguous, so the pair offsets also index the contact history by its lower-id member.
+// For the deterministic reduction (DESIGN.md §4), every particle gets its pair references
+// sorted by partner global id.
+#include "common.cuh"
+#include "state.cuh"
+
+using namespace pd;
+
+PD_DEVICE V3<double> load3(const double* a, int i) { return v3(a[3 * i], a[3 * i + 1], a[3 * i + 2]); }
+
+// cell[i] = its cell; cell_count[cell] += 1.
+extern "C" __global__ void bin_particles(int n, const double* position, GridParams grid, unsigned int* cell,
+                                         unsigned int* cell_count) {
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) {
+        return;
+    }
+    unsigned int c = (unsigned int)cell_of(grid, load3(position, i));
+    cell[i] = c;
+    atomicAdd(&cell_count[c], 1u);
+}
+
+// order[cell_start[c] + k] = some particle of cell c (k-th to arrive).
+extern "C" __global__ void scatter_by_cell(int n, const unsigned int* cell, const unsigned int* cell_start,
+                                           unsigned int* cell_fill, unsigned int* order) {
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) {
+        return;
+    }
+    unsigned int c = cell[i];
+    unsigned int slot = cell_start[c] + atomicAdd(&cell_fill[c], 1u);
+    order[slot] = (unsigned int)i;
+}
+
+// Sorts each cell's particles by global id (insertion sort: cells hold a handful), which makes
+// the order independent of the atomics' arrival order.
+extern "C" __global__ void sort_cells(int n_cells, const unsigned int* cell_start, unsigned int* order,
+                                      const pd_u64* id) {
+    int c = blockIdx.x * blockDim.x + threadIdx.x;
+    if (c >= n_cells) {
+        return;
+    }
+    unsigned int s = cell_start[c], e = cell_start[c + 1];
+    for (unsigned int k = s + 1; k < e; ++k) {
+        unsigned int v = order[k];
+        pd_u64 key = id[v];
+        unsigned int j = k;
+        while (j > s && id[order[j - 1]] > key) {
+            order[j] = order[j - 1];
+            --j;
+        }
+        order[j] = v;
+    }
+}
+
+// dst[k·w .. k·w + w] = src[order[k]·w ..] for k < n: reorders one particle array of `width`
+// doubles per particle.
+extern "C" __global__ void gather_f64(int n, int width, const double* src, double* dst, const unsigned int* order) {
+    int k = blockIdx.x * blockDim.x + threadIdx.x;
+    if (k >= n) {
+        return;
+    }
+    unsigned int o = order[k];
+    for (int c = 0; c < width; ++c) {
+        dst[(size_t)k * width + c] = src[(size_t)o * width + c];
+    }
+}
+
+extern "C" __global__ void gather_u64(int n, const pd_u64* src, pd_u64* dst, const unsigned int* order) {
+    int k = blockIdx.x * blockDim.x + threadIdx.x;
+    if (k < n) {
+        dst[k] = src[order[k]];
+    }
+}
+
+extern "C" __global__ void gather_u32(int n, const unsigned int* src, unsigned int* dst, const unsigned int* order) {
+    int k = blockIdx.x * blockDim.x + threadIdx.x;
+    if (k < n) {
+        dst[k] = src[order[k]];
+    }
+}
+
+// Visits the candidate partners of particle i (after reordering, cell c holds the particles
+// cell_start[c] .. cell_start[c+1]): partners j with a higher global id, in the 27 cells around
+// i's, within the bounding-sphere reach plus skin. Calls visit(j, shift) with the periodic image
+// shift to add to x_j.
+template <class Visit>
+PD_DEVICE void for_each_partner(int i, const double* position, const double* radius, const pd_u64* id,
+                                const unsigned int* cell_start, const GridParams& grid, double skin,
+                                Visit visit) {
+    V3<double> xi = load3(position, i);
+    double ri = radius[i];
+    pd_u64 idi = id[i];
+    int cell = cell_of(grid, xi);
+    int a = cell % grid.dims[0];
+    int b = (cell / grid.dims[0]) % grid.dims[1];
+    int c = cell / (grid.dims[0] * grid.dims[1]);
+    int xs[3], ys[3], zs[3];
+    int nx = stencil_axis(grid, 0, a, xs);
+    int ny = stencil_axis(grid, 1, b, ys);
+    int nz = stencil_axis(grid, 2, c, zs);
+    for (int kz = 0; kz < nz; ++kz) {
+        for (int ky = 0; ky < ny; ++ky) {
+            for (int kx = 0; kx < nx; ++kx) {
+                int cc = (zs[kz] * grid.dims[1] + ys[ky]) * grid.dims[0] + xs[kx];
+                for (unsigned int j = cell_start[cc]; j < cell_start[cc + 1]; ++j) {
+                    if (id[j] <= idi) {
+                        continue;
+                    }
+                    V3<double> xj = load3(position, (int)j);
+                    V3<double> d = displacement(grid, xi, xj);
+                    double reach = ri + radius[j] + skin;
+                    if (norm2(d) < reach * reach) {
+                        visit((int)j, d - (xj - xi));
+                    }
+                }
+            }
+        }
+    }
+}
+
+struct CountVisit {
+    unsigned int count;
+    PD_DEVICE void operator()(int, V3<double>) { ++count; }
+};
+
+extern "C" __global__ void count_pairs(int n, const double* position, const double* radius, const pd_u64* id,
+                                       const unsigned int* cell_start, GridParams grid, double skin,
+                                       unsigned int* counts) {
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) {
+        return;
+    }
+    CountVisit v;
+    v.count = 0;
+    for_each_partner(i, position, radius, id, cell_start, grid, skin, [&](int j, V3<double> s) { v(j, s); });
+    counts[i] = v.count;
+}
+
+// Pairs (i, j) at pair_offset[i] ..; shifts (three doubles per pair) only when some axis is
+// periodic (`periodic` = 1).
+extern "C" __global__ void fill_pairs(int n, const double* position, const double* radius, const pd_u64* id,
+                                      const unsigned int* cell_start, GridParams grid, double skin,
+                                      const unsigned int* pair_offset, int2* pairs, double* shift, int periodic) {
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) {
+        return;
+    }
+    unsigned int k = pair_offset[i];
+    for_each_partner(i, position, radius, id, cell_start, grid, skin, [&](int j, V3<double> s) {
+        pairs[k] = make_int2(i, j);
+        if (periodic) {
+            shift[3 * (size_t)k] = s.x;
+            shift[3 * (size_t)k + 1] = s.y;
+            shift[3 * (size_t)k + 2] = s.z;
+        }
+        ++k;
+    });
+}
+
+// ref_count[i] = number of pairs particle i is a member of.
+extern "C" __global__ void count_refs(int n_pairs, const int2* pairs, unsigned int* ref_count) {
+    int k = blockIdx.x * blockDim.x + threadIdx.x;
+    if (k >= n_pairs) {
+        return;
+    }
+    atomicAdd(&ref_count[pairs[k].x], 1u);
+    atomicAdd(&ref_count[pairs[k].y], 1u);
+}
+
+// refs[ref_offset[i] + …] = 2·pair + (1 if i is the pair's second member).
+extern "C" __global__ void fill_refs(int n_pairs, const int2* pairs, const unsigned int* ref_offset,
+                                     unsigned int* ref_fill, unsigned int* refs) {
+    int k = blockIdx.x * blockDim.x + threadIdx.x;
+    if (k >= n_pairs) {
+        return;
+    }
+    int a = pairs[k].x, b = pairs[k].y;
+    refs[ref_offset[a] + atomicAdd(&ref_fill[a], 1u)] = 2u * (unsigned int)k;
+    refs[ref_offset[b] + atomicAdd(&ref_fill[b], 1u)] = 2u * (unsigned int)k + 1u;
+}
+
+// Sorts each particle's references by partner global id: the reduction order (DESIGN.md §4).
+extern "C" __global__ void sort_refs(int n, const unsigned int* ref_offset, unsigned int* refs, const int2* pairs,
+                                     const pd_u64* id) {
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) {
+        return;
+    }
+    unsigned int s = ref_offset[i], e = ref_offset[i + 1];
+    for (unsigned int k = s + 1; k < e; ++k) {
+        unsigned int r = refs[k];
+        int2 p = pairs[r >> 1];
+        pd_u64 key = id[(r & 1u) ? p.x : p.y];
+        unsigned int j = k;
+        while (j > s) {
+            unsigned int q = refs[j - 1];
+            int2 pq = pairs[q >> 1];
+            if (id[(q & 1u) ? pq.x : pq.y] <= key) {
+                break;
+            }
+            refs[j] = q;
+            --j;
+        }
+        refs[j] = r;
+    }
+}
+
+// Before a rebuild: the partner global id of every pair of the current list, so the history
+// can be found again after the particles are reordered.
+extern "C" __global__ void history_partners(int n_pairs, const int2* pairs, const pd_u64* id, pd_u64* partner) {
+    int k = blockIdx.x * blockDim.x + threadIdx.x;
+    if (k < n_pairs) {
+        partner[k] = id[pairs[k].y];
+    }
+}
+
+// After a rebuild: the tangential spring of each new pair (a, b) from the old list, where the
+// pairs of old particle order[a] are old_offset[order[a]] .. old_offset[order[a] + 1] with
+// partners old_partner[…] (global ids). A pair not found starts with no spring, as on the CPU
+// (ContactHistory keeps only contacts that were live).
+extern "C" __global__ void remap_history(int n_pairs, const int2* pairs, const pd_u64* id, const unsigned int* order,
+                                         const unsigned int* old_offset, const pd_u64* old_partner,
+                                         const double* old_spring, double* spring) {
+    int k = blockIdx.x * blockDim.x + threadIdx.x;
+    if (k >= n_pairs) {
+        return;
+    }
+    int2 p = pairs[k];
+    unsigned int o = order[p.x];
+    pd_u64 partner = id[p.y];
+    double s[3] = {0.0, 0.0, 0.0};
+    for (unsigned int m = old_offset[o]; m < old_offset[o + 1]; ++m) {
+        if (old_partner[m] == partner) {
+            s[0] = old_spring[3 * (size_t)m];
+            s[1] = old_spring[3 * (size_t)m + 1];
+            s[2] = old_spring[3 * (size_t)m + 2];
+            break;
+        }
+    }
+    spring[3 * (size_t)k] = s[0];
+    spring[3 * (size_t)k + 1] = s[1];
+    spring[3 * (size_t)k + 2] = s[2];
+}

@@ -1,0 +1,312 @@
+// Overlap of two convex polyhedra by dual-space Quickhull (seed paper Alg. II–VI, Eq. 4–9), and
+// the full pair evaluation (GJK, plane culling, Chebyshev centre, re-centred frame, overlap).
+// Mirrors src/geometry/overlap.rs operation for operation.
+//
+// With an interior point x0 each plane n·x <= h has a distance δ = h − n·x0 > 0 and a dual point
+// n/δ (Eq. 4–5); the hull of the dual points gives the combinatorics of A ∩ B, each intersection
+// vertex is recomputed from its three planes (Cramer), each face is fanned from the foot of x0:
+// V = Σ δ_u A_u / 3 (Eq. 9), the centroid, S = dV/dx_B = Σ_{u∈B} A_u n_u (Feng, Han & Owen 2012)
+// and the moment M_B of B's part of the overlap surface about the centroid.
+#pragma once
+
+#include "common.cuh"
+#include "gjk.cuh"
+#include "interior.cuh"
+#include "polytope.cuh"
+#include "quickhull.cuh"
+
+namespace pd {
+
+// Geometric result of an overlap evaluation (Rust `Overlap<T>`).
+template <class T> struct Overlap {
+    // Overlap volume V.
+    T volume;
+    // Centroid of the overlap region.
+    V3<T> centroid;
+    // S = dV/dx_B: vector area of the overlap surface lying on B.
+    V3<T> dv_dxb;
+    // M_B: moment of B's part of the overlap surface about the centroid.
+    V3<T> moment_b;
+    // Radius of the largest ball inside the overlap; negative when the bodies are apart.
+    T depth;
+    // Extent of the overlap region along the normal −S/|S|.
+    T thickness;
+};
+
+// Overlap::default.
+template <class T> PD_HD Overlap<T> overlap_zero() {
+    Overlap<T> o;
+    o.volume = T(0);
+    o.centroid = zero3<T>();
+    o.dv_dxb = zero3<T>();
+    o.moment_b = zero3<T>();
+    o.depth = T(0);
+    o.thickness = T(0);
+    return o;
+}
+
+// Overlap::to_world: the same overlap in double, shifted by `origin` (back to world coordinates).
+template <class T> PD_HD Overlap<double> to_world(const Overlap<T>& o, V3<double> origin) {
+    Overlap<double> w;
+    w.volume = double(o.volume);
+    w.centroid = widen(o.centroid) + origin;
+    w.dv_dxb = widen(o.dv_dxb);
+    w.moment_b = widen(o.moment_b);
+    w.depth = double(o.depth);
+    w.thickness = double(o.thickness);
+    return w;
+}
+
+// Buffers of one overlap evaluation (Rust `OverlapWorkspace<T>`), one per thread, reused.
+template <class T> struct OverlapWorkspace {
+    DualHull<T> hull;
+    V3<T> dual[PD_MAX_HULL_POINTS];
+    V3<T> normal[PD_MAX_HULL_POINTS];
+    T delta[PD_MAX_HULL_POINTS];
+    T area[PD_MAX_HULL_POINTS];
+    V3<T> first_moment[PD_MAX_HULL_POINTS];
+    V3<T> vertex[PD_MAX_HULL_FACES];
+    T share_b[PD_MAX_HULL_POINTS];
+    V3<T> x0;
+
+    // OverlapWorkspace::face_area: area of the intersection face on plane i of the last
+    // evaluation (planes of A first, then of B).
+    PD_HD T face_area(int i) const { return area[i]; }
+};
+
+// overlap::overlap_about: the overlap of {n·x <= h for the na planes of a} and likewise b, about
+// the interior point x0 (normally the Chebyshev centre); seed Alg. II–VI. Returns a status code
+// (STATUS_TOO_MANY_PLANES or a hull error) with *out zeroed, or STATUS_OK; a zero overlap (with
+// depth = the inscribed radius) when the interiors are disjoint or only touch.
+template <class T>
+PD_HD int overlap_about(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, const Plane<T>* b, int nb, V3<T> x0,
+                        Overlap<T>* out) {
+    *out = overlap_zero<T>();
+    const int m = na + nb;
+    if (m > PD_MAX_HULL_POINTS) return STATUS_TOO_MANY_PLANES;
+    ws.x0 = x0;
+    T scale = T(0);
+    T radius = Limits<T>::max();
+    for (int i = 0; i < m; ++i) {
+        const Plane<T>& p = i < na ? a[i] : b[i - na];
+        ws.normal[i] = p.normal;
+        ws.delta[i] = p.offset - dot(p.normal, x0);
+        scale = max_(scale, ws.delta[i]);
+        radius = min_(radius, ws.delta[i]);
+    }
+    Overlap<T> none = overlap_zero<T>();
+    none.depth = radius;
+    for (int i = 0; i < m; ++i) ws.area[i] = T(0);
+    if (radius <= T(16.0) * Limits<T>::epsilon() * scale) {
+        *out = none;
+        return STATUS_OK;
+    }
+    // Polar transform (seed Alg. II): every δ is at least the inscribed radius.
+    for (int i = 0; i < m; ++i) {
+        ws.delta[i] = max_(ws.delta[i], radius);
+        ws.dual[i] = ws.normal[i] / ws.delta[i];
+    }
+    // Outside tolerance of the dual hull (Rust HULL_EPS): retry coarser when round-off breaks
+    // the first attempt.
+    const double hull_eps[2] = {32.0, 4096.0};
+    int result = STATUS_HULL_DEGENERATE;
+    for (int e = 0; e < 2; ++e) {
+        result = ws.hull.build(ws.dual, m, T(hull_eps[e]));
+        if (result == STATUS_OK) break;
+    }
+    if (result != STATUS_OK) return result;
+
+    // Share of each plane's face in S: 1 for B's planes, 0 for A's; coincident planes of A and B
+    // (dual points within the hull tolerance) count half to each.
+    const T tol = ws.hull.tolerance();
+    for (int i = 0; i < m; ++i) ws.share_b[i] = i < na ? T(0) : T(1);
+    for (int i = 0; i < na; ++i) {
+        for (int j = na; j < m; ++j) {
+            if (norm2(ws.dual[i] - ws.dual[j]) <= tol * tol) {
+                ws.share_b[i] = T(0.5);
+                ws.share_b[j] = T(0.5);
+            }
+        }
+    }
+
+    const int n_slots = ws.hull.n_tri;
+    // Intersection vertices, one per dual triangle (seed Alg. VI, by Cramer's rule).
+    for (int s = 0; s < n_slots; ++s) {
+        const HullTriangle<T>& t = ws.hull.tri[s];
+        if (!t.alive) continue;
+        int i = t.v[0], j = t.v[1], k = t.v[2];
+        V3<T> ni = ws.normal[i], nj = ws.normal[j], nk = ws.normal[k];
+        V3<T> cjk = cross(nj, nk), cki = cross(nk, ni), cij = cross(ni, nj);
+        T det = dot(ni, cjk);
+        if (abs_(det) > T(64.0) * Limits<T>::epsilon()) {
+            ws.vertex[s] = (cjk * ws.delta[i] + cki * ws.delta[j] + cij * ws.delta[k]) / det;
+        } else if (t.offset > T(0)) {
+            // Nearly dependent normals: unpolarise the dual plane instead (seed Eq. 6–8).
+            ws.vertex[s] = t.normal / t.offset;
+        } else {
+            ws.vertex[s] = zero3<T>();
+        }
+    }
+
+    // Faces of the intersection: fan every face from the foot of x0 on its plane.
+    for (int i = 0; i < m; ++i) ws.first_moment[i] = zero3<T>();
+    const T third = T(1.0 / 3.0);
+    for (int s = 0; s < n_slots; ++s) {
+        const HullTriangle<T>& t = ws.hull.tri[s];
+        if (!t.alive) continue;
+        for (int k = 0; k < 3; ++k) {
+            int u = t.v[k];
+            V3<T> p = ws.vertex[s];
+            V3<T> q = ws.vertex[t.adj[k]];
+            V3<T> foot = ws.normal[u] * ws.delta[u];
+            T twice = dot(ws.normal[u], cross(p - foot, q - foot));
+            T tri_area = twice * T(0.5);
+            ws.area[u] += tri_area;
+            ws.first_moment[u] += (foot + p + q) * (tri_area * third);
+        }
+    }
+    // The traversal orientation is a global convention of the hull; make the areas positive.
+    T volume = T(0);
+    for (int i = 0; i < m; ++i) volume += ws.delta[i] * ws.area[i];
+    if (volume < T(0)) {
+        for (int i = 0; i < m; ++i) {
+            ws.area[i] = -ws.area[i];
+            ws.first_moment[i] = -ws.first_moment[i];
+        }
+        volume = -volume;
+    }
+    volume *= third;
+    if (volume <= T(0)) {
+        *out = none;
+        return STATUS_OK;
+    }
+    V3<T> centroid = zero3<T>();
+    V3<T> dv_dxb = zero3<T>();
+    V3<T> moment_b = zero3<T>();
+    for (int i = 0; i < m; ++i) {
+        centroid += ws.first_moment[i] * (ws.delta[i] * T(0.25));
+        T share = ws.share_b[i];
+        if (share > T(0)) {
+            dv_dxb += ws.normal[i] * (ws.area[i] * share);
+            moment_b += cross(ws.first_moment[i], ws.normal[i]) * share;
+        }
+    }
+    centroid = centroid / volume;
+    // Moment about the overlap centroid rather than x0.
+    moment_b -= cross(centroid, dv_dxb);
+    T thickness = T(0);
+    T area = norm(dv_dxb);
+    if (area > T(0)) {
+        V3<T> n = dv_dxb / area;
+        T lo = Limits<T>::max(), hi = -Limits<T>::max();
+        for (int s = 0; s < n_slots; ++s) {
+            if (!ws.hull.tri[s].alive) continue;
+            T h = dot(n, ws.vertex[s]);
+            lo = min_(lo, h);
+            hi = max_(hi, h);
+        }
+        thickness = max_(hi - lo, T(0));
+    }
+    out->volume = volume;
+    out->centroid = centroid + x0;
+    out->dv_dxb = dv_dxb;
+    out->moment_b = moment_b;
+    out->depth = radius;
+    out->thickness = thickness;
+    return STATUS_OK;
+}
+
+// overlap::overlap_volume: overlap_about about the Chebyshev centre of the two plane sets, the
+// LP started at `start`.
+template <class T>
+PD_HD int overlap_volume(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, const Plane<T>* b, int nb, V3<T> start,
+                         Overlap<T>* out) {
+    if (na + nb > PD_MAX_HULL_POINTS) {
+        *out = overlap_zero<T>();
+        return STATUS_TOO_MANY_PLANES;
+    }
+    ChebyshevCentre<T> centre = chebyshev_centre(a, na, b, nb, start);
+    return overlap_about(ws, a, na, b, nb, centre.point, out);
+}
+
+// One body of a pair: its template, scale and pose (position and body → world rotation), all in
+// double.
+struct BodyRef {
+    TemplateView tpl;
+    double scale;
+    V3<double> pos;
+    Quat<double> rot;
+};
+
+// Contact geometry of one particle pair in world coordinates (Rust `PairGeometry`).
+struct PairGeometry {
+    // Narrow-phase (GJK) verdict.
+    int intersects;
+    // For disjoint bodies GJK's separating axis (v·a > v·b for a ∈ A, b ∈ B); zero otherwise.
+    V3<double> separating_axis;
+    // The overlap, evaluated only when GJK reports an intersection.
+    Overlap<double> overlap;
+};
+
+// Buffers for a full pair evaluation (Rust `PairWorkspace<T>`).
+template <class T> struct PairWorkspace {
+    PosedPolytope<T> a;
+    PosedPolytope<T> b;
+    OverlapWorkspace<T> overlap;
+};
+
+// overlap::axis_separates: whether the plane with normal `axis` separates A from B by a gap of
+// more than `margin`: min_A axis·a − max_B axis·b > margin |axis|. Two support evaluations over
+// the template vertices in each body's frame: the frame-coherence test run before GJK.
+PD_HD bool axis_separates(const BodyRef& A, const BodyRef& B, V3<double> axis, double margin) {
+    double ext[2];
+    for (int side = 0; side < 2; ++side) {
+        const BodyRef& body = side == 0 ? A : B;
+        double sign = side == 0 ? -1.0 : 1.0;
+        V3<double> d = rotate_inverse(body.rot, axis) * sign;
+        double best = -Limits<double>::max();
+        for (int i = 0; i < body.tpl.n_vertices; ++i) best = max_(best, dot(template_vertex(body.tpl, i), d));
+        ext[side] = best;
+    }
+    double min_a = dot(A.pos, axis) - A.scale * ext[0];
+    double max_b = dot(B.pos, axis) + B.scale * ext[1];
+    return min_a - max_b > margin * norm(axis);
+}
+
+// overlap::overlap_pair: narrow phase and overlap of A against B computed in arithmetic T in a
+// frame centred near the contact (DESIGN.md §3): frame origin on the centre line where the
+// bounding spheres would touch, GJK (seed Alg. I), planes culled to those that can cut the other
+// body, Chebyshev centre started at the origin, frame moved onto it in double, overlap about it
+// (seed Alg. II–VI), result back in world coordinates. Returns a status code; on error *out is
+// zeroed.
+template <class T> PD_HD int overlap_pair(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out) {
+    out->intersects = 0;
+    out->separating_axis = zero3<double>();
+    out->overlap = overlap_zero<double>();
+    V3<double> xa = A.pos, xb = B.pos;
+    double ra = A.tpl.circumscribed_radius * A.scale, rb = B.tpl.circumscribed_radius * B.scale;
+    V3<double> origin = xa + (xb - xa) * (ra / (ra + rb));
+    place(ws.a, A.tpl, A.scale, A.pos, A.rot, origin);
+    place(ws.b, B.tpl, B.scale, B.pos, B.rot, origin);
+    V3<T> dir = ws.b.centre - ws.a.centre;
+    V3<T> axis;
+    bool separated = gjk_separating_axis(ws.a.vertices, ws.a.n_vertices, ws.b.vertices, ws.b.n_vertices, dir, &axis);
+    if (separated) {
+        out->separating_axis = widen(axis);
+        return STATUS_OK;
+    }
+    retain_planes_cutting(ws.a, ws.b.vertices, ws.b.n_vertices);
+    retain_planes_cutting(ws.b, ws.a.vertices, ws.a.n_vertices);
+    ChebyshevCentre<T> centre = chebyshev_centre(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>());
+    origin = origin + widen(centre.point);
+    reposition_planes(ws.a, A.tpl, A.scale, A.pos, A.rot, origin);
+    reposition_planes(ws.b, B.tpl, B.scale, B.pos, B.rot, origin);
+    Overlap<T> o;
+    int st = overlap_about(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>(), &o);
+    if (st != STATUS_OK) return st;
+    out->intersects = 1;
+    out->overlap = to_world(o, origin);
+    return STATUS_OK;
+}
+
+} // namespace pd

@@ -1,0 +1,159 @@
+//! The kernels of `cuda/`, embedded in the binary and compiled at run time by NVRTC with
+//! `#define`s derived from the scene (DESIGN.md §1, §5): a scene pays only for the stages it
+//! uses, and the struct sizes shared with Rust are checked by `static_assert` in the kernels.
+
+use super::layout;
+use crate::scene::Scene;
+use cudarc::nvrtc::{CompileOptions, Ptx};
+
+/// Every file of `cuda/`, by name. `#include "x.cuh"` lines are resolved against this list
+/// (each header once), so the binary carries its kernels and runs from any directory.
+pub const SOURCES: &[(&str, &str)] = &[
+    ("common.cuh", include_str!("../../../cuda/common.cuh")),
+    ("state.cuh", include_str!("../../../cuda/state.cuh")),
+    ("polytope.cuh", include_str!("../../../cuda/polytope.cuh")),
+    ("gjk.cuh", include_str!("../../../cuda/gjk.cuh")),
+    ("interior.cuh", include_str!("../../../cuda/interior.cuh")),
+    ("quickhull.cuh", include_str!("../../../cuda/quickhull.cuh")),
+    ("overlap.cuh", include_str!("../../../cuda/overlap.cuh")),
+    ("prism.cuh", include_str!("../../../cuda/prism.cuh")),
+    (
+        "contact_law.cuh",
+        include_str!("../../../cuda/contact_law.cuh"),
+    ),
+    ("scan.cu", include_str!("../../../cuda/scan.cu")),
+    ("integrate.cu", include_str!("../../../cuda/integrate.cu")),
+    ("neighbor.cu", include_str!("../../../cuda/neighbor.cu")),
+    ("contact.cu", include_str!("../../../cuda/contact.cu")),
+];
+
+/// The kernel files (translation units) of the step, in stage order.
+pub const KERNEL_FILES: &[&str] = &["scan.cu", "integrate.cu", "neighbor.cu", "contact.cu"];
+
+/// Arithmetic of the pair geometry on the GPU (issue: precision modes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+pub enum Precision {
+    /// Everything in f64.
+    Double,
+    /// f64 state; f32 pair geometry in the pair's contact-centred frame (DESIGN.md §3).
+    Mixed,
+}
+
+/// What a scene needs from the kernels; turned into `#define`s.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KernelConfig {
+    pub precision: Precision,
+    /// Walls present (stage 6 compiled in).
+    pub walls: bool,
+    /// Some material pair has friction (tangential history compiled in).
+    pub friction: bool,
+    /// Some axis is periodic (pair image shifts stored).
+    pub periodic: bool,
+    /// Number of templates, and the largest vertex and face counts among them: the sizes of the
+    /// constant-memory template tables and of the per-thread geometry workspace.
+    pub templates: usize,
+    pub max_vertices: usize,
+    pub max_faces: usize,
+    /// Number of materials (contact-parameter tables).
+    pub materials: usize,
+}
+
+impl KernelConfig {
+    /// The configuration a scene needs.
+    pub fn for_scene(scene: &Scene, precision: Precision) -> Self {
+        KernelConfig {
+            precision,
+            walls: !scene.walls.is_empty(),
+            friction: scene.pairs.any_friction(),
+            periodic: scene.domain.periodic.iter().any(|&p| p),
+            templates: scene.templates.len().max(1),
+            max_vertices: scene
+                .templates
+                .iter()
+                .map(|t| t.vertices.len())
+                .max()
+                .unwrap_or(1),
+            max_faces: scene
+                .templates
+                .iter()
+                .map(|t| t.faces.len())
+                .max()
+                .unwrap_or(1),
+            materials: scene.materials.len().max(1),
+        }
+    }
+
+    /// The `-D` options.
+    pub fn defines(&self) -> Vec<String> {
+        let flag = |b: bool| u8::from(b);
+        let mut d = vec![
+            format!(
+                "-DPD_DOUBLE_GEOMETRY={}",
+                flag(self.precision == Precision::Double)
+            ),
+            format!("-DPD_WALLS={}", flag(self.walls)),
+            format!("-DPD_FRICTION={}", flag(self.friction)),
+            format!("-DPD_PERIODIC={}", flag(self.periodic)),
+            format!("-DPD_TEMPLATES={}", self.templates),
+            format!("-DPD_MAX_TEMPLATE_VERTICES={}", self.max_vertices),
+            format!("-DPD_MAX_TEMPLATE_FACES={}", self.max_faces),
+            format!("-DPD_MATERIALS={}", self.materials),
+        ];
+        d.extend(layout::size_defines());
+        d
+    }
+}
+
+/// `file` with its `#include "…"` lines replaced by the named sources (each once, as
+/// `#pragma once` would), so NVRTC needs no file system.
+pub fn expand(file: &str) -> Result<String, String> {
+    fn visit(name: &str, seen: &mut Vec<String>, out: &mut String) -> Result<(), String> {
+        if seen.iter().any(|s| s == name) {
+            return Ok(());
+        }
+        seen.push(name.to_string());
+        let text = SOURCES
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, t)| *t)
+            .ok_or_else(|| format!("cuda/{name} is not among the embedded kernel sources"))?;
+        for line in text.lines() {
+            let t = line.trim_start();
+            if let Some(rest) = t.strip_prefix("#include \"") {
+                let inc = rest.split('"').next().unwrap_or_default();
+                visit(inc, seen, out)?;
+            } else if t.starts_with("#pragma once") {
+                continue;
+            } else {
+                out.push_str(line);
+                out.push('\n');
+            }
+        }
+        Ok(())
+    }
+    let mut out = String::new();
+    visit(file, &mut Vec::new(), &mut out)?;
+    Ok(out)
+}
+
+/// Compiles kernel file `file` for `sm_<arch>` (e.g. 90) with the scene's defines. Floating-point
+/// contraction is off (`--fmad=false`) so that double results follow the CPU's rounding.
+pub fn compile(file: &str, config: &KernelConfig, arch: u32) -> Result<Ptx, String> {
+    let source = expand(file)?;
+    let mut options = config.defines();
+    options.push(format!("--gpu-architecture=sm_{arch}"));
+    options.push("--std=c++17".into());
+    let opts = CompileOptions {
+        fmad: Some(false),
+        options,
+        name: Some(file.to_string()),
+        ..Default::default()
+    };
+    cudarc::nvrtc::compile_ptx_with_opts(source, opts).map_err(|e| match e {
+        cudarc::nvrtc::CompileError::CompileError { log, options, .. } => format!(
+            "NVRTC could not compile cuda/{file} (options {options:?}):\n{}",
+            log.to_string_lossy()
+        ),
+        other => format!("NVRTC could not compile cuda/{file}: {other:?}"),
+    })
+}

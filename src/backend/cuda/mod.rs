@@ -1,0 +1,9 @@
+//! The CUDA backend: host side (cudarc). Kernels live in `cuda/` and are compiled at run time by
+//! NVRTC ([`kernels`]); the structs they share with Rust are in [`layout`].
+
+pub mod kernels;
+pub mod layout;
+pub mod simulation;
+
+pub use kernels::{KernelConfig, Precision};
+pub use simulation::{CudaError, CudaSimulation};

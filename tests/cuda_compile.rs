@@ -1,0 +1,71 @@
+//! Every kernel of `cuda/` compiles under NVRTC 13.0 for sm_90 (the H100/H200 architecture),
+//! in each configuration a scene can ask for: this needs NVRTC but no GPU (`make test` puts
+//! PyPI's `nvidia-cuda-nvrtc` on the library path). The kernels also `static_assert` the sizes
+//! of the structs they share with Rust, so a layout drift fails here.
+
+use polydem::backend::cuda::kernels::{KERNEL_FILES, compile};
+use polydem::backend::cuda::{KernelConfig, Precision};
+
+fn configs() -> Vec<KernelConfig> {
+    let base = KernelConfig {
+        precision: Precision::Double,
+        walls: true,
+        friction: true,
+        periodic: false,
+        templates: 1,
+        max_vertices: 20,
+        max_faces: 12,
+        materials: 2,
+    };
+    vec![
+        base.clone(),
+        KernelConfig {
+            precision: Precision::Mixed,
+            ..base.clone()
+        },
+        KernelConfig {
+            walls: false,
+            friction: false,
+            periodic: true,
+            templates: 3,
+            max_vertices: 42,
+            max_faces: 22,
+            materials: 1,
+            ..base.clone()
+        },
+        KernelConfig {
+            precision: Precision::Mixed,
+            templates: 2,
+            max_vertices: 256,
+            max_faces: 128,
+            ..base
+        },
+    ]
+}
+
+#[test]
+fn every_kernel_compiles_with_nvrtc_for_sm_90() {
+    // SAFETY: only tries to open the shared library.
+    let present = unsafe { cudarc::nvrtc::sys::is_culib_present() };
+    assert!(
+        present,
+        "libnvrtc not found: run `make test` (it installs nvidia-cuda-nvrtc==13.0.88 into .venv and \
+         puts .venv/lib/python3*/site-packages/nvidia/cu13/lib on LD_LIBRARY_PATH), or add a CUDA \
+         13.0 lib64 folder to LD_LIBRARY_PATH"
+    );
+    let mut failures = Vec::new();
+    for config in configs() {
+        for file in KERNEL_FILES {
+            let t = std::time::Instant::now();
+            match compile(file, &config, 90) {
+                Ok(_) => println!(
+                    "{file} {:?}: {:.2} s",
+                    config.precision,
+                    t.elapsed().as_secs_f64()
+                ),
+                Err(e) => failures.push(format!("{config:?}\n{e}")),
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}

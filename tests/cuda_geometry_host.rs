@@ -1,0 +1,817 @@
+//! Parity of the CUDA contact-geometry headers (`cuda/gjk.cuh`, `interior.cuh`, `quickhull.cuh`,
+//! `overlap.cuh`, `polytope.cuh`, `prism.cuh`) with the Rust reference, on a machine without a
+//! GPU: the headers compile as plain host C++17, `cuda/host/geometry_harness.cpp` runs them on
+//! cases written by this test, and the results are compared with
+//! `geometry::overlap::{overlap_pair, axis_separates}` and
+//! `geometry::clip::{facet_prism, prism_overlap}` in f64 and f32.
+//!
+//! The headers replay the Rust code operation for operation (nalgebra's orders of summation
+//! included) and every build disables floating-point contraction (`-ffp-contract=off` here,
+//! `--fmad=false` under NVRTC), so the results are expected to be bitwise equal; the tolerances
+//! below leave room only for a compiler that evaluates some expression differently.
+
+mod common;
+
+use common::*;
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+use polydem::geometry::Real;
+use polydem::geometry::clip::{facet_prism, prism_overlap};
+use polydem::geometry::gjk_intersect;
+use polydem::geometry::overlap::{
+    Overlap, OverlapError, OverlapWorkspace, PairGeometry, PairWorkspace, axis_separates,
+    overlap_pair,
+};
+use polydem::geometry::polytope::{PosedPolytope, cast};
+use polydem::geometry::quickhull::HullError;
+use polydem::rng::Rng;
+use polydem::shape::ConvexTemplate;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Double precision: 1e-12 relative to the natural scale of each quantity ([`Scales`]), far
+/// above the last-bit level of a well-conditioned result and far below anything physical. The
+/// volume of a barely touching pair is ill-conditioned (its round-off is ε × size × area, not
+/// ε × V), so for those only a port that reproduces the Rust operations exactly passes: that is
+/// deliberate, the headers are meant to be bitwise twins of the Rust code.
+const TOL_F64: f64 = 1e-12;
+
+/// Single precision: the C++ float path must reproduce the Rust f32 path, not merely approximate
+/// the exact overlap (tests/overlap_oracle.rs allows 1e-4 between f32 and the exact volume).
+/// 1e-5 relative is an order of magnitude below that, so a computation done in a different
+/// precision anywhere shows up, yet a last-bit difference in a well-conditioned result passes.
+const TOL_F32: f64 = 1e-5;
+
+/// Least fraction of results that must be bitwise identical to the Rust reference. Every
+/// operation involved (+, −, ×, ÷, √) is correctly rounded in IEEE 754 and none is contracted, so
+/// all of them are expected to be; a change of the order of operations that stays within the
+/// tolerances (a reordered sum in a well-conditioned place) shows up here. The margin leaves room
+/// for a compiler that evaluates a rare expression differently.
+const MIN_BITWISE: f64 = 0.99;
+
+/// Cases: 2640 pairs (every ordered pair of the 11 test shapes 21 or 22 times, in five kinds of
+/// contact, see [`pair_cases`]) and 660 body–facet cases.
+const N_PAIRS: usize = 2640;
+const N_FACETS: usize = 660;
+
+/// One pair case: shapes, scales, poses, and an axis and margin for `axis_separates`.
+struct PairCase {
+    a: usize,
+    b: usize,
+    sa: f64,
+    sb: f64,
+    pose_a: Isometry3<f64>,
+    pose_b: Isometry3<f64>,
+    axis: Vector3<f64>,
+    margin: f64,
+    kind: &'static str,
+}
+
+/// One facet case: a body, a triangle (relative to `origin`) and the pair-frame origin.
+struct FacetCase {
+    t: usize,
+    s: f64,
+    pose: Isometry3<f64>,
+    origin: Vector3<f64>,
+    tri: [Vector3<f64>; 3],
+}
+
+fn scaled_world_vertices(t: &ConvexTemplate, s: f64, pose: &Isometry3<f64>) -> Vec<Vector3<f64>> {
+    t.vertices
+        .iter()
+        .map(|v| pose.rotation * (v.coords * s) + pose.translation.vector)
+        .collect()
+}
+
+/// Centre distance along `dir` at which A and B (B moving along `dir` from A's centre) stop
+/// intersecting, by bisection on the f64 GJK verdict.
+fn touching_distance(shapes: &[Shape], c: &PairCase, dir: &Vector3<f64>) -> f64 {
+    let (ta, tb) = (&shapes[c.a].template, &shapes[c.b].template);
+    let va = scaled_world_vertices(ta, c.sa, &c.pose_a);
+    let (mut lo, mut hi) = (
+        0.0,
+        1.01 * (ta.circumscribed_radius * c.sa + tb.circumscribed_radius * c.sb),
+    );
+    for _ in 0..80 {
+        let mid = 0.5 * (lo + hi);
+        let pb = pose(c.pose_a.translation.vector + dir * mid, c.pose_b.rotation);
+        let vb = scaled_world_vertices(tb, c.sb, &pb);
+        if gjk_intersect(&va, &vb, dir * mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// `n` pairs cycling through every ordered pair of shapes, in five kinds: deep (centre distance
+/// up to 0.6 (r_A + r_B)), uniform (up to 1.05 (r_A + r_B)), near-touching (the touching distance
+/// times 1 ± 10^-e, e in [3, 13]: shallow, barely touching and barely apart), touching (the
+/// bisected touching distance itself) and aligned (both bodies with the same rotation, offset
+/// along a body axis: face-to-face contacts with coincident planes). Some bodies are scaled, some
+/// pairs sit far from the world origin.
+fn pair_cases(shapes: &[Shape], n: usize, seed: u64) -> Vec<PairCase> {
+    let mut rng = Rng::new(seed);
+    let k = shapes.len();
+    let mut cases = Vec::with_capacity(n);
+    for i in 0..n {
+        let (a, b) = (i % k, (i / k) % k);
+        let sa = if i % 7 == 3 { rng.range(0.5, 2.0) } else { 1.0 };
+        let sb = if i % 5 == 1 { rng.range(0.5, 2.0) } else { 1.0 };
+        let ra = shapes[a].template.circumscribed_radius * sa;
+        let rb = shapes[b].template.circumscribed_radius * sb;
+        let far = if i % 9 == 4 { 100.0 } else { 2.0 };
+        let pa = Vector3::new(
+            rng.range(-far, far),
+            rng.range(-far, far),
+            rng.range(-far, far),
+        );
+        let qa = random_rotation(&mut rng);
+        let kind = ["deep", "uniform", "near-touching", "touching", "aligned"][i % 5];
+        let (qb, dir) = if kind == "aligned" {
+            let q = if rng.uniform() < 0.3 {
+                UnitQuaternion::identity()
+            } else {
+                qa
+            };
+            let axis = [Vector3::x(), Vector3::y(), Vector3::z()][(i / 5) % 3];
+            let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+            (q, q * (axis * sign))
+        } else {
+            (random_rotation(&mut rng), Vector3::from(rng.unit_vector()))
+        };
+        let mut c = PairCase {
+            a,
+            b,
+            sa,
+            sb,
+            pose_a: pose(pa, qa),
+            pose_b: pose(pa, qb),
+            axis: Vector3::zeros(),
+            margin: 0.0,
+            kind,
+        };
+        let dist = match kind {
+            "deep" => rng.uniform() * 0.6 * (ra + rb),
+            "uniform" => rng.uniform() * 1.05 * (ra + rb),
+            "near-touching" => {
+                let e = rng.range(3.0, 13.0);
+                let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+                touching_distance(shapes, &c, &dir) * (1.0 + sign * 10f64.powf(-e))
+            }
+            "touching" => touching_distance(shapes, &c, &dir),
+            _ => {
+                let d = touching_distance(shapes, &c, &dir);
+                if rng.uniform() < 0.5 {
+                    d * (1.0 - rng.range(0.0, 0.2))
+                } else {
+                    d
+                }
+            }
+        };
+        c.pose_b = pose(pa + dir * dist, qb);
+        cases.push(c);
+    }
+    cases
+}
+
+/// `n` bodies against a triangle: the facet plane at a signed distance in [−0.5, 1.1] r from the
+/// body's centre (deep to missed), the triangle from 0.2 to 3 r across and shifted in its plane by
+/// up to r (so the prism's side planes cut the body too); every 40th triangle is degenerate. The
+/// pair-frame origin is the facet's foot under the body or the world origin.
+fn facet_cases(shapes: &[Shape], n: usize, seed: u64) -> Vec<FacetCase> {
+    let mut rng = Rng::new(seed);
+    let k = shapes.len();
+    (0..n)
+        .map(|i| {
+            let t = i % k;
+            let s = if i % 3 == 2 { rng.range(0.5, 2.0) } else { 1.0 };
+            let r = shapes[t].template.circumscribed_radius * s;
+            let p = Vector3::new(
+                rng.range(-2.0, 2.0),
+                rng.range(-2.0, 2.0),
+                rng.range(-2.0, 2.0),
+            );
+            let q = random_rotation(&mut rng);
+            let nrm = Vector3::from(rng.unit_vector());
+            let h = r * rng.range(-0.5, 1.1);
+            let foot = p - nrm * h;
+            let helper = if nrm.x.abs() < 0.9 {
+                Vector3::x()
+            } else {
+                Vector3::y()
+            };
+            let e1 = nrm.cross(&helper).normalize();
+            let e2 = nrm.cross(&e1);
+            let centre = foot + e1 * (r * rng.range(-1.0, 1.0)) + e2 * (r * rng.range(-1.0, 1.0));
+            let size = r * rng.range(0.2, 3.0);
+            let theta0 = rng.range(0.0, std::f64::consts::TAU);
+            let mut tri = [Vector3::zeros(); 3];
+            for (j, v) in tri.iter_mut().enumerate() {
+                let th = theta0 + j as f64 * std::f64::consts::TAU / 3.0 + rng.range(-0.4, 0.4);
+                let rad = size * rng.range(0.5, 1.0);
+                *v = centre + e1 * (rad * th.cos()) + e2 * (rad * th.sin());
+            }
+            if i % 40 == 7 {
+                tri[2] = tri[1]; // degenerate: facet_prism returns None
+            }
+            let origin = if i % 2 == 0 { foot } else { Vector3::zeros() };
+            FacetCase {
+                t,
+                s,
+                pose: pose(p, q),
+                origin,
+                tri: tri.map(|v| v - origin),
+            }
+        })
+        .collect()
+}
+
+fn hex(out: &mut String, x: f64) {
+    write!(out, " {:016x}", x.to_bits()).unwrap();
+}
+
+fn hex3(out: &mut String, v: &Vector3<f64>) {
+    hex(out, v.x);
+    hex(out, v.y);
+    hex(out, v.z);
+}
+
+fn hex_pose(out: &mut String, p: &Isometry3<f64>) {
+    hex3(out, &p.translation.vector);
+    let q = p.rotation;
+    hex(out, q.w);
+    hex(out, q.i);
+    hex(out, q.j);
+    hex(out, q.k);
+}
+
+/// The case file read by the harness (format in cuda/host/geometry_harness.cpp).
+fn case_file(shapes: &[Shape], pairs: &[PairCase], facets: &[FacetCase]) -> String {
+    let mut out = String::new();
+    writeln!(out, "templates {}", shapes.len()).unwrap();
+    for s in shapes {
+        let t = &s.template;
+        write!(out, "{}", t.vertices.len()).unwrap();
+        for v in &t.vertices {
+            hex3(&mut out, &v.coords);
+        }
+        write!(out, "\n{}", t.faces.len()).unwrap();
+        for f in &t.faces {
+            hex3(&mut out, &f.normal);
+            hex(&mut out, f.offset);
+        }
+        out.push('\n');
+        hex(&mut out, t.circumscribed_radius);
+        out.push('\n');
+    }
+    writeln!(out, "pairs {}", pairs.len()).unwrap();
+    for c in pairs {
+        write!(out, "{}", c.a).unwrap();
+        hex(&mut out, c.sa);
+        hex_pose(&mut out, &c.pose_a);
+        write!(out, " {}", c.b).unwrap();
+        hex(&mut out, c.sb);
+        hex_pose(&mut out, &c.pose_b);
+        hex3(&mut out, &c.axis);
+        hex(&mut out, c.margin);
+        out.push('\n');
+    }
+    writeln!(out, "facets {}", facets.len()).unwrap();
+    for c in facets {
+        write!(out, "{}", c.t).unwrap();
+        hex(&mut out, c.s);
+        hex_pose(&mut out, &c.pose);
+        hex3(&mut out, &c.origin);
+        for v in &c.tri {
+            hex3(&mut out, v);
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// The status code the headers return for a Rust error (cuda/polytope.cuh, GeometryStatus).
+fn status_code(e: &OverlapError) -> i64 {
+    match e {
+        OverlapError::TooManyPlanes(_) => 1,
+        OverlapError::Hull(HullError::TooManyPoints) => 2,
+        OverlapError::Hull(HullError::Degenerate) => 3,
+        OverlapError::Hull(HullError::CapacityExceeded) => 4,
+        OverlapError::Hull(HullError::Topology) => 5,
+    }
+}
+
+/// One precision's result for one case, Rust or C++.
+#[derive(Clone, Debug)]
+struct Result1 {
+    status: i64,
+    intersects: bool,
+    axis: Vector3<f64>,
+    overlap: Overlap<f64>,
+}
+
+impl Result1 {
+    /// No intersection and a zero overlap (what the headers leave on error), with `status`.
+    fn empty(status: i64) -> Self {
+        Result1 {
+            status,
+            intersects: false,
+            axis: Vector3::zeros(),
+            overlap: Overlap::default(),
+        }
+    }
+}
+
+fn from_rust(r: Result<PairGeometry, OverlapError>) -> Result1 {
+    match r {
+        Ok(g) => Result1 {
+            status: 0,
+            intersects: g.intersects,
+            axis: g.separating_axis.unwrap_or_else(Vector3::zeros),
+            overlap: g.overlap,
+        },
+        Err(e) => Result1::empty(status_code(&e)),
+    }
+}
+
+/// Rust facet case in precision `T`: (facet_prism status, prism_overlap status, overlap).
+fn rust_facet<T: Real>(
+    shapes: &[Shape],
+    c: &FacetCase,
+    ws: &mut OverlapWorkspace<T>,
+) -> (i64, Result1) {
+    let mut body = PosedPolytope::<T>::default();
+    body.place(&shapes[c.t].template, c.s, &c.pose, &c.origin);
+    let tri = c.tri.map(|v| cast::<T>(&v));
+    let Some(prism) = facet_prism(&tri) else {
+        return (6, Result1::empty(0));
+    };
+    let r = match prism_overlap(ws, &body, &prism) {
+        Ok(o) => Result1 {
+            status: 0,
+            intersects: false,
+            axis: Vector3::zeros(),
+            overlap: o.to_world(&Vector3::zeros()),
+        },
+        Err(e) => Result1::empty(status_code(&e)),
+    };
+    (0, r)
+}
+
+/// Parses `n` hex doubles.
+fn parse_f64s(tok: &mut std::slice::Iter<&str>, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|_| {
+            let t = tok.next().expect("truncated harness output");
+            f64::from_bits(u64::from_str_radix(t, 16).expect("hex double"))
+        })
+        .collect()
+}
+
+fn parse_int(tok: &mut std::slice::Iter<&str>) -> i64 {
+    tok.next()
+        .expect("truncated harness output")
+        .parse()
+        .expect("integer")
+}
+
+fn parse_overlap(tok: &mut std::slice::Iter<&str>) -> Overlap<f64> {
+    let v = parse_f64s(tok, 12);
+    Overlap {
+        volume: v[0],
+        centroid: Vector3::new(v[1], v[2], v[3]),
+        dv_dxb: Vector3::new(v[4], v[5], v[6]),
+        moment_b: Vector3::new(v[7], v[8], v[9]),
+        depth: v[10],
+        thickness: v[11],
+    }
+}
+
+/// Worst relative deviations per quantity, with the case that produced each.
+#[derive(Default)]
+struct Worst {
+    entries: Vec<(&'static str, f64, String)>,
+    compared: usize,
+    bitwise: usize,
+}
+
+impl Worst {
+    fn note(&mut self, what: &'static str, err: f64, label: &str) {
+        match self.entries.iter_mut().find(|e| e.0 == what) {
+            Some(e) => {
+                if err > e.1 {
+                    e.1 = err;
+                    e.2 = label.to_string();
+                }
+            }
+            None => self.entries.push((what, err, label.to_string())),
+        }
+    }
+
+    fn report(&self, title: &str) {
+        println!(
+            "{title}: {} results compared, {} bitwise identical",
+            self.compared, self.bitwise
+        );
+        for (what, err, label) in &self.entries {
+            if *err > 0.0 {
+                println!("  worst {what:<10} {err:.3e}  ({label})");
+            } else {
+                println!("  worst {what:<10} 0");
+            }
+        }
+    }
+}
+
+/// Natural scales of a case: the body size (circumscribed radius of the larger body) for
+/// positions and lengths; the volume itself for the volume; for S the contact area |S|, or
+/// V^(2/3) where that is larger (a body entirely inside the other has S = 0 exactly, and the
+/// computed S is round-off on the scale of the overlap's faces); that area times the size for the
+/// moment.
+struct Scales {
+    size: f64,
+}
+
+/// Compares the C++ result `got` with the Rust result `want` in tolerance `tol`, recording the
+/// deviations in `worst` and any failure in `failures`.
+fn compare(
+    label: &str,
+    want: &Result1,
+    got: &Result1,
+    sc: &Scales,
+    tol: f64,
+    worst: &mut Worst,
+    failures: &mut Vec<String>,
+) {
+    worst.compared += 1;
+    if want.status != got.status || want.intersects != got.intersects {
+        failures.push(format!(
+            "{label}: status/verdict differ: Rust ({}, intersects {}), C++ ({}, intersects {})",
+            want.status, want.intersects, got.status, got.intersects
+        ));
+        return;
+    }
+    let (w, g) = (&want.overlap, &got.overlap);
+    let rel = |d: f64, s: f64| {
+        if d == 0.0 {
+            0.0
+        } else if s > 0.0 {
+            d / s
+        } else {
+            f64::INFINITY
+        }
+    };
+    let area = w.dv_dxb.norm().max(w.volume.abs().powf(2.0 / 3.0));
+    // The thickness is measured along S/|S|, which is only defined when |S| is not round-off:
+    // checked against the tolerance when |S| >= 0.1 V^(2/3) (bitwise identity is still counted).
+    let thickness_defined = w.dv_dxb.norm() >= 0.1 * w.volume.abs().powf(2.0 / 3.0);
+    let errs = [
+        ("axis", rel((want.axis - got.axis).norm(), want.axis.norm())),
+        ("volume", rel((w.volume - g.volume).abs(), w.volume.abs())),
+        ("centroid", rel((w.centroid - g.centroid).norm(), sc.size)),
+        ("S", rel((w.dv_dxb - g.dv_dxb).norm(), area)),
+        (
+            "moment",
+            rel((w.moment_b - g.moment_b).norm(), area * sc.size),
+        ),
+        ("depth", rel((w.depth - g.depth).abs(), sc.size)),
+        (
+            "thickness",
+            if thickness_defined {
+                rel((w.thickness - g.thickness).abs(), sc.size)
+            } else {
+                0.0
+            },
+        ),
+    ];
+    let same = want.axis == got.axis
+        && w.volume == g.volume
+        && w.centroid == g.centroid
+        && w.dv_dxb == g.dv_dxb
+        && w.moment_b == g.moment_b
+        && w.depth == g.depth
+        && w.thickness == g.thickness;
+    if same {
+        worst.bitwise += 1;
+    }
+    for (what, e) in errs {
+        worst.note(what, e, label);
+        if !(e <= tol) {
+            failures.push(format!(
+                "{label}: {what} deviates by {e:e} (relative), tolerance {tol:e}\n    Rust {want:?}\n    C++  {got:?}"
+            ));
+        }
+    }
+}
+
+/// A C++ compiler: `CXX` when set, else the first of c++, g++, clang++ that runs.
+fn cxx() -> String {
+    let candidates: Vec<String> = std::env::var("CXX")
+        .ok()
+        .into_iter()
+        .chain(["c++", "g++", "clang++"].map(String::from))
+        .collect();
+    for c in &candidates {
+        if Command::new(c)
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success())
+        {
+            return c.clone();
+        }
+    }
+    panic!(
+        "no C++ compiler found (tried {candidates:?}): the CUDA host parity test needs g++ or \
+         clang++ with C++17 (part of the project's setup; install g++ or set CXX)"
+    );
+}
+
+/// Compiles the harness into `dir` and returns its path.
+fn build_harness(root: &Path, dir: &Path) -> PathBuf {
+    let exe = dir.join("geometry_harness");
+    let cxx = cxx();
+    let out = Command::new(&cxx)
+        .args(["-O2", "-std=c++17", "-ffp-contract=off", "-Wall", "-I"])
+        .arg(root.join("cuda"))
+        .arg(root.join("cuda/host/geometry_harness.cpp"))
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {cxx}: {e}"));
+    assert!(
+        out.status.success(),
+        "{cxx} failed to compile cuda/host/geometry_harness.cpp:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    exe
+}
+
+#[test]
+fn cuda_geometry_headers_match_the_rust_reference_in_f64_and_f32() {
+    let root = repo_root();
+    let dir = temp_dir("cuda-geometry-host");
+    let exe = build_harness(&root, &dir);
+
+    let shapes = test_shapes();
+    let mut pairs = pair_cases(&shapes, N_PAIRS, 4242);
+    let facets = facet_cases(&shapes, N_FACETS, 99);
+
+    // Rust reference results; the axis for axis_separates is GJK's (a separating one) for
+    // disjoint pairs and the centre line otherwise, with margins from 0 to 10 % of the size.
+    let mut ws64 = PairWorkspace::<f64>::boxed();
+    let mut ws32 = PairWorkspace::<f32>::boxed();
+    let mut rng = Rng::new(7);
+    let mut want_pairs = Vec::with_capacity(pairs.len());
+    for c in pairs.iter_mut() {
+        let (ta, tb) = (&shapes[c.a].template, &shapes[c.b].template);
+        let r64 = from_rust(overlap_pair(
+            &mut ws64,
+            (ta, c.sa, &c.pose_a),
+            (tb, c.sb, &c.pose_b),
+        ));
+        let r32 = from_rust(overlap_pair(
+            &mut ws32,
+            (ta, c.sa, &c.pose_a),
+            (tb, c.sb, &c.pose_b),
+        ));
+        let size = (ta.circumscribed_radius * c.sa).max(tb.circumscribed_radius * c.sb);
+        c.axis = if r64.status == 0 && !r64.intersects {
+            r64.axis
+        } else {
+            c.pose_a.translation.vector - c.pose_b.translation.vector
+        };
+        c.margin = [0.0, 1e-9, 1e-3, 0.1][rng.next_u64() as usize % 4] * size;
+        let sep = axis_separates(
+            (ta, c.sa, &c.pose_a),
+            (tb, c.sb, &c.pose_b),
+            &c.axis,
+            c.margin,
+        );
+        want_pairs.push((r64, r32, sep, size));
+    }
+    let mut fws64 = OverlapWorkspace::<f64>::boxed();
+    let mut fws32 = OverlapWorkspace::<f32>::boxed();
+    let want_facets: Vec<_> = facets
+        .iter()
+        .map(|c| {
+            (
+                rust_facet(&shapes, c, &mut fws64),
+                rust_facet(&shapes, c, &mut fws32),
+            )
+        })
+        .collect();
+
+    // The harness on the same cases.
+    let cases = dir.join("cases.txt");
+    std::fs::write(&cases, case_file(&shapes, &pairs, &facets)).unwrap();
+    let out = Command::new(&exe).arg(&cases).output().unwrap();
+    assert!(
+        out.status.success(),
+        "harness failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        lines.len(),
+        pairs.len() + facets.len(),
+        "harness printed {} lines for {} cases",
+        lines.len(),
+        pairs.len() + facets.len()
+    );
+
+    let mut failures = Vec::new();
+    let (mut w64, mut w32, mut wf64, mut wf32) = (
+        Worst::default(),
+        Worst::default(),
+        Worst::default(),
+        Worst::default(),
+    );
+    let mut kinds = std::collections::BTreeMap::<String, usize>::new();
+    let mut axis_checked = [0usize; 2];
+    for (i, (c, (r64, r32, sep, size))) in pairs.iter().zip(&want_pairs).enumerate() {
+        let toks: Vec<&str> = lines[i].split_whitespace().collect();
+        assert_eq!(toks.len(), 37, "pair line {i}: {}", lines[i]);
+        assert_eq!((toks[0], toks[1]), ("P", i.to_string().as_str()));
+        let mut it = toks[2..].iter();
+        let parse = |it: &mut std::slice::Iter<&str>| {
+            let status = parse_int(it);
+            let intersects = parse_int(it) != 0;
+            let a = parse_f64s(it, 3);
+            Result1 {
+                status,
+                intersects,
+                axis: Vector3::new(a[0], a[1], a[2]),
+                overlap: parse_overlap(it),
+            }
+        };
+        let g64 = parse(&mut it);
+        let g32 = parse(&mut it);
+        let gsep = parse_int(&mut it) != 0;
+        let label = format!(
+            "pair {i} ({}, {} vs {}, scales {} {})",
+            c.kind, shapes[c.a].name, shapes[c.b].name, c.sa, c.sb
+        );
+        let sc = Scales { size: *size };
+        compare(
+            &format!("{label} f64"),
+            r64,
+            &g64,
+            &sc,
+            TOL_F64,
+            &mut w64,
+            &mut failures,
+        );
+        compare(
+            &format!("{label} f32"),
+            r32,
+            &g32,
+            &sc,
+            TOL_F32,
+            &mut w32,
+            &mut failures,
+        );
+        if gsep != *sep {
+            failures.push(format!("{label}: axis_separates Rust {sep}, C++ {gsep}"));
+        }
+        axis_checked[*sep as usize] += 1;
+        let class = if r64.status != 0 {
+            "error".to_string()
+        } else if !r64.intersects {
+            "separated".to_string()
+        } else if r64.overlap.volume == 0.0 {
+            "touching (no volume)".to_string()
+        } else if r64.overlap.volume
+            < 1e-6 * shapes[c.a].template.volume.min(shapes[c.b].template.volume)
+        {
+            "shallow (V < 1e-6 V_small)".to_string()
+        } else {
+            "overlapping".to_string()
+        };
+        *kinds.entry(class).or_default() += 1;
+        if r32.intersects != r64.intersects {
+            *kinds
+                .entry("f32 verdict differs from f64".into())
+                .or_default() += 1;
+        }
+    }
+    let mut facet_hits = 0;
+    for (i, (c, ((p64, f64r), (p32, f32r)))) in facets.iter().zip(&want_facets).enumerate() {
+        let line = lines[pairs.len() + i];
+        let toks: Vec<&str> = line.split_whitespace().collect();
+        assert_eq!(toks.len(), 30, "facet line {i}: {line}");
+        assert_eq!((toks[0], toks[1]), ("F", i.to_string().as_str()));
+        let mut it = toks[2..].iter();
+        let parse = |it: &mut std::slice::Iter<&str>| {
+            let pst = parse_int(it);
+            let status = parse_int(it);
+            let overlap = parse_overlap(it);
+            (
+                pst,
+                Result1 {
+                    status,
+                    intersects: false,
+                    axis: Vector3::zeros(),
+                    overlap,
+                },
+            )
+        };
+        let (gp64, g64) = parse(&mut it);
+        let (gp32, g32) = parse(&mut it);
+        let label = format!("facet {i} ({}, scale {})", shapes[c.t].name, c.s);
+        if gp64 != *p64 || gp32 != *p32 {
+            failures.push(format!(
+                "{label}: facet_prism status Rust ({p64}, {p32}), C++ ({gp64}, {gp32})"
+            ));
+        }
+        let sc = Scales {
+            size: shapes[c.t].template.circumscribed_radius * c.s,
+        };
+        compare(
+            &format!("{label} f64"),
+            f64r,
+            &g64,
+            &sc,
+            TOL_F64,
+            &mut wf64,
+            &mut failures,
+        );
+        compare(
+            &format!("{label} f32"),
+            f32r,
+            &g32,
+            &sc,
+            TOL_F32,
+            &mut wf32,
+            &mut failures,
+        );
+        if f64r.overlap.volume > 0.0 {
+            facet_hits += 1;
+        }
+    }
+
+    println!("pair classes (f64 reference): {kinds:?}");
+    println!(
+        "axis_separates: {} separating, {} not",
+        axis_checked[1], axis_checked[0]
+    );
+    println!(
+        "facets with a penetrating volume: {facet_hits} of {}",
+        facets.len()
+    );
+    w64.report("overlap_pair f64");
+    w32.report("overlap_pair f32");
+    wf64.report("prism_overlap f64");
+    wf32.report("prism_overlap f32");
+
+    // The case mix must exercise every path that matters.
+    let count = |k: &str| kinds.get(k).copied().unwrap_or(0);
+    assert!(
+        count("overlapping") > 800,
+        "too few overlapping pairs: {kinds:?}"
+    );
+    assert!(
+        count("separated") > 300,
+        "too few separated pairs: {kinds:?}"
+    );
+    assert!(
+        count("shallow (V < 1e-6 V_small)") + count("touching (no volume)") > 100,
+        "too few touching pairs: {kinds:?}"
+    );
+    assert!(
+        facet_hits > 150,
+        "too few penetrating facets ({facet_hits})"
+    );
+    assert!(
+        axis_checked[0] > 100 && axis_checked[1] > 100,
+        "axis_separates cases {axis_checked:?}"
+    );
+    assert!(
+        failures.is_empty(),
+        "{} parity failures (first 20):\n{}",
+        failures.len(),
+        failures
+            .iter()
+            .take(20)
+            .cloned()
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+    // Same operations in the same order give the same bits: a change of the order of operations
+    // in a header that stays inside the tolerances still shows up as lost bitwise identity.
+    for (w, title) in [
+        (&w64, "overlap_pair f64"),
+        (&w32, "overlap_pair f32"),
+        (&wf64, "prism_overlap f64"),
+        (&wf32, "prism_overlap f32"),
+    ] {
+        assert!(
+            w.bitwise as f64 >= MIN_BITWISE * w.compared as f64,
+            "{title}: only {} of {} results bitwise identical to the Rust reference",
+            w.bitwise,
+            w.compared
+        );
+    }
+}
