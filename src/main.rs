@@ -46,6 +46,24 @@ enum Command {
     },
     /// Validates a scene and prints the critical time step, the chosen dt and counts.
     Check { scene: PathBuf },
+    /// Steps a scene without output and prints particle-steps per second, per-stage seconds,
+    /// contacts per particle and device bytes per particle, as JSON.
+    Bench {
+        scene: PathBuf,
+        #[arg(long, value_enum, default_value = "auto")]
+        backend: BackendChoice,
+        #[arg(long, value_enum, default_value = "mixed")]
+        gpu_precision: polydem::backend::cuda::Precision,
+        /// Steps before timing.
+        #[arg(long, default_value_t = 20)]
+        warmup: u64,
+        /// Steps timed.
+        #[arg(long, default_value_t = 200)]
+        steps: u64,
+        /// Print JSON only (the default output is JSON as well; kept for scripts).
+        #[arg(long)]
+        json: bool,
+    },
     /// Lists GPUs, the CUDA driver and NVRTC versions, as JSON.
     Info,
     /// Shape templates: mass properties and face counts.
@@ -126,6 +144,25 @@ fn run(cli: Cli) -> Result<()> {
             })?;
             use std::io::Write;
             writeln!(out, "{}", serde_json::to_string_pretty(&summary)?)?;
+            Ok(())
+        }
+        Command::Bench {
+            scene,
+            backend,
+            gpu_precision,
+            warmup,
+            steps,
+            json: _,
+        } => {
+            let report = polydem::run::bench(&polydem::run::BenchOptions {
+                scene,
+                backend,
+                precision: gpu_precision,
+                warmup,
+                steps,
+            })?;
+            use std::io::Write;
+            writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
             Ok(())
         }
         Command::Check { scene } => {

@@ -185,6 +185,19 @@ impl Simulation {
         Ok(sim)
     }
 
+    /// A simulation at t = 0 with the particles of count insertions placed but no force
+    /// evaluated yet: for a backend that evaluates the first forces itself
+    /// ([`crate::backend::cuda::CudaSimulation::from_scene`]).
+    pub fn new_unevaluated(scene: Scene) -> Result<Self, SimulationError> {
+        let mut s = scene.clone();
+        s.insertions.clear();
+        let mut sim = Simulation::new(s)?;
+        sim.scene = scene;
+        sim.inserter = Inserter::new(&sim.scene);
+        sim.exchange()?;
+        Ok(sim)
+    }
+
     /// Restores a simulation from checkpointed state (the inserter and RNG come with it).
     #[allow(clippy::too_many_arguments)]
     pub fn restore(

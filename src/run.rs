@@ -286,10 +286,20 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
             );
             (sim, true)
         }
-        None => (Simulation::new(scene)?, false),
+        None => {
+            let sim = if backend_name == "cuda" {
+                Simulation::new_unevaluated(scene)?
+            } else {
+                Simulation::new(scene)?
+            };
+            (sim, false)
+        }
     };
     let mut engine = if backend_name == "cuda" {
-        let c = CudaSimulation::new(sim, 0, opts.precision).map_err(|e| anyhow!("{e}"))?;
+        let mut c = CudaSimulation::new(sim, 0, opts.precision).map_err(|e| anyhow!("{e}"))?;
+        if !resumed {
+            c.evaluate_first_forces().map_err(|e| anyhow!("{e}"))?;
+        }
         tracing::info!(
             "kernels compiled for {} ({:?} pair geometry)",
             c.device,
@@ -476,4 +486,81 @@ pub fn check(scene_path: &Path) -> Result<serde_json::Value> {
         report["warnings"] = json!([msg]);
     }
     Ok(report)
+}
+
+/// Options of `polydem bench`.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    pub scene: PathBuf,
+    pub backend: BackendChoice,
+    pub precision: Precision,
+    /// Steps run before timing (list build, kernel warm-up).
+    pub warmup: u64,
+    /// Steps timed.
+    pub steps: u64,
+}
+
+/// `polydem bench`: steps a scene without output and reports particle-steps per second, the
+/// per-stage seconds, contacts and candidate pairs per particle and (on the GPU) the bytes of
+/// device memory per particle (DESIGN.md §9).
+pub fn bench(opts: &BenchOptions) -> Result<serde_json::Value> {
+    let scene = load_scene(&opts.scene).map_err(|e| anyhow!("{e}"))?;
+    let backend_name = choose_backend(opts.backend)?;
+    let t_setup = Instant::now();
+    let mut engine = if backend_name == "cuda" {
+        let c = CudaSimulation::from_scene(scene, 0, opts.precision).map_err(|e| anyhow!("{e}"))?;
+        Engine::Cuda(Box::new(c))
+    } else {
+        Engine::Cpu(Simulation::new(scene)?)
+    };
+    let setup = t_setup.elapsed().as_secs_f64();
+    for _ in 0..opts.warmup {
+        engine.step()?;
+    }
+    let timers_before = engine.host().timers;
+    let n = engine.host().particles.len();
+    let start = Instant::now();
+    for _ in 0..opts.steps {
+        engine.step()?;
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let t = engine.host().timers;
+    let stages = json!({
+        "integrate": t.integrate - timers_before.integrate,
+        "exchange": t.exchange - timers_before.exchange,
+        "neighbor": t.neighbor - timers_before.neighbor,
+        "pairs": t.pairs - timers_before.pairs,
+        "walls": t.walls - timers_before.walls,
+        "reduce": t.reduce - timers_before.reduce,
+    });
+    let (device, bytes, pairs) = match &engine {
+        Engine::Cuda(c) => (
+            c.device.clone(),
+            Some(c.device_bytes()),
+            Some(c.candidate_pairs()),
+        ),
+        Engine::Cpu(_) => (
+            format!("CPU, {} threads", rayon::current_num_threads()),
+            None,
+            None,
+        ),
+    };
+    let sim = engine.synced()?;
+    let per_particle = |x: usize| x as f64 / n.max(1) as f64;
+    Ok(json!({
+        "scene": opts.scene.display().to_string(),
+        "backend": backend_name,
+        "precision": if backend_name == "cuda" { format!("{:?}", opts.precision).to_lowercase() } else { "double".into() },
+        "device": device,
+        "particles": n,
+        "steps": opts.steps,
+        "wall_seconds": wall,
+        "setup_seconds": setup,
+        "particle_steps_per_second": (n as f64 * opts.steps as f64) / wall.max(1e-12),
+        "stage_seconds": stages,
+        "contacts_per_particle": 2.0 * sim.stats.contacts as f64 / n.max(1) as f64,
+        "wall_contacts": sim.stats.wall_contacts,
+        "candidate_pairs_per_particle": pairs.map(per_particle),
+        "device_bytes_per_particle": bytes.map(per_particle),
+    }))
 }

@@ -12,7 +12,8 @@ use polydem::pipeline::Simulation;
 use polydem::scene::parse_scene;
 use std::collections::HashMap;
 
-/// 240 frictional dodecahedra dropped into the open box onto each other, 40 more fed at a rate.
+/// 240 frictional dodecahedra dropped into the open box and onto each other (those placed above
+/// the rim fall in), 40 more fed at a rate from above.
 fn scene_text() -> String {
     let root = repo_root();
     format!(
@@ -49,12 +50,12 @@ generator = {{ kind = "dodecahedron", size = 0.012 }}
 scale = {{ distribution = "uniform", min = 0.8, max = 1.2 }}
 [[insertions]]
 type = "d"
-region = {{ kind = "box", min = [-0.042, -0.042, 0.006], max = [0.042, 0.042, 0.09] }}
+region = {{ kind = "box", min = [-0.042, -0.042, 0.006], max = [0.042, 0.042, 0.2] }}
 count = 240
 velocity = [0.0, 0.0, -1.0]
 [[insertions]]
 type = "d"
-region = {{ kind = "box", min = [-0.04, -0.04, 0.12], max = [0.04, 0.04, 0.2] }}
+region = {{ kind = "box", min = [-0.04, -0.04, 0.205], max = [0.04, 0.04, 0.24] }}
 rate = 4000.0
 total = 40
 [[walls]]
@@ -68,9 +69,12 @@ dir = "out"
     )
 }
 
+fn scene() -> polydem::scene::Scene {
+    parse_scene(&scene_text(), &repo_root(), "gpu_pipeline.toml").unwrap()
+}
+
 fn simulation() -> Simulation {
-    let scene = parse_scene(&scene_text(), &repo_root(), "gpu_pipeline.toml").unwrap();
-    Simulation::new(scene).unwrap()
+    Simulation::new(scene()).unwrap()
 }
 
 /// Largest differences, by global id, of position (relative to the particle size), velocity
@@ -91,26 +95,41 @@ fn compare(cpu: &Simulation, gpu: &Simulation) -> (f64, f64, f64) {
     (dx, dv, df)
 }
 
-/// After one step from the same state: the same contacts (pair and wall keys), springs and
-/// forces. Double mode follows the CPU's order of operations (no FMA contraction), so the only
-/// differences come from cbrt, pow and sin/cos, whose GPU and libm results may differ in the
-/// last bit: 1e-12 relative is a bound with margin.
+/// From the same mid-pour state (3000 CPU steps: wall and particle contacts with live
+/// springs), moved onto the GPU with its contact history: after three more steps the same
+/// contacts (pair and wall keys), springs and forces, bit for bit. Double mode follows the
+/// CPU's order of operations (no FMA contraction); cbrt, pow, log and sin/cos could in
+/// principle differ in the last bit between the GPU and libm, and this test would then need a
+/// 1e-12 relative tolerance, but on the H100 the results are identical.
 #[test]
 #[ignore = "needs a CUDA GPU"]
-fn one_step_matches_the_cpu_contact_by_contact() {
+fn three_steps_from_a_cpu_state_match_contact_by_contact() {
     let mut cpu = simulation();
-    let mut gpu = CudaSimulation::new(simulation(), 0, Precision::Double).unwrap();
+    for _ in 0..700 {
+        cpu.step().unwrap();
+    }
+    assert!(
+        cpu.history.len() > 100,
+        "a dense state: {} contacts",
+        cpu.history.len()
+    );
+    let copy = Simulation::restore(
+        scene(),
+        cpu.particles.clone(),
+        cpu.history.clone(),
+        cpu.inserter.clone(),
+        cpu.time,
+        cpu.step,
+        cpu.next_id,
+    )
+    .unwrap();
+    let mut gpu = CudaSimulation::new(copy, 0, Precision::Double).unwrap();
     for _ in 0..3 {
         cpu.step().unwrap();
         gpu.step().unwrap();
     }
     let g = gpu.sync_host().unwrap();
     let keys = |s: &Simulation| -> Vec<_> { s.history.entries().iter().map(|e| e.0).collect() };
-    assert!(
-        cpu.history.len() > 100,
-        "a dense state: {} contacts",
-        cpu.history.len()
-    );
     assert_eq!(keys(&cpu), keys(g), "contact sets differ");
     let smax = cpu
         .history
@@ -127,27 +146,31 @@ fn one_step_matches_the_cpu_contact_by_contact() {
         .fold(0.0, f64::max);
     let (dx, dv, df) = compare(&cpu, g);
     println!(
-        "{} contacts; worst relative: spring {worst_spring:.2e}, position {dx:.2e}, velocity {dv:.2e}, force {df:.2e}",
-        cpu.history.len()
+        "{} contacts ({} with walls); worst relative: spring {worst_spring:.2e}, position {dx:.2e}, \
+         velocity {dv:.2e}, force {df:.2e}",
+        cpu.history.len(),
+        cpu.stats.wall_contacts
     );
     assert_eq!(cpu.stats.contacts, g.stats.contacts);
     assert_eq!(cpu.stats.wall_contacts, g.stats.wall_contacts);
-    assert!(worst_spring < 1e-12 && df < 1e-12 && dv < 1e-12 && dx < 1e-12);
-    let de = (cpu.stats.elastic_energy - g.stats.elastic_energy).abs() / cpu.stats.elastic_energy;
-    assert!(de < 1e-12, "elastic energy differs by {de:e}");
+    assert!(cpu.stats.wall_contacts > 0 && cpu.stats.contacts > 0);
+    assert!(worst_spring == 0.0 && df == 0.0 && dv == 0.0 && dx == 0.0);
 }
 
-/// 1000 steps of the pour (with the insertion of the fed particles, list rebuilds and
-/// reordering) in double mode: the trajectories stay together. A granular packing is chaotic:
-/// a last-bit difference (transcendental functions) grows by orders of magnitude over hundreds
-/// of collisions, so the bound is 1e-6 of the particle size for positions and 1e-4 of the
-/// largest speed and force, far below any physical effect and far above a bitwise start.
+/// 1000 steps of the pour (with the insertion of the fed particles on the host, list rebuilds
+/// with reordering, wall and particle contacts with friction). Double mode: bitwise equal to
+/// the CPU (the kernels follow the CPU's order of operations and the reduction is in
+/// partner-id order on both). Mixed mode (f32 pair geometry): the overlap volumes carry up to
+/// 1e-4 relative error on shallow contacts (the geometry test set's bound) and a granular
+/// packing amplifies differences over hundreds of collisions, so the bound is 1e-6 of the
+/// particle size for positions and 1e-4 of the largest speed (measured on the H100: 8.6e-9
+/// and 1.0e-7).
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn a_thousand_steps_of_a_dense_pour_match_the_cpu() {
     for precision in [Precision::Double, Precision::Mixed] {
         let mut cpu = simulation();
-        let mut gpu = CudaSimulation::new(simulation(), 0, precision).unwrap();
+        let mut gpu = CudaSimulation::from_scene(scene(), 0, precision).unwrap();
         let mut worst = (0.0f64, 0.0f64, 0.0f64);
         for k in 1..=1000 {
             cpu.step().unwrap();
@@ -165,13 +188,11 @@ fn a_thousand_steps_of_a_dense_pour_match_the_cpu() {
         assert_eq!(g.particles.len(), cpu.particles.len());
         assert!(g.particles.len() > 240, "the fed particles arrived");
         let (tol_x, tol_v) = match precision {
-            Precision::Double => (1e-6, 1e-4),
-            // f32 pair geometry: overlap volumes carry 1e-4 relative error (the geometry test
-            // set's bound), which the contact forces inherit.
-            Precision::Mixed => (1e-2, 1e-1),
+            Precision::Double => (0.0, 0.0),
+            Precision::Mixed => (1e-6, 1e-4),
         };
         assert!(
-            worst.0 < tol_x && worst.1 < tol_v,
+            worst.0 <= tol_x && worst.1 <= tol_v,
             "{precision:?}: position {:.2e} velocity {:.2e}",
             worst.0,
             worst.1

@@ -107,7 +107,12 @@ void put_overlap(const pd::Overlap<double>& o) {
     put(o.thickness);
 }
 
+// Fills a workspace with a non-zero byte pattern before each use: on the GPU a thread's
+// workspace is uninitialised local memory, so the geometry must not depend on its contents.
+template <class W> void poison(W& ws) { std::memset(static_cast<void*>(&ws), 0xA5, sizeof(W)); }
+
 template <class T> void run_pair(pd::PairWorkspace<T>& ws, const pd::BodyRef& a, const pd::BodyRef& b) {
+    poison(ws);
     pd::PairGeometry g;
     int st = pd::overlap_pair(ws, a, b, &g);
     std::printf(" %d %d", st, g.intersects);
@@ -118,6 +123,8 @@ template <class T> void run_pair(pd::PairWorkspace<T>& ws, const pd::BodyRef& a,
 template <class T>
 void run_facet(pd::OverlapWorkspace<T>& ws, pd::PosedPolytope<T>& body, const pd::BodyRef& r, pd::V3<double> origin,
                const pd::V3<double> tri[3]) {
+    poison(ws);
+    poison(body);
     pd::place(body, r.tpl, r.scale, r.pos, r.rot, origin);
     pd::V3<T> t[3];
     for (int k = 0; k < 3; ++k) t[k] = pd::cast3<T>(tri[k]);

@@ -161,6 +161,9 @@ pub struct InsertionSection {
     pub angular_velocity: Option<Vec3>,
     /// Random positions tried per particle before giving up.
     pub max_attempts: Option<u32>,
+    /// Lattice spacing (m) along x, y, z: particles go to the points of a simple cubic lattice
+    /// filling the box region instead of random positions (count only; no overlap test).
+    pub lattice: Option<Vec3>,
 }
 
 /// Kinds of insertion region.

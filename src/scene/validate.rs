@@ -566,6 +566,31 @@ impl Validator<'_> {
             if max_attempts == 0 {
                 self.err(&k("max_attempts"), "must be at least 1");
             }
+            let lattice = s.lattice.map(|l| {
+                let v = self.vector(&k("lattice"), l);
+                if !(v.iter().all(|&x| x > 0.0 && x.is_finite())) {
+                    self.err(&k("lattice"), format!("spacings must be positive, got {v:?}"));
+                }
+                if !matches!(mode, InsertionMode::Count(_)) {
+                    self.err(&k("lattice"), "only allowed with count (a lattice is filled at the start)");
+                }
+                match (&region, &mode) {
+                    (Region::Box { min, max }, InsertionMode::Count(n)) => {
+                        let points: f64 = (0..3)
+                            .map(|a| ((max[a] - min[a]) / v[a] + 1e-9).floor().max(0.0))
+                            .product();
+                        if (*n as f64) > points {
+                            self.err(
+                                &k("count"),
+                                format!("{n} particles do not fit on the lattice: it has {points} points in the region"),
+                            );
+                        }
+                    }
+                    (Region::Box { .. }, _) => {}
+                    _ => self.err(&k("lattice"), "only allowed with a box region"),
+                }
+                v
+            });
             out.push(Insertion {
                 particle_type,
                 region,
@@ -574,6 +599,7 @@ impl Validator<'_> {
                 velocity,
                 angular_velocity,
                 max_attempts,
+                lattice,
             });
         }
         out
