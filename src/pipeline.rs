@@ -266,7 +266,7 @@ impl Simulation {
     }
 
     /// Stage 1 on the host copy of another backend's state: insertion of due particles and
-    /// removal of those outside a closed domain ([`Simulation::exchange`]).
+    /// removal of those outside a closed domain, as in [`Simulation::step`].
     pub fn exchange_on_host(&mut self) -> Result<(), SimulationError> {
         self.exchange()
     }

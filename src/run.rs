@@ -85,7 +85,7 @@ fn choose_backend(choice: BackendChoice) -> Result<&'static str> {
 
 /// The simulation a run steps: on the CPU, or on the GPU with a host copy synced for output.
 enum Engine {
-    Cpu(Simulation),
+    Cpu(Box<Simulation>),
     Cuda(Box<CudaSimulation>),
 }
 
@@ -307,7 +307,7 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
         );
         Engine::Cuda(Box::new(c))
     } else {
-        Engine::Cpu(sim)
+        Engine::Cpu(Box::new(sim))
     };
     let sim = engine.host();
     let s = &sim.scene;
@@ -511,7 +511,7 @@ pub fn bench(opts: &BenchOptions) -> Result<serde_json::Value> {
         let c = CudaSimulation::from_scene(scene, 0, opts.precision).map_err(|e| anyhow!("{e}"))?;
         Engine::Cuda(Box::new(c))
     } else {
-        Engine::Cpu(Simulation::new(scene)?)
+        Engine::Cpu(Box::new(Simulation::new(scene)?))
     };
     let setup = t_setup.elapsed().as_secs_f64();
     for _ in 0..opts.warmup {

@@ -498,7 +498,7 @@ fn compare(
     }
     for (what, e) in errs {
         worst.note(what, e, label);
-        if !(e <= tol) {
+        if e.is_nan() || e > tol {
             failures.push(format!(
                 "{label}: {what} deviates by {e:e} (relative), tolerance {tol:e}\n    Rust {want:?}\n    C++  {got:?}"
             ));

@@ -1,9 +1,13 @@
 //! The CUDA backend: host side (cudarc). Kernels live in `cuda/` and are compiled at run time by
 //! NVRTC ([`kernels`]); the structs they share with Rust are in [`layout`].
 
+mod contacts;
 pub mod kernels;
 pub mod layout;
+mod pairs;
 pub mod simulation;
+mod sync;
+mod upload;
 
 pub use kernels::{KernelConfig, Precision};
 pub use simulation::{CudaError, CudaSimulation};

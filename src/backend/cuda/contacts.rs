@@ -1,0 +1,160 @@
+//! Stages 3–8 on the GPU, host side: the pair contacts, the wall contacts with the walls'
+//! poses at the current time, and the deterministic reduction (kernels in `cuda/contact.cu`).
+
+use super::simulation::{CudaError, CudaSimulation, PairOutputs, WallState, cfg, ptr, zeros};
+use crate::pipeline::SimulationError;
+use crate::scene::WallMotion;
+use cudarc::driver::PushKernelArg;
+use nalgebra::Vector3;
+use std::time::Instant;
+
+impl CudaSimulation {
+    /// Stages 2–8 on the device at the current state, advancing the springs by `dt`.
+    pub(super) fn forces(&mut self, dt: f64) -> Result<(), CudaError> {
+        let t0 = Instant::now();
+        if self.rebuild || self.pairs.is_none() {
+            self.build_pairs()?;
+        }
+        self.stream.synchronize()?;
+        self.host.timers.neighbor += t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        let st = self.stream.clone();
+        let view = self.particle_view();
+        let n = self.n;
+        let ni = n as i32;
+        let n_mat = self.host.scene.materials.len() as i32;
+        let pairs = self.pairs.as_mut().expect("built above");
+        let np = pairs.n;
+        let npi = np as i32;
+        let outputs = PairOutputs {
+            ptrs: [
+                ptr(&pairs.forces, &st),
+                ptr(&pairs.energy, &st),
+                ptr(&pairs.contact, &st),
+            ],
+        };
+        // SAFETY (all launches): argument lists match the kernels of cuda/contact.cu; the
+        // pointer structs point into buffers alive for the whole call.
+        unsafe {
+            st.launch_builder(self.k.get("pair_contacts"))
+                .arg(&npi)
+                .arg(&pairs.pairs)
+                .arg(&pairs.shift)
+                .arg(&mut pairs.axes)
+                .arg(&view)
+                .arg(&self.materials)
+                .arg(&n_mat)
+                .arg(&pairs.spring_in)
+                .arg(&mut pairs.spring_out)
+                .arg(&outputs)
+                .arg(&dt)
+                .arg(&mut self.error)
+                .launch(cfg(np))?;
+        }
+        // Kernels run asynchronously: wait for the stage so that its timer measures it (a few
+        // microseconds per stage, negligible against the step).
+        st.synchronize()?;
+        self.host.timers.pairs += t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        if let Some(w) = &mut self.walls {
+            let states: Vec<WallState> = self
+                .host
+                .scene
+                .walls
+                .iter()
+                .map(|wall| wall_state(&wall.motion, self.host.time))
+                .collect();
+            st.memcpy_htod(&states, &mut w.states)?;
+            let nw = w.n as i32;
+            unsafe {
+                st.launch_builder(self.k.get("wall_contacts"))
+                    .arg(&ni)
+                    .arg(&view)
+                    .arg(&nw)
+                    .arg(&w.info)
+                    .arg(&w.states)
+                    .arg(&w.triangles)
+                    .arg(&w.prisms)
+                    .arg(&w.cell_start)
+                    .arg(&w.cell_items)
+                    .arg(&self.materials)
+                    .arg(&n_mat)
+                    .arg(&w.spring_in)
+                    .arg(&mut w.spring_out)
+                    .arg(&mut w.force)
+                    .arg(&mut w.torque)
+                    .arg(&mut w.energy)
+                    .arg(&mut w.per_wall_force)
+                    .arg(&mut w.contact)
+                    .arg(&dt)
+                    .arg(&mut self.error)
+                    .launch(cfg(n))?;
+            }
+        }
+        st.synchronize()?;
+        self.host.timers.walls += t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        let (wf, wt) = match &self.walls {
+            Some(w) => (&w.force, &w.torque),
+            None => (&self.p.force, &self.p.torque), // not read without walls
+        };
+        let (mut force, mut torque) = (zeros::<f64>(&st, 3 * n)?, zeros::<f64>(&st, 3 * n)?);
+        unsafe {
+            st.launch_builder(self.k.get("reduce_forces"))
+                .arg(&ni)
+                .arg(&pairs.ref_offset)
+                .arg(&pairs.refs)
+                .arg(&pairs.forces)
+                .arg(wf)
+                .arg(wt)
+                .arg(&mut force)
+                .arg(&mut torque)
+                .launch(cfg(n))?;
+        }
+        self.p.force = force;
+        self.p.torque = torque;
+        // The springs just computed are the history of the next evaluation.
+        std::mem::swap(&mut pairs.spring_in, &mut pairs.spring_out);
+        if let Some(w) = &mut self.walls {
+            std::mem::swap(&mut w.spring_in, &mut w.spring_out);
+        }
+        let mut error = [0u32; 2];
+        st.memcpy_dtoh(&self.error, &mut error)?;
+        self.host.timers.reduce += t0.elapsed().as_secs_f64();
+        if error[0] != 0 {
+            return Err(SimulationError::Geometry {
+                step: self.host.step,
+                what: format!("pair or particle slot {} on the GPU", error[1]),
+                message: format!(
+                    "geometry status {} (cuda/polytope.cuh status codes)",
+                    error[0]
+                ),
+            }
+            .into());
+        }
+        self.host_current = false;
+        Ok(())
+    }
+}
+
+/// A wall's pose and velocity field at time `t` (the GPU form of [`WallMotion::transform`],
+/// `velocity_at` and `angular_velocity`: v(c) = v0 + ω × (c − origin)).
+fn wall_state(motion: &WallMotion, t: f64) -> WallState {
+    let pose = motion.transform(t);
+    let c = pose.rotation.coords;
+    let (v0, omega, origin) = match motion {
+        WallMotion::Rotate { origin, .. } => (Vector3::zeros(), motion.angular_velocity(), *origin),
+        _ => (
+            motion.velocity_at(t, &Vector3::zeros()),
+            Vector3::zeros(),
+            Vector3::zeros(),
+        ),
+    };
+    WallState {
+        rotation: [c.x, c.y, c.z, c.w],
+        translation: pose.translation.vector.into(),
+        v0: v0.into(),
+        omega: omega.into(),
+        origin: origin.into(),
+    }
+}

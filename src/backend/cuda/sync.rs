@@ -1,0 +1,115 @@
+//! Copying the device state back into the host [`Simulation`] for output, checkpoints and
+//! host-side insertion: particles in the device's order, the contact history rebuilt from the
+//! pair slots and per-particle wall slots, and the step statistics.
+
+use super::simulation::{CudaError, CudaSimulation};
+use crate::contact::{ContactHistory, ContactKey, ContactState};
+use crate::pipeline::Simulation;
+use cudarc::driver::CudaSlice;
+use nalgebra::{UnitQuaternion, Vector3};
+
+impl CudaSimulation {
+    /// Copies the device state into [`CudaSimulation::host`] (particles in the device's
+    /// current order, forces, contact history, statistics and wall forces), when it is stale.
+    pub fn sync_host(&mut self) -> Result<&Simulation, CudaError> {
+        if self.host_current {
+            return Ok(&self.host);
+        }
+        let st = &self.stream;
+        let n = self.n;
+        let get = |s: &CudaSlice<f64>| st.clone_dtoh(s);
+        let vec3 = |v: Vec<f64>| -> Vec<Vector3<f64>> {
+            v.chunks_exact(3)
+                .take(n)
+                .map(|c| Vector3::new(c[0], c[1], c[2]))
+                .collect()
+        };
+        let p = &mut self.host.particles;
+        let mut id = st.clone_dtoh(&self.p.id)?;
+        id.truncate(n);
+        p.id = id;
+        let mut kind = st.clone_dtoh(&self.p.kind)?;
+        kind.truncate(n);
+        p.kind = kind;
+        let mut scale = get(&self.p.scale)?;
+        scale.truncate(n);
+        p.scale = scale;
+        let mut mass = get(&self.p.mass)?;
+        mass.truncate(n);
+        p.mass = mass;
+        p.position = vec3(get(&self.p.position)?);
+        p.velocity = vec3(get(&self.p.velocity)?);
+        p.angular_velocity = vec3(get(&self.p.angular_velocity)?);
+        p.force = vec3(get(&self.p.force)?);
+        p.torque = vec3(get(&self.p.torque)?);
+        p.inertia = vec3(get(&self.p.inertia)?);
+        p.orientation = get(&self.p.orientation)?
+            .chunks_exact(4)
+            .take(n)
+            .map(|c| {
+                UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(c[3], c[0], c[1], c[2]))
+            })
+            .collect();
+        // History and statistics from the last evaluation (springs are in `spring_in` after
+        // the swap at its end).
+        let mut entries = Vec::new();
+        let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
+        if let Some(pairs) = &self.pairs {
+            let pr = st.clone_dtoh(&pairs.pairs)?;
+            let contact = st.clone_dtoh(&pairs.contact)?;
+            let spring = get(&pairs.spring_in)?;
+            let e = get(&pairs.energy)?;
+            for k in 0..pairs.n {
+                energy += e[k];
+                if contact[k] != 0 {
+                    contacts += 1;
+                    let (a, b) = (pr[2 * k] as usize, pr[2 * k + 1] as usize);
+                    entries.push((
+                        ContactKey::particles(p.id[a], p.id[b]),
+                        ContactState {
+                            spring: Vector3::new(
+                                spring[3 * k],
+                                spring[3 * k + 1],
+                                spring[3 * k + 2],
+                            ),
+                        },
+                    ));
+                }
+            }
+        }
+        let mut wall_forces = vec![Vector3::zeros(); self.walls.as_ref().map_or(0, |w| w.n)];
+        if let Some(w) = &self.walls {
+            let contact = st.clone_dtoh(&w.contact)?;
+            let spring = get(&w.spring_in)?;
+            let e = get(&w.energy)?;
+            let f = get(&w.per_wall_force)?;
+            for (i, ei) in e.iter().enumerate().take(n) {
+                energy += ei;
+                for (k, wf) in wall_forces.iter_mut().enumerate() {
+                    let s = i * w.n + k;
+                    if contact[s] != 0 {
+                        wall_contacts += 1;
+                        *wf += Vector3::new(f[3 * s], f[3 * s + 1], f[3 * s + 2]);
+                        entries.push((
+                            ContactKey::wall(p.id[i], k),
+                            ContactState {
+                                spring: Vector3::new(
+                                    spring[3 * s],
+                                    spring[3 * s + 1],
+                                    spring[3 * s + 2],
+                                ),
+                            },
+                        ));
+                    }
+                }
+            }
+        }
+        self.host.history = ContactHistory::from_entries(entries);
+        self.host.stats.contacts = contacts;
+        self.host.stats.wall_contacts = wall_contacts;
+        self.host.stats.elastic_energy = energy;
+        self.host.wall_forces = wall_forces;
+        self.host_current = true;
+        Ok(&self.host)
+    }
+}
