@@ -40,8 +40,10 @@ die() {
 # --- 1. System packages -------------------------------------------------------------------
 
 read -r -a apt_packages <<<"${POLYDEM_SETUP_APT_PACKAGES:-libopenmpi-dev openmpi-bin libclang-dev pkg-config}"
-if ! command -v cc >/dev/null 2>&1; then
-    apt_packages+=(build-essential) # Rust links through the system C compiler
+if ! command -v cc >/dev/null 2>&1 || ! command -v c++ >/dev/null 2>&1; then
+    # Rust links through the system C compiler; tests/cuda_geometry_host.rs compiles the CUDA
+    # geometry headers as host C++.
+    apt_packages+=(build-essential)
 fi
 if ! command -v "$PYTHON" >/dev/null 2>&1; then
     apt_packages+=(python3 python3-venv)
