@@ -293,6 +293,12 @@ pub fn facet_contact<T: Real>(
         volume: ov.volume,
         volume_centroid: ov.centroid,
         dv_dx: -ov.dv_dxb,
-        cap_area: ws.face_area(n_body),
+        // The workspace holds this evaluation's faces only when it computed an overlap
+        // (prism_overlap returns early for a separated body).
+        cap_area: if ov.volume > T::zero() {
+            ws.face_area(n_body)
+        } else {
+            T::zero()
+        },
     })
 }
