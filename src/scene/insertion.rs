@@ -387,7 +387,52 @@ impl Inserter {
         Ok(report)
     }
 
-    /// Draws one particle's scale and orientation and places it at `c` without any test.
+    /// Draws one particle's scale and orientation (in this order, from the insertion stream);
+    /// `None` for a type the scene does not define (validation prevents it).
+    fn draw(&mut self, ins: &Insertion, scene: &Scene) -> Option<(f64, UnitQuaternion<f64>)> {
+        let dist = scene.scale_distributions.get(ins.particle_type)?;
+        let scale = dist.sample(&mut self.rng);
+        let orientation = match &ins.orientation {
+            OrientationMode::Random => {
+                let q = self.rng.unit_quaternion();
+                UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+            }
+            OrientationMode::Fixed(q) => *q,
+        };
+        Some((scale, orientation))
+    }
+
+    /// Appends a particle of the insertion's type at `c` with the insertion's velocities.
+    fn push(
+        ins: &Insertion,
+        particles: &mut Particles,
+        scene: &Scene,
+        (scale, orientation): (f64, UnitQuaternion<f64>),
+        c: Vector3<f64>,
+        next_id: &mut u64,
+    ) {
+        let kind = ins.particle_type;
+        let ptype = &scene.particle_types[kind];
+        let density = scene
+            .materials
+            .get(ptype.material)
+            .map_or(0.0, |m| m.density);
+        particles.push(
+            *next_id,
+            kind as u32,
+            scale,
+            c,
+            orientation,
+            &scene.templates[ptype.template],
+            density,
+        );
+        let i = particles.len() - 1;
+        particles.velocity[i] = ins.velocity;
+        particles.angular_velocity[i] = ins.angular_velocity;
+        *next_id += 1;
+    }
+
+    /// Draws one particle and places it at `c` without any test (lattice insertion).
     fn place_at(
         &mut self,
         ins: &Insertion,
@@ -396,31 +441,9 @@ impl Inserter {
         c: Vector3<f64>,
         next_id: &mut u64,
     ) {
-        let kind = ins.particle_type;
-        let ptype = &scene.particle_types[kind];
-        let template = &scene.templates[ptype.template];
-        let density = scene.materials[ptype.material].density;
-        let scale = scene.scale_distributions[kind].sample(&mut self.rng);
-        let orientation = match &ins.orientation {
-            OrientationMode::Random => {
-                let q = self.rng.unit_quaternion();
-                UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
-            }
-            OrientationMode::Fixed(q) => *q,
-        };
-        particles.push(
-            *next_id,
-            kind as u32,
-            scale,
-            c,
-            orientation,
-            template,
-            density,
-        );
-        let i = particles.len() - 1;
-        particles.velocity[i] = ins.velocity;
-        particles.angular_velocity[i] = ins.angular_velocity;
-        *next_id += 1;
+        if let Some(body) = self.draw(ins, scene) {
+            Self::push(ins, particles, scene, body, c, next_id);
+        }
     }
 
     /// Draws one particle and tries to place it; false if no position was free.
@@ -433,47 +456,23 @@ impl Inserter {
         walls: &WallTriangles,
         next_id: &mut u64,
     ) -> bool {
-        let kind = ins.particle_type;
-        let (Some(ptype), Some(dist)) = (
-            scene.particle_types.get(kind),
-            scene.scale_distributions.get(kind),
-        ) else {
+        let Some(template) = scene
+            .particle_types
+            .get(ins.particle_type)
+            .and_then(|p| scene.templates.get(p.template))
+        else {
             return false;
         };
-        let Some(template) = scene.templates.get(ptype.template) else {
+        let Some(body) = self.draw(ins, scene) else {
             return false;
         };
-        let density = scene
-            .materials
-            .get(ptype.material)
-            .map_or(0.0, |m| m.density);
-        let scale = dist.sample(&mut self.rng);
-        let orientation = match &ins.orientation {
-            OrientationMode::Random => {
-                let q = self.rng.unit_quaternion();
-                UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
-            }
-            OrientationMode::Fixed(q) => *q,
-        };
-        let r = template.circumscribed_radius * scale;
+        let r = template.circumscribed_radius * body.0;
         for _ in 0..ins.max_attempts {
             let Some(c) = ins.region.sample_centre(&mut self.rng, r) else {
                 return false;
             };
             if occupied.is_free(&c, r) && walls.is_free(&c, r) {
-                particles.push(
-                    *next_id,
-                    kind as u32,
-                    scale,
-                    c,
-                    orientation,
-                    template,
-                    density,
-                );
-                let i = particles.len() - 1;
-                particles.velocity[i] = ins.velocity;
-                particles.angular_velocity[i] = ins.angular_velocity;
-                *next_id += 1;
+                Self::push(ins, particles, scene, body, c, next_id);
                 occupied.add(c, r);
                 return true;
             }
