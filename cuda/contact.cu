@@ -37,21 +37,6 @@ PD_DEVICE TemplateView template_view(unsigned int t) {
     return v;
 }
 
-PD_DEVICE V3<double> ld3(const double* a, size_t i) { return v3(a[3 * i], a[3 * i + 1], a[3 * i + 2]); }
-PD_DEVICE void st3(double* a, size_t i, V3<double> v) {
-    a[3 * i] = v.x;
-    a[3 * i + 1] = v.y;
-    a[3 * i + 2] = v.z;
-}
-PD_DEVICE Quat<double> ldq(const double* q, size_t i) {
-    Quat<double> r;
-    r.x = q[4 * i];
-    r.y = q[4 * i + 1];
-    r.z = q[4 * i + 2];
-    r.w = q[4 * i + 3];
-    return r;
-}
-
 // The particle state the contact stages read (device pointers, xyz-interleaved).
 struct ParticleView {
     const double* position;
@@ -99,32 +84,32 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
     }
     size_t k = (size_t)kk;
     int a = pairs[k].x, b = pairs[k].y;
-    V3<double> xa = ld3(p.position, a);
-    V3<double> xb = ld3(p.position, b);
+    V3<double> xa = load3(p.position, a);
+    V3<double> xb = load3(p.position, b);
 #if PD_PERIODIC
-    xb = xb + ld3(shift, k);
+    xb = xb + load3(shift, k);
 #endif
     V3<double> d = xb - xa;
     double reach = p.radius[a] + p.radius[b];
     clear_pair(out, k);
-    st3(spring_out, k, zero3<double>());
+    store3(spring_out, k, zero3<double>());
     // Stage 3: bounding spheres.
     if (norm2(d) >= reach * reach) {
-        st3(axes, k, zero3<double>());
+        store3(axes, k, zero3<double>());
         return;
     }
     BodyRef A, B;
     A.tpl = template_view(p.tmpl[a]);
     A.scale = p.scale[a];
     A.pos = xa;
-    A.rot = ldq(p.orientation, a);
+    A.rot = load_quat(p.orientation, a);
     B.tpl = template_view(p.tmpl[b]);
     B.scale = p.scale[b];
     B.pos = xb;
-    B.rot = ldq(p.orientation, b);
+    B.rot = load_quat(p.orientation, b);
     // Stage 4 shortcut: last step's separating axis, with a margin far above GJK's touching
     // tolerance, so the verdict is GJK's.
-    V3<double> axis = ld3(axes, k);
+    V3<double> axis = load3(axes, k);
     if (!(axis == zero3<double>()) && axis_separates(A, B, axis, 1e-9 * reach)) {
         return;
     }
@@ -134,14 +119,14 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
     int status = overlap_pair(ws, A, B, &g);
     if (status != STATUS_OK) {
         report_error(error, status, (unsigned int)k);
-        st3(axes, k, zero3<double>());
+        store3(axes, k, zero3<double>());
         return;
     }
     if (g.overlap.volume <= 0.0) {
-        st3(axes, k, g.separating_axis);
+        store3(axes, k, g.separating_axis);
         return;
     }
-    st3(axes, k, zero3<double>());
+    store3(axes, k, zero3<double>());
     // Stage 7: the contact law.
     unsigned int ma = p.material[a], mb = p.material[b];
     const PairMaterial& pm = materials[ma * (unsigned int)n_materials + mb];
@@ -153,31 +138,31 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
     ContactKinematics kin;
     kin.x_a = xa;
     kin.x_b = xb;
-    kin.v_a = ld3(p.velocity, a);
-    kin.v_b = ld3(p.velocity, b);
-    kin.w_a = ld3(p.angular_velocity, a);
-    kin.w_b = ld3(p.angular_velocity, b);
+    kin.v_a = load3(p.velocity, a);
+    kin.v_b = load3(p.velocity, b);
+    kin.w_a = load3(p.angular_velocity, a);
+    kin.w_b = load3(p.angular_velocity, b);
     double area = norm(g.overlap.dv_dxb);
     if (area > 0.0) {
         V3<double> nrm = (-g.overlap.dv_dxb) / area;
         double inverse = 0.0;
-        inverse += inverse_mass_term(p.mass[a], ld3(p.inertia, a), A.rot, xa, g.overlap.centroid, nrm);
-        inverse += inverse_mass_term(p.mass[b], ld3(p.inertia, b), B.rot, xb, g.overlap.centroid, nrm);
+        inverse += inverse_mass_term(p.mass[a], load3(p.inertia, a), A.rot, xa, g.overlap.centroid, nrm);
+        inverse += inverse_mass_term(p.mass[b], load3(p.inertia, b), B.rot, xb, g.overlap.centroid, nrm);
         kin.effective_mass = 1.0 / inverse;
     } else {
         kin.effective_mass = min_(p.mass[a], p.mass[b]);
     }
     V3<double> spring = zero3<double>();
 #if PD_FRICTION
-    spring = ld3(spring_in, k);
+    spring = load3(spring_in, k);
 #endif
     ContactForces f = contact_forces(params, pm.damping, g.overlap, kin, &spring, dt);
-    st3(out.forces, 3 * k, f.force_b);
-    st3(out.forces, 3 * k + 1, f.torque_a);
-    st3(out.forces, 3 * k + 2, f.torque_b);
+    store3(out.forces, 3 * k, f.force_b);
+    store3(out.forces, 3 * k + 1, f.torque_a);
+    store3(out.forces, 3 * k + 2, f.torque_b);
     out.energy[k] = f.elastic_energy;
     out.contact[k] = 1u;
-    st3(spring_out, k, spring);
+    store3(spring_out, k, spring);
 }
 
 #if PD_WALLS
@@ -263,8 +248,8 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
     size_t i = (size_t)ii;
     V3<double> force = zero3<double>(), torque = zero3<double>();
     double energy = 0.0;
-    V3<double> xp = ld3(p.position, i);
-    Quat<double> qp = ldq(p.orientation, i);
+    V3<double> xp = load3(p.position, i);
+    Quat<double> qp = load_quat(p.orientation, i);
     TemplateView tv = template_view(p.tmpl[i]);
     double radius = p.radius[i];
     PosedPolytope<double> body;
@@ -272,8 +257,8 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
     unsigned int cand[PD_MAX_WALL_CANDIDATES];
     for (int k = 0; k < n_walls; ++k) {
         size_t slot = i * (size_t)n_walls + (size_t)k;
-        st3(spring_out, slot, zero3<double>());
-        st3(per_wall_force, slot, zero3<double>());
+        store3(spring_out, slot, zero3<double>());
+        store3(per_wall_force, slot, zero3<double>());
         wall_contact[slot] = 0u;
         const WallInfo& w = walls[k];
         const WallState& s = states[k];
@@ -384,34 +369,34 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
         ContactKinematics kin;
         kin.x_a = xp;
         kin.x_b = c;
-        kin.v_a = ld3(p.velocity, i);
+        kin.v_a = load3(p.velocity, i);
         V3<double> omega = v3(s.omega[0], s.omega[1], s.omega[2]);
         kin.v_b = v3(s.v0[0], s.v0[1], s.v0[2]) + cross(omega, c - v3(s.origin[0], s.origin[1], s.origin[2]));
-        kin.w_a = ld3(p.angular_velocity, i);
+        kin.w_a = load3(p.angular_velocity, i);
         kin.w_b = omega;
         double area = norm(world.dv_dxb);
         if (area > 0.0) {
             V3<double> nrm = (-world.dv_dxb) / area;
             double inverse = 0.0;
-            inverse += inverse_mass_term(p.mass[i], ld3(p.inertia, i), qp, xp, c, nrm);
+            inverse += inverse_mass_term(p.mass[i], load3(p.inertia, i), qp, xp, c, nrm);
             kin.effective_mass = 1.0 / inverse;
         } else {
             kin.effective_mass = p.mass[i];
         }
         V3<double> spring = zero3<double>();
 #if PD_FRICTION
-        spring = ld3(spring_in, slot);
+        spring = load3(spring_in, slot);
 #endif
         ContactForces f = contact_forces(params, pm.damping, world, kin, &spring, dt);
         force -= f.force_b;
         torque += f.torque_a;
         energy += f.elastic_energy;
-        st3(per_wall_force, slot, f.force_b);
-        st3(spring_out, slot, spring);
+        store3(per_wall_force, slot, f.force_b);
+        store3(spring_out, slot, spring);
         wall_contact[slot] = 1u;
     }
-    st3(wall_force, i, force);
-    st3(wall_torque, i, torque);
+    store3(wall_force, i, force);
+    store3(wall_torque, i, torque);
     wall_energy[i] = energy;
 }
 #endif
@@ -431,17 +416,17 @@ extern "C" __global__ void reduce_forces(int n, const unsigned int* ref_offset, 
         unsigned int r = refs[m];
         size_t k = r >> 1;
         if (r & 1u) {
-            f += ld3(pair_forces, 3 * k);
-            t += ld3(pair_forces, 3 * k + 2);
+            f += load3(pair_forces, 3 * k);
+            t += load3(pair_forces, 3 * k + 2);
         } else {
-            f -= ld3(pair_forces, 3 * k);
-            t += ld3(pair_forces, 3 * k + 1);
+            f -= load3(pair_forces, 3 * k);
+            t += load3(pair_forces, 3 * k + 1);
         }
     }
 #if PD_WALLS
-    f += ld3(wall_force, i);
-    t += ld3(wall_torque, i);
+    f += load3(wall_force, i);
+    t += load3(wall_torque, i);
 #endif
-    st3(force, i, f);
-    st3(torque, i, t);
+    store3(force, i, f);
+    store3(torque, i, t);
 }

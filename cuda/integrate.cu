@@ -11,27 +11,6 @@
 
 using namespace pd;
 
-PD_DEVICE V3<double> load3(const double* a, int i) { return v3(a[3 * i], a[3 * i + 1], a[3 * i + 2]); }
-PD_DEVICE void store3(double* a, int i, V3<double> v) {
-    a[3 * i] = v.x;
-    a[3 * i + 1] = v.y;
-    a[3 * i + 2] = v.z;
-}
-PD_DEVICE Quat<double> load_quat(const double* q, int i) {
-    Quat<double> r;
-    r.x = q[4 * i];
-    r.y = q[4 * i + 1];
-    r.z = q[4 * i + 2];
-    r.w = q[4 * i + 3];
-    return r;
-}
-PD_DEVICE void store_quat(double* q, int i, Quat<double> r) {
-    q[4 * i] = r.x;
-    q[4 * i + 1] = r.y;
-    q[4 * i + 2] = r.z;
-    q[4 * i + 3] = r.w;
-}
-
 // Hamilton product a b, in nalgebra's order of operations.
 PD_DEVICE Quat<double> quat_mul(Quat<double> a, Quat<double> b) {
     Quat<double> r;

@@ -12,8 +12,6 @@
 
 using namespace pd;
 
-PD_DEVICE V3<double> load3(const double* a, int i) { return v3(a[3 * i], a[3 * i + 1], a[3 * i + 2]); }
-
 // cell[i] = its cell; cell_count[cell] += 1.
 extern "C" __global__ void bin_particles(int n, const double* position, GridParams grid, unsigned int* cell,
                                          unsigned int* cell_count) {

@@ -7,6 +7,29 @@
 
 namespace pd {
 
+// Loads and stores of the particle arrays' layout: vectors as three consecutive doubles, unit
+// quaternions as (x, y, z, w), nalgebra's storage order.
+PD_HD V3<double> load3(const double* a, size_t i) { return v3(a[3 * i], a[3 * i + 1], a[3 * i + 2]); }
+PD_HD void store3(double* a, size_t i, V3<double> v) {
+    a[3 * i] = v.x;
+    a[3 * i + 1] = v.y;
+    a[3 * i + 2] = v.z;
+}
+PD_HD Quat<double> load_quat(const double* q, size_t i) {
+    Quat<double> r;
+    r.x = q[4 * i];
+    r.y = q[4 * i + 1];
+    r.z = q[4 * i + 2];
+    r.w = q[4 * i + 3];
+    return r;
+}
+PD_HD void store_quat(double* q, size_t i, Quat<double> r) {
+    q[4 * i] = r.x;
+    q[4 * i + 1] = r.y;
+    q[4 * i + 2] = r.z;
+    q[4 * i + 3] = r.w;
+}
+
 // The domain box and the neighbour grid (shared with Rust: `GridParams`). Mirrors
 // src/neighbor/mod.rs `Bounds` and `Grid`.
 struct GridParams {
