@@ -4,6 +4,7 @@
 //! of the structs they share with Rust, so a layout drift fails here.
 
 use polydem::backend::cuda::kernels::{KERNEL_FILES, compile};
+use polydem::backend::cuda::probe::PROBE_FILE;
 use polydem::backend::cuda::{KernelConfig, Precision};
 
 fn configs() -> Vec<KernelConfig> {
@@ -55,7 +56,7 @@ fn every_kernel_compiles_with_nvrtc_for_sm_90() {
     );
     let mut failures = Vec::new();
     for config in configs() {
-        for file in KERNEL_FILES {
+        for file in KERNEL_FILES.iter().chain([&PROBE_FILE]) {
             let t = std::time::Instant::now();
             match compile(file, &config, 90) {
                 Ok(_) => println!(

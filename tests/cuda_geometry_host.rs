@@ -548,12 +548,116 @@ fn build_harness(root: &Path, dir: &Path) -> PathBuf {
     exe
 }
 
-#[test]
-fn cuda_geometry_headers_match_the_rust_reference_in_f64_and_f32() {
+/// The harness's output lines for the cases, from the host-compiled headers.
+fn harness_lines(shapes: &[Shape], pairs: &[PairCase], facets: &[FacetCase]) -> Vec<String> {
     let root = repo_root();
     let dir = temp_dir("cuda-geometry-host");
     let exe = build_harness(&root, &dir);
+    let cases = dir.join("cases.txt");
+    std::fs::write(&cases, case_file(shapes, pairs, facets)).unwrap();
+    let out = Command::new(&exe).arg(&cases).output().unwrap();
+    assert!(
+        out.status.success(),
+        "harness failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(String::from)
+        .collect()
+}
 
+fn put_overlap(out: &mut String, o: &Overlap<f64>) {
+    hex(out, o.volume);
+    hex3(out, &o.centroid);
+    hex3(out, &o.dv_dxb);
+    hex3(out, &o.moment_b);
+    hex(out, o.depth);
+    hex(out, o.thickness);
+}
+
+/// The same lines from the kernels of `cuda/probe.cu`, compiled by NVRTC and run on GPU 0.
+fn gpu_lines(shapes: &[Shape], pairs: &[PairCase], facets: &[FacetCase]) -> Vec<String> {
+    use polydem::backend::cuda::probe::{GeometryProbe, ProbeBody, ProbeFacet, ProbePair};
+    let templates: Vec<&ConvexTemplate> = shapes.iter().map(|s| &s.template).collect();
+    let mv = templates.iter().map(|t| t.vertices.len()).max().unwrap();
+    let mf = templates.iter().map(|t| t.faces.len()).max().unwrap();
+    let probe = GeometryProbe::new(0, mv, mf).expect("GPU probe");
+    println!(
+        "GPU: {} (workspace for {mv} vertices, {mf} faces)",
+        probe.device
+    );
+    let body = |template, scale, pose: &Isometry3<f64>| ProbeBody {
+        template,
+        scale,
+        pose: *pose,
+    };
+    let pair_cases: Vec<ProbePair> = pairs
+        .iter()
+        .map(|c| ProbePair {
+            a: body(c.a, c.sa, &c.pose_a),
+            b: body(c.b, c.sb, &c.pose_b),
+            axis: c.axis,
+            margin: c.margin,
+        })
+        .collect();
+    let facet_cases: Vec<ProbeFacet> = facets
+        .iter()
+        .map(|c| ProbeFacet {
+            body: body(c.t, c.s, &c.pose),
+            origin: c.origin,
+            triangle: c.tri,
+        })
+        .collect();
+    let mut lines = Vec::new();
+    for (i, (r64, r32, sep)) in probe
+        .pairs(&templates, &pair_cases)
+        .expect("probe_pairs")
+        .iter()
+        .enumerate()
+    {
+        let mut l = format!("P {i}");
+        for r in [r64, r32] {
+            write!(l, " {} {}", r.status, u8::from(r.intersects)).unwrap();
+            hex3(&mut l, &r.separating_axis);
+            put_overlap(&mut l, &r.overlap);
+        }
+        write!(l, " {}", u8::from(*sep)).unwrap();
+        lines.push(l);
+    }
+    for (i, (r64, r32)) in probe
+        .facets(&templates, &facet_cases)
+        .expect("probe_facets")
+        .iter()
+        .enumerate()
+    {
+        let mut l = format!("F {i}");
+        for r in [r64, r32] {
+            write!(l, " {} {}", r.prism_status, r.status).unwrap();
+            put_overlap(&mut l, &r.overlap);
+        }
+        lines.push(l);
+    }
+    lines
+}
+
+#[test]
+fn cuda_geometry_headers_match_the_rust_reference_in_f64_and_f32() {
+    parity("C++", harness_lines);
+}
+
+/// The same cases and tolerances with the headers compiled by NVRTC and run on the GPU: the
+/// geometry of stages 4–6 on the device is the Rust reference's, bit for bit.
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn cuda_geometry_kernels_match_the_rust_reference_on_the_gpu() {
+    parity("GPU", gpu_lines);
+}
+
+/// Runs the Rust reference and `produce` (C++ on the host, or the GPU) on the same cases and
+/// compares them.
+fn parity(what: &str, produce: fn(&[Shape], &[PairCase], &[FacetCase]) -> Vec<String>) {
     let shapes = test_shapes();
     let mut pairs = pair_cases(&shapes, N_PAIRS, 4242);
     let facets = facet_cases(&shapes, N_FACETS, 99);
@@ -603,21 +707,12 @@ fn cuda_geometry_headers_match_the_rust_reference_in_f64_and_f32() {
         })
         .collect();
 
-    // The harness on the same cases.
-    let cases = dir.join("cases.txt");
-    std::fs::write(&cases, case_file(&shapes, &pairs, &facets)).unwrap();
-    let out = Command::new(&exe).arg(&cases).output().unwrap();
-    assert!(
-        out.status.success(),
-        "harness failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = String::from_utf8(out.stdout).unwrap();
-    let lines: Vec<&str> = text.lines().collect();
+    // The C++ headers on the same cases.
+    let lines = produce(&shapes, &pairs, &facets);
     assert_eq!(
         lines.len(),
         pairs.len() + facets.len(),
-        "harness printed {} lines for {} cases",
+        "{what} printed {} lines for {} cases",
         lines.len(),
         pairs.len() + facets.len()
     );
@@ -631,6 +726,7 @@ fn cuda_geometry_headers_match_the_rust_reference_in_f64_and_f32() {
     );
     let mut kinds = std::collections::BTreeMap::<String, usize>::new();
     let mut axis_checked = [0usize; 2];
+    let mut worst_mixed = 0.0f64;
     for (i, (c, (r64, r32, sep, size))) in pairs.iter().zip(&want_pairs).enumerate() {
         let toks: Vec<&str> = lines[i].split_whitespace().collect();
         assert_eq!(toks.len(), 37, "pair line {i}: {}", lines[i]);
@@ -673,6 +769,20 @@ fn cuda_geometry_headers_match_the_rust_reference_in_f64_and_f32() {
             &mut w32,
             &mut failures,
         );
+        // Mixed precision's promise: the f32 volume within 1e-4 of the f64 one wherever the
+        // overlap is above f32 round-off (V > 1e-6 of the smaller body, as in overlap_oracle.rs).
+        let v_small = (shapes[c.a].template.volume * c.sa.powi(3))
+            .min(shapes[c.b].template.volume * c.sb.powi(3));
+        if r64.status == 0 && g32.status == 0 && r64.overlap.volume > 1e-6 * v_small {
+            let e = (g32.overlap.volume - r64.overlap.volume).abs() / r64.overlap.volume;
+            worst_mixed = worst_mixed.max(e);
+            if e > 1e-4 {
+                failures.push(format!(
+                    "{label}: f32 volume {:e} is {e:e} off the f64 volume {:e}",
+                    g32.overlap.volume, r64.overlap.volume
+                ));
+            }
+        }
         if gsep != *sep {
             failures.push(format!("{label}: axis_separates Rust {sep}, C++ {gsep}"));
         }
@@ -699,7 +809,7 @@ fn cuda_geometry_headers_match_the_rust_reference_in_f64_and_f32() {
     }
     let mut facet_hits = 0;
     for (i, (c, ((p64, f64r), (p32, f32r)))) in facets.iter().zip(&want_facets).enumerate() {
-        let line = lines[pairs.len() + i];
+        let line = &lines[pairs.len() + i];
         let toks: Vec<&str> = line.split_whitespace().collect();
         assert_eq!(toks.len(), 30, "facet line {i}: {line}");
         assert_eq!((toks[0], toks[1]), ("F", i.to_string().as_str()));
@@ -761,10 +871,11 @@ fn cuda_geometry_headers_match_the_rust_reference_in_f64_and_f32() {
         "facets with a penetrating volume: {facet_hits} of {}",
         facets.len()
     );
-    w64.report("overlap_pair f64");
-    w32.report("overlap_pair f32");
-    wf64.report("prism_overlap f64");
-    wf32.report("prism_overlap f32");
+    println!("{what} f32 volume vs the f64 one (V > 1e-6 V_small): worst {worst_mixed:.3e}");
+    w64.report(&format!("{what} overlap_pair f64"));
+    w32.report(&format!("{what} overlap_pair f32"));
+    wf64.report(&format!("{what} prism_overlap f64"));
+    wf32.report(&format!("{what} prism_overlap f32"));
 
     // The case mix must exercise every path that matters.
     let count = |k: &str| kinds.get(k).copied().unwrap_or(0);
@@ -809,7 +920,7 @@ fn cuda_geometry_headers_match_the_rust_reference_in_f64_and_f32() {
     ] {
         assert!(
             w.bitwise as f64 >= MIN_BITWISE * w.compared as f64,
-            "{title}: only {} of {} results bitwise identical to the Rust reference",
+            "{what} {title}: only {} of {} results bitwise identical to the Rust reference",
             w.bitwise,
             w.compared
         );

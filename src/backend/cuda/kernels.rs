@@ -25,6 +25,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("integrate.cu", include_str!("../../../cuda/integrate.cu")),
     ("neighbor.cu", include_str!("../../../cuda/neighbor.cu")),
     ("contact.cu", include_str!("../../../cuda/contact.cu")),
+    ("probe.cu", include_str!("../../../cuda/probe.cu")),
 ];
 
 /// The kernel files (translation units) of the step, in stage order.

@@ -5,6 +5,7 @@ mod contacts;
 pub mod kernels;
 pub mod layout;
 mod pairs;
+pub mod probe;
 pub mod simulation;
 mod sync;
 mod upload;
