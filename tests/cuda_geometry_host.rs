@@ -657,7 +657,10 @@ fn cuda_geometry_kernels_match_the_rust_reference_on_the_gpu() {
 
 /// Runs the Rust reference and `produce` (C++ on the host, or the GPU) on the same cases and
 /// compares them.
-fn parity(what: &str, produce: fn(&[Shape], &[PairCase], &[FacetCase]) -> Vec<String>) {
+/// Produces the harness's output lines for the cases.
+type Producer = fn(&[Shape], &[PairCase], &[FacetCase]) -> Vec<String>;
+
+fn parity(what: &str, produce: Producer) {
     let shapes = test_shapes();
     let mut pairs = pair_cases(&shapes, N_PAIRS, 4242);
     let facets = facet_cases(&shapes, N_FACETS, 99);
