@@ -610,6 +610,23 @@ impl Simulation {
         Ok(())
     }
 
+    /// The candidate pair list of stage 2 as global-id pairs (lower id first), sorted: what the
+    /// GPU's list must equal after a build from the same positions.
+    pub fn candidate_pair_ids(&self) -> Vec<(u64, u64)> {
+        let id = &self.particles.id;
+        let mut v: Vec<(u64, u64)> = self
+            .pairs
+            .pairs
+            .iter()
+            .map(|&[a, b]| {
+                let (x, y) = (id[a as usize], id[b as usize]);
+                (x.min(y), x.max(y))
+            })
+            .collect();
+        v.sort_unstable();
+        v
+    }
+
     /// Kinetic energy (translational, rotational) and gravitational potential energy
     /// (relative to the origin).
     pub fn energies(&self) -> (f64, f64, f64) {

@@ -3,13 +3,14 @@
 //! (stage 10 of DESIGN.md §1).
 
 use crate::backend;
+use crate::backend::Engine;
 use crate::backend::cuda::{CudaSimulation, Precision};
 use crate::io::checkpoint::fnv1a64;
 use crate::io::{
     Checkpoint, FrameView, FrameWriter, SeriesRow, SeriesWriter, WallView, read_checkpoint,
     write_atomic, write_checkpoint, write_particle_csv,
 };
-use crate::pipeline::{Simulation, SimulationError};
+use crate::pipeline::Simulation;
 use crate::scene::{
     Inserter, InserterState, Scene, check_report, face_contact_times, impact_speed, load_scene,
 };
@@ -80,38 +81,6 @@ fn choose_backend(choice: BackendChoice) -> Result<&'static str> {
                 Ok("cpu")
             }
         },
-    }
-}
-
-/// The simulation a run steps: on the CPU, or on the GPU with a host copy synced for output.
-enum Engine {
-    Cpu(Box<Simulation>),
-    Cuda(Box<CudaSimulation>),
-}
-
-impl Engine {
-    fn step(&mut self) -> Result<()> {
-        match self {
-            Engine::Cpu(s) => s.step().map_err(|e: SimulationError| anyhow!("{e}")),
-            Engine::Cuda(c) => c.step().map_err(|e| anyhow!("{e}")),
-        }
-    }
-
-    /// The host simulation: time, step, dt, scene and particle count are always current; the
-    /// particle state and statistics only after [`Engine::synced`].
-    fn host(&self) -> &Simulation {
-        match self {
-            Engine::Cpu(s) => s,
-            Engine::Cuda(c) => &c.host,
-        }
-    }
-
-    /// The host simulation with the device state copied in.
-    fn synced(&mut self) -> Result<&Simulation> {
-        match self {
-            Engine::Cpu(s) => Ok(s),
-            Engine::Cuda(c) => c.sync_host().map_err(|e| anyhow!("{e}")),
-        }
     }
 }
 

@@ -1,11 +1,13 @@
 //! Validation cases 3–5 on the CPU: energy conservation of elastic frictionless collisions and
 //! its dt² convergence, restitution for vertex, edge and face impacts, and a polyhedron at rest
-//! on a plane. Each test states its tolerance.
+//! on a plane. Each test states its tolerance. The same tests run on the GPU (double and mixed
+//! pair geometry) in the `*_on_gpu_*` variants, with the same tolerances.
 
 mod common;
 
 use common::*;
 use nalgebra::{UnitQuaternion, Vector3};
+use polydem::backend::{Device, Engine};
 use polydem::pipeline::Simulation;
 use polydem::scene::parse_scene;
 use std::f64::consts::FRAC_PI_4;
@@ -55,18 +57,21 @@ fn total_energy(sim: &Simulation) -> f64 {
     kt + kr + pg + sim.stats.elastic_energy
 }
 
-fn in_contact(sim: &Simulation) -> bool {
-    sim.stats.contacts + sim.stats.wall_contacts > 0
+fn in_contact(e: &mut Engine) -> bool {
+    let (pairs, walls) = e.contact_counts().unwrap();
+    pairs + walls > 0
 }
 
-/// Runs until a contact has begun and ended; returns (steps in contact, relative energy change).
-fn collide(mut sim: Simulation) -> (u64, f64) {
+/// Runs until a contact has begun and ended on `device`; returns (steps in contact, relative
+/// energy change).
+fn collide(mut sim: Simulation, device: Device) -> (u64, f64) {
     sim.refresh().unwrap();
     let e0 = total_energy(&sim);
+    let mut e = engine(sim, device);
     let (mut touched, mut contact_steps) = (false, 0);
     for _ in 0..2_000_000 {
-        sim.step().unwrap();
-        if in_contact(&sim) {
+        e.step().unwrap();
+        if in_contact(&mut e) {
             touched = true;
             contact_steps += 1;
         } else if touched {
@@ -74,7 +79,10 @@ fn collide(mut sim: Simulation) -> (u64, f64) {
         }
     }
     assert!(touched, "no collision");
-    (contact_steps, (total_energy(&sim) - e0).abs() / e0)
+    (
+        contact_steps,
+        (total_energy(e.synced().unwrap()) - e0).abs() / e0,
+    )
 }
 
 /// Two spinning dodecahedra (circumscribed diameter 2 cm) collide off-centre, and one spins
@@ -83,6 +91,22 @@ fn collide(mut sim: Simulation) -> (u64, f64) {
 /// over dt = t_c/50 … t_c/200).
 #[test]
 fn elastic_collisions_conserve_energy_to_second_order() {
+    elastic_collisions(CPU);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn elastic_collisions_on_gpu_double() {
+    elastic_collisions(GPU_DOUBLE);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn elastic_collisions_on_gpu_mixed() {
+    elastic_collisions(GPU_MIXED);
+}
+
+fn elastic_collisions(device: Device) {
     let dodeca = "{ kind = \"dodecahedron\", size = 0.02 }";
     let q1 = UnitQuaternion::from_euler_angles(0.3, 1.1, -0.4);
     let q2 = UnitQuaternion::from_euler_angles(-0.9, 0.2, 2.0);
@@ -122,17 +146,17 @@ fn elastic_collisions_conserve_energy_to_second_order() {
         ("particle-particle", &pair as &dyn Fn(f64) -> Simulation),
         ("particle-wall", &wall),
     ] {
-        // Contact duration from a fine run.
+        // Contact duration from a fine run (on the CPU: it only sets the time steps).
         let fine_dt = 2e-7;
-        let (steps, _) = collide(build(fine_dt));
+        let (steps, _) = collide(build(fine_dt), CPU);
         let tc = steps as f64 * fine_dt;
         let errors: Vec<f64> = [50.0, 100.0, 200.0]
             .iter()
-            .map(|n| collide(build(tc / n)).1)
+            .map(|n| collide(build(tc / n), device).1)
             .collect();
         let orders: Vec<f64> = errors.windows(2).map(|w| (w[0] / w[1]).log2()).collect();
         println!(
-            "{name}: t_c = {tc:.3e} s; relative energy error at t_c/50, /100, /200: {errors:?}; observed orders {orders:.2?}"
+            "{device:?} {name}: t_c = {tc:.3e} s; relative energy error at t_c/50, /100, /200: {errors:?}; observed orders {orders:.2?}"
         );
         assert!(
             errors[0] < 1e-4,
@@ -157,6 +181,22 @@ fn elastic_collisions_conserve_energy_to_second_order() {
 /// 0.9, at dt = t_c/50 of each impact.
 #[test]
 fn restitution_is_prescribed_for_vertex_edge_and_face_impacts() {
+    restitution(CPU);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn restitution_on_gpu_double() {
+    restitution(GPU_DOUBLE);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn restitution_on_gpu_mixed() {
+    restitution(GPU_MIXED);
+}
+
+fn restitution(device: Device) {
     let cube = "{ kind = \"cuboid\", a = 0.01, b = 0.01, c = 0.01 }";
     // Orientations that put a vertex, an edge or a face straight below the centre.
     let vertex =
@@ -183,34 +223,36 @@ fn restitution_is_prescribed_for_vertex_edge_and_face_impacts() {
                 s.refresh().unwrap();
                 s
             };
-            let run = |mut s: Simulation| {
+            let run = |s: Simulation, device: Device| {
+                let mut s = engine(s, device);
                 let (mut touched, mut steps) = (false, 0u64);
                 for _ in 0..2_000_000 {
                     s.step().unwrap();
-                    if in_contact(&s) {
+                    if in_contact(&mut s) {
                         touched = true;
                         steps += 1;
                     } else if touched {
                         break;
                     }
                 }
-                (steps, s.particles.velocity[0].z)
+                (steps, s.synced().unwrap().particles.velocity[0].z)
             };
+            // The contact time from a fine run, on the CPU (it only sets the time step).
             let fine = 5e-8;
-            let (steps, _) = run(build_at(fine, 1e-6));
+            let (steps, _) = run(build_at(fine, 1e-6), CPU);
             let tc = steps as f64 * fine;
             // The first contact step samples the contact at some fraction of a step after first
             // touch; its phase shifts each impact's e_out a little (most for the infinitely stiff
             // start of a face contact). e is judged as the mean over eight evenly spread phases.
             let dt = tc / 50.0;
             let outs: Vec<f64> = (0..8)
-                .map(|k| run(build_at(dt, 1e-6 + dt * k as f64 / 8.0)).1)
+                .map(|k| run(build_at(dt, 1e-6 + dt * k as f64 / 8.0), device).1)
                 .collect();
             let e_out = outs.iter().sum::<f64>() / 8.0;
             let spread = outs.iter().cloned().fold(f64::MIN, f64::max)
                 - outs.iter().cloned().fold(f64::MAX, f64::min);
             println!(
-                "{name} impact, e_in {e}: e_out {e_out:.4} (spread over phases {spread:.4}; t_c {tc:.3e} s)"
+                "{device:?} {name} impact, e_in {e}: e_out {e_out:.4} (spread over phases {spread:.4}; t_c {tc:.3e} s)"
             );
             if ((e_out - e) / e).abs() > 0.03 {
                 failures.push(format!("{name}, e_in {e}: e_out {e_out:.4}"));
@@ -234,6 +276,22 @@ fn restitution_is_prescribed_for_vertex_edge_and_face_impacts() {
 /// resting faces (`polydem check` reports it).
 #[test]
 fn a_polyhedron_comes_to_rest_on_a_plane() {
+    rest(CPU);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn rest_on_gpu_double() {
+    rest(GPU_DOUBLE);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn rest_on_gpu_mixed() {
+    rest(GPU_MIXED);
+}
+
+fn rest(device: Device) {
     let g = 9.81;
     let dt = 2e-6;
     let e_soft = 1e5;
@@ -289,14 +347,16 @@ fn a_polyhedron_comes_to_rest_on_a_plane() {
             Vector3::zeros(),
         );
         s.refresh().unwrap();
+        let mut e = engine(s, device);
         for _ in 0..100_000 {
-            s.step().unwrap();
+            e.step().unwrap();
         }
+        let s = e.synced().unwrap();
         let l = 2.0 * t.circumscribed_radius;
         let ke = s.particles.kinetic_energy(0);
         let f = s.wall_forces[0];
         println!(
-            "{name}: δ_eq = {delta:.3e} m; after 1e5 steps KE/(m g L) = {:.3e}, wall force/(m g) = {:?}",
+            "{device:?} {name}: δ_eq = {delta:.3e} m; after 1e5 steps KE/(m g L) = {:.3e}, wall force/(m g) = {:?}",
             ke / (m * g * l),
             (f / (m * g)).as_slice()
         );

@@ -3,12 +3,14 @@
 //! frictionless, e = 0.85, no gravity, Δt = 5e-7 s. After the first separation its normal
 //! velocity and angular velocity are compared with the rigid-body single-point impact:
 //! `v'/v₀ = (e k² − r²)/(k² + r²)`, `ω' = −(1 + e) v₀ r/(k² + r²)`, with `k² = I⊥/m` and the
-//! contact vertex's lever arm `r` taken from the polyhedron itself.
+//! contact vertex's lever arm `r` taken from the polyhedron itself. The `*_on_gpu_*` variants
+//! run the same impacts, with the same tolerances, on the GPU.
 
 mod common;
 
 use common::*;
 use nalgebra::{UnitQuaternion, Vector3};
+use polydem::backend::Device;
 use polydem::pipeline::Simulation;
 use polydem::scene::parse_scene;
 
@@ -20,7 +22,7 @@ struct Impact {
     w_ref: f64,
 }
 
-fn impact(theta_deg: f64) -> Impact {
+fn impact(theta_deg: f64, device: Device) -> Impact {
     let root = repo_root();
     let mesh = root.join("meshes/particles/cylinder_42.stl");
     let types = format!(
@@ -64,11 +66,12 @@ fn impact(theta_deg: f64) -> Impact {
         .push(0, 0, 1.0, centre, orientation, &t, 1245.0);
     sim.particles.velocity[0] = Vector3::new(0.0, 0.0, -v0);
     sim.refresh().unwrap();
+    let mut e = engine(sim, device);
     let (mut touched, mut steps) = (false, 0);
     while steps < 400_000 {
-        sim.step().unwrap();
+        e.step().unwrap();
         steps += 1;
-        if sim.stats.wall_contacts > 0 {
+        if e.contact_counts().unwrap().1 > 0 {
             touched = true;
         } else if touched {
             break;
@@ -78,6 +81,7 @@ fn impact(theta_deg: f64) -> Impact {
         touched && steps < 400_000,
         "θ {theta_deg}: no complete impact"
     );
+    let sim = e.synced().unwrap();
     // Reference with the polyhedron's own inertia and lever arm.
     let m = sim.particles.mass[0];
     let i_perp = {
@@ -103,10 +107,26 @@ fn impact(theta_deg: f64) -> Impact {
 
 #[test]
 fn cylinder_wall_impact_matches_rigid_body_theory() {
-    println!("theta   v'/v0 (sim, ref)        w'/v0 [1/m] (sim, ref)");
+    impacts(CPU);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn cylinder_wall_impact_on_gpu_double() {
+    impacts(GPU_DOUBLE);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn cylinder_wall_impact_on_gpu_mixed() {
+    impacts(GPU_MIXED);
+}
+
+fn impacts(device: Device) {
+    println!("{device:?}\ntheta   v'/v0 (sim, ref)        w'/v0 [1/m] (sim, ref)");
     let mut failures = Vec::new();
     for theta in [10.0, 15.0, 20.0, 30.0, 45.0, 60.0, 75.0, 80.0] {
-        let r = impact(theta);
+        let r = impact(theta, device);
         println!(
             "{:5.1}  {:8.4} {:8.4}   {:9.2} {:9.2}",
             r.theta, r.v_ratio, r.v_ref, r.w_ratio, r.w_ref

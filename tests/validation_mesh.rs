@@ -2,12 +2,13 @@
 //! L_c = 2.5 cm, ρ = 1500, E = 1 MPa, ν = 0.1, μ = 0.8, e = 0.1, Δt = 1e-5 s) pressed into a flat
 //! wall and moved at constant speed along x across walls meshed at λ = L_c/L_m = 0.5, 1, 1.8, 3
 //! and 4. The normal and tangential wall forces against κ = Δx/L_c must be the same curve for
-//! every mesh: within 1 % of the force scale.
+//! every mesh: within 1 % of the force scale. The `*_on_gpu_*` variants run the same on the GPU.
 
 mod common;
 
 use common::*;
 use nalgebra::{Point3, UnitQuaternion, Vector3};
+use polydem::backend::Device;
 use polydem::pipeline::Simulation;
 use polydem::scene::parse_scene;
 use polydem::shape::MeshFile;
@@ -52,7 +53,7 @@ fn write_wall(path: &std::path::Path, cell: f64) {
 }
 
 /// Normal and tangential wall force along the path, one sample per step.
-fn push_across(lambda: f64, dir: &std::path::Path) -> Vec<(f64, f64, f64)> {
+fn push_across(lambda: f64, dir: &std::path::Path, device: Device) -> Vec<(f64, f64, f64)> {
     let lc = 0.025;
     let wall = dir.join(format!("wall_{lambda}.stl"));
     write_wall(&wall, lc / lambda);
@@ -104,14 +105,20 @@ dir = "{}"
         &t,
         1500.0,
     );
+    let mut e = engine(sim, device);
     let mut samples = Vec::new();
     let steps = (0.1 / v / dt) as usize; // κ from 0 to 4
     for k in 0..steps {
-        sim.particles.velocity[0] = Vector3::new(v, 0.0, 0.0);
-        sim.particles.angular_velocity[0] = Vector3::zeros();
-        sim.particles.position[0] = Vector3::new(x0 + v * dt * k as f64, 0.013, 0.5 * lc - depth);
-        sim.particles.orientation[0] = UnitQuaternion::identity();
-        sim.step().unwrap();
+        e.edit(|sim| {
+            sim.particles.velocity[0] = Vector3::new(v, 0.0, 0.0);
+            sim.particles.angular_velocity[0] = Vector3::zeros();
+            sim.particles.position[0] =
+                Vector3::new(x0 + v * dt * k as f64, 0.013, 0.5 * lc - depth);
+            sim.particles.orientation[0] = UnitQuaternion::identity();
+        })
+        .unwrap();
+        e.step().unwrap();
+        let sim = e.synced().unwrap();
         let f = sim.wall_forces[0];
         samples.push(((sim.particles.position[0].x - x0) / lc, f.z, f.xy().norm()));
     }
@@ -120,11 +127,28 @@ dir = "{}"
 
 #[test]
 fn wall_force_does_not_depend_on_mesh_resolution() {
-    let dir = temp_dir("mesh-resolution");
+    mesh_resolution(CPU);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn wall_force_on_gpu_double() {
+    mesh_resolution(GPU_DOUBLE);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn wall_force_on_gpu_mixed() {
+    mesh_resolution(GPU_MIXED);
+}
+
+fn mesh_resolution(device: Device) {
+    let dir =
+        temp_dir(&format!("mesh-resolution-{device:?}").replace([' ', '{', '}', ':', ','], ""));
     type Curve = Vec<(f64, f64, f64)>;
     let curves: Vec<(f64, Curve)> = [0.5, 1.0, 1.8, 3.0, 4.0]
         .iter()
-        .map(|&l| (l, push_across(l, &dir)))
+        .map(|&l| (l, push_across(l, &dir, device)))
         .collect();
     let scale_n = curves[0].1.iter().map(|s| s.1.abs()).fold(0.0, f64::max);
     let scale_t = curves[0].1.iter().map(|s| s.2).fold(0.0, f64::max);
@@ -141,7 +165,7 @@ fn wall_force_does_not_depend_on_mesh_resolution() {
         );
     }
     println!(
-        "normal force scale {scale_n:.4e} N, tangential {scale_t:.4e} N; worst difference {:.2e} and {:.2e} of the scale",
+        "{device:?}: normal force scale {scale_n:.4e} N, tangential {scale_t:.4e} N; worst difference {:.2e} and {:.2e} of the scale",
         worst.0, worst.1
     );
     for k in (0..curves[0].1.len()).step_by(1250) {

@@ -6,6 +6,9 @@
 //! without a usable GPU simply gets the CPU backend, with the reason in the log.
 
 pub mod cuda;
+mod engine;
+
+pub use engine::{Device, Engine};
 
 use serde::Serialize;
 

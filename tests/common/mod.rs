@@ -269,3 +269,27 @@ dir = "{}"
         std::env::temp_dir().join("polydem-validation").display()
     )
 }
+
+/// The backends a validation case runs on: the CPU here, GPU 0 (double or mixed pair geometry)
+/// in the `*_on_gpu_*` variants, which are `#[ignore]`d without a GPU.
+#[allow(dead_code)]
+pub const CPU: polydem::backend::Device = polydem::backend::Device::Cpu;
+#[allow(dead_code)]
+pub const GPU_DOUBLE: polydem::backend::Device = polydem::backend::Device::Cuda {
+    ordinal: 0,
+    precision: polydem::backend::cuda::Precision::Double,
+};
+#[allow(dead_code)]
+pub const GPU_MIXED: polydem::backend::Device = polydem::backend::Device::Cuda {
+    ordinal: 0,
+    precision: polydem::backend::cuda::Precision::Mixed,
+};
+
+/// `sim` (its forces evaluated) on `device`.
+#[allow(dead_code)]
+pub fn engine(
+    sim: polydem::pipeline::Simulation,
+    device: polydem::backend::Device,
+) -> polydem::backend::Engine {
+    polydem::backend::Engine::new(sim, device).expect("backend")
+}

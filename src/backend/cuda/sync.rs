@@ -113,3 +113,60 @@ impl CudaSimulation {
         Ok(&self.host)
     }
 }
+
+impl CudaSimulation {
+    /// Applies `f` to the host copy of the current state and uploads the result (with its
+    /// contact history); the next step rebuilds the pair list.
+    pub fn edit_host(&mut self, f: impl FnOnce(&mut Simulation)) -> Result<(), CudaError> {
+        self.sync_host()?;
+        f(&mut self.host);
+        self.upload_from_host()
+    }
+
+    /// The candidate pair list as global-id pairs (lower id first), sorted (see
+    /// [`Simulation::candidate_pair_ids`]).
+    pub fn candidate_pair_ids(&mut self) -> Result<Vec<(u64, u64)>, CudaError> {
+        let Some(pairs) = &self.pairs else {
+            return Ok(Vec::new());
+        };
+        let st = &self.stream;
+        let pr = st.clone_dtoh(&pairs.pairs)?;
+        let id = st.clone_dtoh(&self.p.id)?;
+        let mut v: Vec<(u64, u64)> = pr
+            .chunks_exact(2)
+            .take(pairs.n)
+            .map(|c| {
+                let (x, y) = (id[c[0] as usize], id[c[1] as usize]);
+                (x.min(y), x.max(y))
+            })
+            .collect();
+        v.sort_unstable();
+        Ok(v)
+    }
+
+    /// Particle–particle and particle–wall contacts of the last force evaluation, from the
+    /// contact flags alone (the rest of the state stays on the device).
+    pub fn contact_counts(&mut self) -> Result<(u64, u64), CudaError> {
+        if self.host_current {
+            return Ok((self.host.stats.contacts, self.host.stats.wall_contacts));
+        }
+        let st = &self.stream;
+        let count = |s: &CudaSlice<u32>, n: usize| -> Result<u64, CudaError> {
+            Ok(st
+                .clone_dtoh(s)?
+                .iter()
+                .take(n)
+                .filter(|&&c| c != 0)
+                .count() as u64)
+        };
+        let pairs = match &self.pairs {
+            Some(p) => count(&p.contact, p.n)?,
+            None => 0,
+        };
+        let walls = match &self.walls {
+            Some(w) => count(&w.contact, self.n * w.n)?,
+            None => 0,
+        };
+        Ok((pairs, walls))
+    }
+}
