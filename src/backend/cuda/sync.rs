@@ -115,12 +115,47 @@ impl CudaSimulation {
 }
 
 impl CudaSimulation {
-    /// Applies `f` to the host copy of the current state and uploads the result (with its
-    /// contact history); the next step rebuilds the pair list.
+    /// Applies `f` to the host copy of the current state and uploads the result; the next step
+    /// rebuilds the pair list. When `f` changed only the motion (positions, orientations,
+    /// velocities, forces), only those arrays go back up, into the device's order; otherwise
+    /// everything does, with the contact history.
     pub fn edit_host(&mut self, f: impl FnOnce(&mut Simulation)) -> Result<(), CudaError> {
         self.sync_host()?;
+        let before = (
+            self.host.particles.id.clone(),
+            self.host.particles.kind.clone(),
+            self.host.particles.scale.clone(),
+            self.host.particles.mass.clone(),
+            self.host.particles.inertia.clone(),
+            self.host.history.clone(),
+        );
         f(&mut self.host);
-        self.upload_from_host()
+        let p = &self.host.particles;
+        let motion_only = before.0 == p.id
+            && before.1 == p.kind
+            && before.2 == p.scale
+            && before.3 == p.mass
+            && before.4 == p.inertia
+            && before.5 == self.host.history;
+        if !motion_only || self.n == 0 {
+            return self.upload_from_host();
+        }
+        let st = &self.stream;
+        let flat =
+            |v: &[Vector3<f64>]| -> Vec<f64> { v.iter().flat_map(|x| [x.x, x.y, x.z]).collect() };
+        st.memcpy_htod(&flat(&p.position), &mut self.p.position)?;
+        st.memcpy_htod(&flat(&p.velocity), &mut self.p.velocity)?;
+        st.memcpy_htod(&flat(&p.angular_velocity), &mut self.p.angular_velocity)?;
+        st.memcpy_htod(&flat(&p.force), &mut self.p.force)?;
+        st.memcpy_htod(&flat(&p.torque), &mut self.p.torque)?;
+        let q: Vec<f64> = p
+            .orientation
+            .iter()
+            .flat_map(|q| [q.coords.x, q.coords.y, q.coords.z, q.coords.w])
+            .collect();
+        st.memcpy_htod(&q, &mut self.p.orientation)?;
+        self.rebuild = true;
+        Ok(())
     }
 
     /// The candidate pair list as global-id pairs (lower id first), sorted (see
