@@ -231,6 +231,27 @@ PD_DEVICE int grid_coord(const WallInfo& w, double x, int k) {
     return c < 0.0 ? 0 : (int)min_(c, (double)(w.dims[k] - 1));
 }
 
+// The smallest facet id >= `from` listed in grid cells [ca, cb] of a wall (UINT_MAX: none).
+// The walk over a particle's facets when they outnumber the candidate buffer: one scan of the
+// cells per facet, so the facets still come in increasing id order (WallMesh::facets_near's
+// order, which fixes the order of the sums) with no bound on their number.
+PD_DEVICE unsigned int next_facet_in_box(const unsigned int* cs, const unsigned int* cell_items, const WallInfo& w,
+                                         const int ca[3], const int cb[3], unsigned int from) {
+    unsigned int best = 0xffffffffu;
+    for (int z = ca[2]; z <= cb[2]; ++z) {
+        for (int y = ca[1]; y <= cb[1]; ++y) {
+            for (int x = ca[0]; x <= cb[0]; ++x) {
+                int cell = (z * w.dims[1] + y) * w.dims[0] + x;
+                for (unsigned int m = cs[cell]; m < cs[cell + 1]; ++m) {
+                    unsigned int f = cell_items[m];
+                    if (f >= from && f < best) best = f;
+                }
+            }
+        }
+    }
+    return best;
+}
+
 // Stage 6 per particle (Simulation::wall_contacts): for every wall, the facets within the
 // bounding radius, the summed penetrating volume of their prisms (WallMesh::contact) and the
 // contact law applied once to the total; the wall's spring per particle and wall.
@@ -291,12 +312,13 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
         int ca[3] = {grid_coord(w, lo.x, 0), grid_coord(w, lo.y, 1), grid_coord(w, lo.z, 2)};
         int cb[3] = {grid_coord(w, hi.x, 0), grid_coord(w, hi.y, 1), grid_coord(w, hi.z, 2)};
         int nc = 0;
-        for (int z = ca[2]; z <= cb[2]; ++z) {
-            for (int y = ca[1]; y <= cb[1]; ++y) {
-                for (int x = ca[0]; x <= cb[0]; ++x) {
+        bool overflow = false;
+        const unsigned int* cs = cell_start + w.cell_offset;
+        for (int z = ca[2]; z <= cb[2] && !overflow; ++z) {
+            for (int y = ca[1]; y <= cb[1] && !overflow; ++y) {
+                for (int x = ca[0]; x <= cb[0] && !overflow; ++x) {
                     int cell = (z * w.dims[1] + y) * w.dims[0] + x;
-                    const unsigned int* cs = cell_start + w.cell_offset;
-                    for (unsigned int m = cs[cell]; m < cs[cell + 1]; ++m) {
+                    for (unsigned int m = cs[cell]; m < cs[cell + 1] && !overflow; ++m) {
                         unsigned int f = cell_items[m];
                         // Insert sorted, skipping duplicates.
                         int j = nc;
@@ -310,8 +332,8 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
                         }
                         if (dup) continue;
                         if (nc == PD_MAX_WALL_CANDIDATES) {
-                            report_error(error, 100, (unsigned int)i);
-                            continue;
+                            overflow = true;
+                            break;
                         }
                         for (int q = nc; q > j; --q) cand[q] = cand[q - 1];
                         cand[j] = f;
@@ -324,8 +346,19 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
         Overlap<double> total = overlap_zero<double>();
         V3<double> first_moment = zero3<double>();
         V3<double> moment_origin = zero3<double>();
-        for (int c = 0; c < nc; ++c) {
-            size_t f = (size_t)w.facet_offset + cand[c];
+        int next = 0;
+        unsigned int from = 0;
+        while (true) {
+            unsigned int id;
+            if (!overflow) {
+                if (next == nc) break;
+                id = cand[next++];
+            } else {
+                id = next_facet_in_box(cs, cell_items, w, ca, cb, from);
+                if (id == 0xffffffffu) break;
+                from = id + 1;
+            }
+            size_t f = (size_t)w.facet_offset + id;
             if (point_triangle_distance(local_t, triangles + 9 * f) > radius) continue;
             if (!placed) {
                 place(body, tv, p.scale[i], local_t, local_q, zero3<double>());

@@ -105,6 +105,19 @@ dir = "{}"
         &t,
         1500.0,
     );
+    // Facets within the cube's bounding radius. The GPU gathers the facets of the grid cells
+    // the bounding box covers (a superset); on the finer meshes these overflow its candidate
+    // buffer (128 ids), and it walks the cells in facet-id order instead.
+    let mut near = Vec::new();
+    sim.walls[0].facets_near(
+        &Vector3::new(0.0, 0.013, 0.5 * lc - depth),
+        t.circumscribed_radius,
+        &mut near,
+    );
+    println!(
+        "λ = {lambda}: {} facets within the bounding radius",
+        near.len()
+    );
     let mut e = engine(sim, device);
     let mut samples = Vec::new();
     let steps = (0.1 / v / dt) as usize; // κ from 0 to 4
