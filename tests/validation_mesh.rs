@@ -140,26 +140,24 @@ dir = "{}"
 
 #[test]
 fn wall_force_does_not_depend_on_mesh_resolution() {
-    mesh_resolution(CPU);
+    mesh_resolution(CPU, &[0.5, 1.0, 1.8, 3.0, 4.0]);
 }
 
+/// The coarsest and the finest mesh on the GPU (the finest overflows the wall kernel's
+/// candidate buffer, see `push_across`). Double only: wall contacts are evaluated in f64 in
+/// both precision modes, so mixed mode gives the same wall forces. Two meshes, not five: with
+/// the motion prescribed from the host, every step is a host round trip.
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn wall_force_on_gpu_double() {
-    mesh_resolution(GPU_DOUBLE);
+    mesh_resolution(GPU_DOUBLE, &[0.5, 4.0]);
 }
 
-#[test]
-#[ignore = "needs a CUDA GPU"]
-fn wall_force_on_gpu_mixed() {
-    mesh_resolution(GPU_MIXED);
-}
-
-fn mesh_resolution(device: Device) {
+fn mesh_resolution(device: Device, lambdas: &[f64]) {
     let dir =
         temp_dir(&format!("mesh-resolution-{device:?}").replace([' ', '{', '}', ':', ','], ""));
     type Curve = Vec<(f64, f64, f64)>;
-    let curves: Vec<(f64, Curve)> = [0.5, 1.0, 1.8, 3.0, 4.0]
+    let curves: Vec<(f64, Curve)> = lambdas
         .iter()
         .map(|&l| (l, push_across(l, &dir, device)))
         .collect();
