@@ -2,7 +2,8 @@
 // GJK and the dual-space overlap (overlap.cuh), the contact law (contact_law.cuh) with the
 // tangential spring carried in pair slots; per particle, the wall contacts (prism.cuh) and the
 // deterministic reduction in partner-id order. The GPU twin of `Simulation::pair_contacts`,
-// `wall_contacts` and the reduction in src/pipeline.rs. One thread per pair or per particle;
+// `wall_contacts` and the reduction in src/pipeline.rs. One thread per pair, per particle–facet
+// (the wall prism overlaps) or per particle;
 // each thread's geometry workspace is sized by the scene's largest template
 // (PD_MAX_TEMPLATE_VERTICES/FACES), so a dodecahedron scene pays for 20 vertices and 12 faces.
 #include "common.cuh"
@@ -252,55 +253,52 @@ PD_DEVICE unsigned int next_facet_in_box(const unsigned int* cs, const unsigned 
     return best;
 }
 
-// Stage 6 per particle (Simulation::wall_contacts): for every wall, the facets within the
-// bounding radius, the summed penetrating volume of their prisms (WallMesh::contact) and the
-// contact law applied once to the total; the wall's spring per particle and wall.
-extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, const WallInfo* walls,
-                                         const WallState* states, const double* triangles, const double* prisms,
-                                         const unsigned int* cell_start, const unsigned int* cell_items,
-                                         const PairMaterial* materials, int n_materials, const double* spring_in,
-                                         double* spring_out, double* wall_force, double* wall_torque,
-                                         double* wall_energy, double* per_wall_force, unsigned int* wall_contact,
-                                         double dt, unsigned int* error) {
+// A particle's pose in a wall's frame: local = wall_pose⁻¹ · pose, in nalgebra's order
+// (t = q⁻¹(−t_w) + q⁻¹ x_p).
+PD_DEVICE void wall_local_pose(const WallState& s, V3<double> xp, Quat<double> qp, V3<double>* local_t,
+                               Quat<double>* local_q) {
+    Quat<double> qw;
+    qw.x = s.rotation[0];
+    qw.y = s.rotation[1];
+    qw.z = s.rotation[2];
+    qw.w = s.rotation[3];
+    V3<double> tw = v3(s.translation[0], s.translation[1], s.translation[2]);
+    *local_t = rotate_inverse(qw, -tw) + rotate_inverse(qw, xp);
+    Quat<double> qc;
+    qc.w = qw.w;
+    qc.x = -qw.x;
+    qc.y = -qw.y;
+    qc.z = -qw.z;
+    local_q->w = qc.w * qp.w - qc.x * qp.x - qc.y * qp.y - qc.z * qp.z;
+    local_q->x = qc.w * qp.x + qc.x * qp.w + qc.y * qp.z - qc.z * qp.y;
+    local_q->y = qc.w * qp.y - qc.x * qp.z + qc.y * qp.w + qc.z * qp.x;
+    local_q->z = qc.w * qp.z + qc.x * qp.y - qc.y * qp.x + qc.z * qp.w;
+}
+
+// Stage 6, first part, per particle (WallMesh::facets_near + the distance test of
+// WallMesh::contact): for every wall in order, the facets within the bounding radius in
+// increasing id order. With `items` null it only counts them into counts[i]; otherwise it writes
+// them from items[offset[i]] as (particle · n_walls + wall, facet), the order in which the
+// third part sums them.
+extern "C" __global__ void wall_candidates(int n, ParticleView p, int n_walls, const WallInfo* walls,
+                                           const WallState* states, const double* triangles,
+                                           const unsigned int* cell_start, const unsigned int* cell_items,
+                                           unsigned int* counts, const unsigned int* offset, uint2* items) {
     int ii = blockIdx.x * blockDim.x + threadIdx.x;
     if (ii >= n) {
         return;
     }
     size_t i = (size_t)ii;
-    V3<double> force = zero3<double>(), torque = zero3<double>();
-    double energy = 0.0;
     V3<double> xp = load3(p.position, i);
     Quat<double> qp = load_quat(p.orientation, i);
-    TemplateView tv = template_view(p.tmpl[i]);
     double radius = p.radius[i];
-    PosedPolytope<double> body;
-    OverlapWorkspace<double> ws;
+    unsigned int found = 0;
     unsigned int cand[PD_MAX_WALL_CANDIDATES];
     for (int k = 0; k < n_walls; ++k) {
-        size_t slot = i * (size_t)n_walls + (size_t)k;
-        store3(spring_out, slot, zero3<double>());
-        store3(per_wall_force, slot, zero3<double>());
-        wall_contact[slot] = 0u;
         const WallInfo& w = walls[k];
-        const WallState& s = states[k];
-        Quat<double> qw;
-        qw.x = s.rotation[0];
-        qw.y = s.rotation[1];
-        qw.z = s.rotation[2];
-        qw.w = s.rotation[3];
-        V3<double> tw = v3(s.translation[0], s.translation[1], s.translation[2]);
-        // local = wall_pose⁻¹ · pose, in nalgebra's order: t = q⁻¹(−t_w) + q⁻¹ x_p.
-        V3<double> local_t = rotate_inverse(qw, -tw) + rotate_inverse(qw, xp);
-        Quat<double> qc;
-        qc.w = qw.w;
-        qc.x = -qw.x;
-        qc.y = -qw.y;
-        qc.z = -qw.z;
+        V3<double> local_t;
         Quat<double> local_q;
-        local_q.w = qc.w * qp.w - qc.x * qp.x - qc.y * qp.y - qc.z * qp.z;
-        local_q.x = qc.w * qp.x + qc.x * qp.w + qc.y * qp.z - qc.z * qp.y;
-        local_q.y = qc.w * qp.y - qc.x * qp.z + qc.y * qp.w + qc.z * qp.x;
-        local_q.z = qc.w * qp.z + qc.x * qp.y - qc.y * qp.x + qc.z * qp.w;
+        wall_local_pose(states[k], xp, qp, &local_t, &local_q);
         // Facets near (WallMesh::facets_near): grid candidates, sorted, unique, within reach.
         V3<double> lo = local_t - v3(radius, radius, radius), hi = local_t + v3(radius, radius, radius);
         double top[3];
@@ -342,10 +340,6 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
                 }
             }
         }
-        bool placed = false;
-        Overlap<double> total = overlap_zero<double>();
-        V3<double> first_moment = zero3<double>();
-        V3<double> moment_origin = zero3<double>();
         int next = 0;
         unsigned int from = 0;
         while (true) {
@@ -360,21 +354,94 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
             }
             size_t f = (size_t)w.facet_offset + id;
             if (point_triangle_distance(local_t, triangles + 9 * f) > radius) continue;
-            if (!placed) {
-                place(body, tv, p.scale[i], local_t, local_q, zero3<double>());
-                placed = true;
+            if (items) {
+                items[offset[i] + found] = make_uint2((unsigned int)(i * (size_t)n_walls + (size_t)k), (unsigned int)f);
             }
-            Plane<double> prism[4];
-            for (int q = 0; q < 4; ++q) {
-                prism[q].normal = v3(prisms[16 * f + 4 * q], prisms[16 * f + 4 * q + 1], prisms[16 * f + 4 * q + 2]);
-                prism[q].offset = prisms[16 * f + 4 * q + 3];
-            }
+            ++found;
+        }
+    }
+    if (!items) counts[i] = found;
+}
+
+// Stage 6, second part, per particle–facet item (WallMesh::contact's prism overlap): the
+// particle placed in the wall's frame, clipped by the facet's prism. overlaps[12 m ...] =
+// volume, centroid (3), S (3), M (3), depth, thickness, in the wall's frame.
+extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, int n_walls, ParticleView p,
+                                               const WallState* states, const double* prisms, double* overlaps,
+                                               unsigned int* error) {
+    int mm = blockIdx.x * blockDim.x + threadIdx.x;
+    if (mm >= n_items) {
+        return;
+    }
+    size_t m = (size_t)mm;
+    uint2 item = items[m];
+    size_t i = item.x / (unsigned int)n_walls;
+    int k = (int)(item.x % (unsigned int)n_walls);
+    size_t f = item.y;
+    V3<double> local_t;
+    Quat<double> local_q;
+    wall_local_pose(states[k], load3(p.position, i), load_quat(p.orientation, i), &local_t, &local_q);
+    PosedPolytope<double> body;
+    OverlapWorkspace<double> ws;
+    place(body, template_view(p.tmpl[i]), p.scale[i], local_t, local_q, zero3<double>());
+    Plane<double> prism[4];
+    for (int q = 0; q < 4; ++q) {
+        prism[q].normal = v3(prisms[16 * f + 4 * q], prisms[16 * f + 4 * q + 1], prisms[16 * f + 4 * q + 2]);
+        prism[q].offset = prisms[16 * f + 4 * q + 3];
+    }
+    Overlap<double> o = overlap_zero<double>();
+    int status = prism_overlap(ws, body, prism, &o);
+    if (status != STATUS_OK) {
+        report_error(error, status, (unsigned int)i);
+        o = overlap_zero<double>();
+    }
+    double* out = overlaps + 12 * m;
+    out[0] = o.volume;
+    store3(out + 1, 0, o.centroid);
+    store3(out + 4, 0, o.dv_dxb);
+    store3(out + 7, 0, o.moment_b);
+    out[10] = o.depth;
+    out[11] = o.thickness;
+}
+
+// Stage 6, third part, per particle (Simulation::wall_contacts): for every wall, the facet
+// overlaps summed in facet-id order into the total penetrating volume (WallMesh::contact) and
+// the contact law applied once to the total; the wall's spring per particle and wall.
+extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, const WallState* states,
+                                         const WallInfo* walls, const unsigned int* item_offset, const uint2* items,
+                                         const double* overlaps, const PairMaterial* materials, int n_materials,
+                                         const double* spring_in, double* spring_out, double* wall_force,
+                                         double* wall_torque, double* wall_energy, double* per_wall_force,
+                                         unsigned int* wall_contact, double dt) {
+    int ii = blockIdx.x * blockDim.x + threadIdx.x;
+    if (ii >= n) {
+        return;
+    }
+    size_t i = (size_t)ii;
+    V3<double> force = zero3<double>(), torque = zero3<double>();
+    double energy = 0.0;
+    V3<double> xp = load3(p.position, i);
+    Quat<double> qp = load_quat(p.orientation, i);
+    unsigned int m = item_offset[i], m_end = item_offset[i + 1];
+    for (int k = 0; k < n_walls; ++k) {
+        size_t slot = i * (size_t)n_walls + (size_t)k;
+        store3(spring_out, slot, zero3<double>());
+        store3(per_wall_force, slot, zero3<double>());
+        wall_contact[slot] = 0u;
+        const WallInfo& w = walls[k];
+        const WallState& s = states[k];
+        Overlap<double> total = overlap_zero<double>();
+        V3<double> first_moment = zero3<double>();
+        V3<double> moment_origin = zero3<double>();
+        for (; m < m_end && items[m].x == (unsigned int)slot; ++m) {
+            const double* q = overlaps + 12 * (size_t)m;
             Overlap<double> o;
-            int status = prism_overlap(ws, body, prism, &o);
-            if (status != STATUS_OK) {
-                report_error(error, status, (unsigned int)i);
-                continue;
-            }
+            o.volume = q[0];
+            o.centroid = load3(q + 1, 0);
+            o.dv_dxb = load3(q + 4, 0);
+            o.moment_b = load3(q + 7, 0);
+            o.depth = q[10];
+            o.thickness = q[11];
             if (o.volume > 0.0) {
                 total.volume += o.volume;
                 first_moment += o.centroid * o.volume;
@@ -385,6 +452,12 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
             }
         }
         if (!(total.volume > 0.0)) continue;
+        Quat<double> qw;
+        qw.x = s.rotation[0];
+        qw.y = s.rotation[1];
+        qw.z = s.rotation[2];
+        qw.w = s.rotation[3];
+        V3<double> tw = v3(s.translation[0], s.translation[1], s.translation[2]);
         total.centroid = first_moment / total.volume;
         total.moment_b = moment_origin - cross(total.centroid, total.dv_dxb);
         // To world: centroid = R c + t; S and M rotated.

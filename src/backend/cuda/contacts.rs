@@ -56,7 +56,9 @@ impl CudaSimulation {
         st.synchronize()?;
         self.host.timers.pairs += t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
-        if let Some(w) = &mut self.walls {
+        // Taken out while the stage runs, so that the scan helper can borrow `self`.
+        let mut walls = self.walls.take();
+        if let Some(w) = &mut walls {
             let states: Vec<WallState> = self
                 .host
                 .scene
@@ -66,17 +68,67 @@ impl CudaSimulation {
                 .collect();
             st.memcpy_htod(&states, &mut w.states)?;
             let nw = w.n as i32;
+            // Three kernels: the facets within reach per particle (counted, scanned, listed in
+            // the order they are summed), one thread per particle–facet for the prism overlaps
+            // (the costly part: a particle on a finely meshed wall meets tens of facets), and
+            // per particle the sums and the contact law.
+            let mut counts = zeros::<u32>(&st, n)?;
+            let null = 0u64;
             unsafe {
-                st.launch_builder(self.k.get("wall_contacts"))
+                st.launch_builder(self.k.get("wall_candidates"))
                     .arg(&ni)
                     .arg(&view)
                     .arg(&nw)
                     .arg(&w.info)
                     .arg(&w.states)
                     .arg(&w.triangles)
-                    .arg(&w.prisms)
                     .arg(&w.cell_start)
                     .arg(&w.cell_items)
+                    .arg(&mut counts)
+                    .arg(&null)
+                    .arg(&null)
+                    .launch(cfg(n))?;
+            }
+            let mut item_offset = zeros::<u32>(&st, n + 1)?;
+            let n_items = self.scan(&counts, n, &mut item_offset)? as usize;
+            let mut items = zeros::<u32>(&st, 2 * n_items)?;
+            let mut overlaps = zeros::<f64>(&st, 12 * n_items)?;
+            let n_items_i = n_items as i32;
+            unsafe {
+                st.launch_builder(self.k.get("wall_candidates"))
+                    .arg(&ni)
+                    .arg(&view)
+                    .arg(&nw)
+                    .arg(&w.info)
+                    .arg(&w.states)
+                    .arg(&w.triangles)
+                    .arg(&w.cell_start)
+                    .arg(&w.cell_items)
+                    .arg(&mut counts)
+                    .arg(&item_offset)
+                    .arg(&mut items)
+                    .launch(cfg(n))?;
+                if n_items > 0 {
+                    st.launch_builder(self.k.get("wall_facet_overlaps"))
+                        .arg(&n_items_i)
+                        .arg(&items)
+                        .arg(&nw)
+                        .arg(&view)
+                        .arg(&w.states)
+                        .arg(&w.prisms)
+                        .arg(&mut overlaps)
+                        .arg(&mut self.error)
+                        .launch(cfg(n_items))?;
+                }
+                st.launch_builder(self.k.get("wall_contacts"))
+                    .arg(&ni)
+                    .arg(&view)
+                    .arg(&nw)
+                    .arg(&w.states)
+                    .arg(&w.info)
+                    .arg(&item_offset)
+                    .arg(&items)
+                    .arg(&overlaps)
                     .arg(&self.materials)
                     .arg(&n_mat)
                     .arg(&w.spring_in)
@@ -87,13 +139,14 @@ impl CudaSimulation {
                     .arg(&mut w.per_wall_force)
                     .arg(&mut w.contact)
                     .arg(&dt)
-                    .arg(&mut self.error)
                     .launch(cfg(n))?;
             }
         }
+        self.walls = walls;
         st.synchronize()?;
         self.host.timers.walls += t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
+        let pairs = self.pairs.as_mut().expect("built above");
         let (wf, wt) = match &self.walls {
             Some(w) => (&w.force, &w.torque),
             None => (&self.p.force, &self.p.torque), // not read without walls

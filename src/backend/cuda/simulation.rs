@@ -254,14 +254,20 @@ impl CudaSimulation {
             ),
             (
                 "contact.cu",
-                &["pair_contacts", "wall_contacts", "reduce_forces"],
+                &[
+                    "pair_contacts",
+                    "wall_candidates",
+                    "wall_facet_overlaps",
+                    "wall_contacts",
+                    "reduce_forces",
+                ],
             ),
         ];
         for (file, kernels) in names {
             let ptx = compile(file, &config, arch).map_err(CudaError::Compile)?;
             let module = ctx.load_module(ptx)?;
             for &name in *kernels {
-                if name == "wall_contacts" && !config.walls {
+                if name.starts_with("wall_") && !config.walls {
                     continue;
                 }
                 f.insert(name, module.load_function(name)?);
