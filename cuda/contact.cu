@@ -168,7 +168,7 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
 
 #if PD_WALLS
 #ifndef PD_MAX_WALL_CANDIDATES
-#define PD_MAX_WALL_CANDIDATES 128
+#define PD_MAX_WALL_CANDIDATES 512
 #endif
 
 // One wall mesh in its own frame (src/contact/wall.rs `WallMesh`): facets
@@ -253,6 +253,28 @@ PD_DEVICE unsigned int next_facet_in_box(const unsigned int* cs, const unsigned 
     return best;
 }
 
+// Sorts ids[0..n) ascending in place (heapsort: no recursion, no extra memory).
+PD_DEVICE void sort_ids(unsigned int* ids, int n) {
+    auto sift = [&](int root, int end) {
+        while (2 * root + 1 < end) {
+            int child = 2 * root + 1;
+            if (child + 1 < end && ids[child] < ids[child + 1]) ++child;
+            if (ids[root] >= ids[child]) return;
+            unsigned int t = ids[root];
+            ids[root] = ids[child];
+            ids[child] = t;
+            root = child;
+        }
+    };
+    for (int start = n / 2 - 1; start >= 0; --start) sift(start, n);
+    for (int end = n - 1; end > 0; --end) {
+        unsigned int t = ids[0];
+        ids[0] = ids[end];
+        ids[end] = t;
+        sift(0, end);
+    }
+}
+
 // A particle's pose in a wall's frame: local = wall_pose⁻¹ · pose, in nalgebra's order
 // (t = q⁻¹(−t_w) + q⁻¹ x_p).
 PD_DEVICE void wall_local_pose(const WallState& s, V3<double> xp, Quat<double> qp, V3<double>* local_t,
@@ -316,35 +338,25 @@ extern "C" __global__ void wall_candidates(int n, ParticleView p, int n_walls, c
             for (int y = ca[1]; y <= cb[1] && !overflow; ++y) {
                 for (int x = ca[0]; x <= cb[0] && !overflow; ++x) {
                     int cell = (z * w.dims[1] + y) * w.dims[0] + x;
-                    for (unsigned int m = cs[cell]; m < cs[cell + 1] && !overflow; ++m) {
-                        unsigned int f = cell_items[m];
-                        // Insert sorted, skipping duplicates.
-                        int j = nc;
-                        bool dup = false;
-                        while (j > 0 && cand[j - 1] >= f) {
-                            if (cand[j - 1] == f) {
-                                dup = true;
-                                break;
-                            }
-                            --j;
-                        }
-                        if (dup) continue;
+                    for (unsigned int m = cs[cell]; m < cs[cell + 1]; ++m) {
                         if (nc == PD_MAX_WALL_CANDIDATES) {
                             overflow = true;
                             break;
                         }
-                        for (int q = nc; q > j; --q) cand[q] = cand[q - 1];
-                        cand[j] = f;
-                        ++nc;
+                        cand[nc++] = cell_items[m];
                     }
                 }
             }
         }
+        // Sorted (heapsort: O(k log k) for the k ids with repeats the cells list) and then
+        // walked skipping repeats: the increasing id order of WallMesh::facets_near.
+        if (!overflow) sort_ids(cand, nc);
         int next = 0;
         unsigned int from = 0;
         while (true) {
             unsigned int id;
             if (!overflow) {
+                while (next < nc && next > 0 && cand[next] == cand[next - 1]) ++next;
                 if (next == nc) break;
                 id = cand[next++];
             } else {

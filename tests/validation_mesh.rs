@@ -105,9 +105,8 @@ dir = "{}"
         &t,
         1500.0,
     );
-    // Facets within the cube's bounding radius. The GPU gathers the facets of the grid cells
-    // the bounding box covers (a superset); on the finer meshes these overflow its candidate
-    // buffer (128 ids), and it walks the cells in facet-id order instead.
+    // Facets within the cube's bounding radius (the GPU gathers the facet ids of the grid cells
+    // the bounding box covers, sorts them and tests each facet's distance).
     let mut near = Vec::new();
     sim.walls[0].facets_near(
         &Vector3::new(0.0, 0.013, 0.5 * lc - depth),
@@ -121,7 +120,15 @@ dir = "{}"
     let mut e = engine(sim, device);
     let mut samples = Vec::new();
     let steps = (0.1 / v / dt) as usize; // κ from 0 to 4
+    let mut spent = [0.0f64; 3];
     for k in 0..steps {
+        if k % 1000 == 999 && device != CPU {
+            println!(
+                "λ = {lambda}, step {k}: edit {:.3} s, step {:.3} s, sync {:.3} s",
+                spent[0], spent[1], spent[2]
+            );
+        }
+        let t = std::time::Instant::now();
         e.edit(|sim| {
             sim.particles.velocity[0] = Vector3::new(v, 0.0, 0.0);
             sim.particles.angular_velocity[0] = Vector3::zeros();
@@ -130,8 +137,13 @@ dir = "{}"
             sim.particles.orientation[0] = UnitQuaternion::identity();
         })
         .unwrap();
+        spent[0] += t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
         e.step().unwrap();
+        spent[1] += t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
         let sim = e.synced().unwrap();
+        spent[2] += t.elapsed().as_secs_f64();
         let f = sim.wall_forces[0];
         samples.push(((sim.particles.position[0].x - x0) / lc, f.z, f.xy().norm()));
     }
@@ -143,8 +155,7 @@ fn wall_force_does_not_depend_on_mesh_resolution() {
     mesh_resolution(CPU, &[0.5, 1.0, 1.8, 3.0, 4.0]);
 }
 
-/// The coarsest and the finest mesh on the GPU (the finest overflows the wall kernel's
-/// candidate buffer, see `push_across`). Double only: wall contacts are evaluated in f64 in
+/// The coarsest and the finest mesh on the GPU. Double only: wall contacts are evaluated in f64 in
 /// both precision modes, so mixed mode gives the same wall forces. Two meshes, not five: with
 /// the motion prescribed from the host, every step is a host round trip.
 #[test]
