@@ -127,15 +127,7 @@ dir = "{}"
     let mut e = engine(sim, device);
     let mut samples = Vec::new();
     let steps = (kappa_end * lc / v / dt) as usize;
-    let mut spent = [0.0f64; 3];
     for k in 0..steps {
-        if k % 1000 == 999 && device != CPU {
-            println!(
-                "λ = {lambda}, step {k}: edit {:.3} s, step {:.3} s, sync {:.3} s",
-                spent[0], spent[1], spent[2]
-            );
-        }
-        let t = std::time::Instant::now();
         e.edit(|sim| {
             sim.particles.velocity[0] = Vector3::new(v, 0.0, 0.0);
             sim.particles.angular_velocity[0] = Vector3::zeros();
