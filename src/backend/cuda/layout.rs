@@ -65,3 +65,48 @@ pub fn size_defines() -> Vec<String> {
         ),
     ]
 }
+
+/// Templates packed as the kernels read them (`cuda/contact.cu` constants, `cuda/probe.cu`
+/// `ProbeTemplates`): template t's vertices at `3 (t mv + i)`, its face normals at
+/// `3 (t mf + i)` with offsets at `t mf + i`, the vertex and face counts at `2t`, `2t + 1`, and
+/// the circumscribed radius at `t`; `nt` slots (at least the templates given).
+pub struct TemplateTables {
+    pub vertices: Vec<f64>,
+    pub normals: Vec<f64>,
+    pub offsets: Vec<f64>,
+    pub counts: Vec<i32>,
+    pub radius: Vec<f64>,
+}
+
+impl TemplateTables {
+    /// Packs `templates` into `nt` slots of `mv` vertices and `mf` faces.
+    pub fn new<'a>(
+        templates: impl IntoIterator<Item = &'a crate::shape::ConvexTemplate>,
+        nt: usize,
+        mv: usize,
+        mf: usize,
+    ) -> Self {
+        let mut t = TemplateTables {
+            vertices: vec![0.0; nt * mv * 3],
+            normals: vec![0.0; nt * mf * 3],
+            offsets: vec![0.0; nt * mf],
+            counts: vec![0; nt * 2],
+            radius: vec![0.0; nt],
+        };
+        for (k, tpl) in templates.into_iter().enumerate() {
+            for (i, v) in tpl.vertices.iter().enumerate() {
+                t.vertices[(k * mv + i) * 3..(k * mv + i) * 3 + 3]
+                    .copy_from_slice(v.coords.as_slice());
+            }
+            for (i, f) in tpl.faces.iter().enumerate() {
+                t.normals[(k * mf + i) * 3..(k * mf + i) * 3 + 3]
+                    .copy_from_slice(f.normal.as_slice());
+                t.offsets[k * mf + i] = f.offset;
+            }
+            t.counts[2 * k] = tpl.vertices.len() as i32;
+            t.counts[2 * k + 1] = tpl.faces.len() as i32;
+            t.radius[k] = tpl.circumscribed_radius;
+        }
+        t
+    }
+}

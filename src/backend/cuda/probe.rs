@@ -5,6 +5,7 @@
 //! `geometry::overlap::overlap_pair` and `geometry::clip::prism_overlap`.
 
 use super::kernels::{KernelConfig, Precision, compile};
+use super::layout::TemplateTables;
 use super::simulation::{CudaError, cfg, ptr};
 use crate::geometry::Overlap;
 use crate::shape::ConvexTemplate;
@@ -189,31 +190,13 @@ impl GeometryProbe {
     ) -> Result<Vec<f64>, CudaError> {
         self.check_capacity(templates)?;
         let (mv, mf, nt) = (self.max_vertices, self.max_faces, templates.len().max(1));
-        let mut vertices = vec![0.0f64; nt * mv * 3];
-        let mut normals = vec![0.0f64; nt * mf * 3];
-        let mut offsets = vec![0.0f64; nt * mf];
-        let mut counts = vec![0i32; nt * 2];
-        let mut radius = vec![0.0f64; nt];
-        for (t, tpl) in templates.iter().enumerate() {
-            for (i, v) in tpl.vertices.iter().enumerate() {
-                vertices[(t * mv + i) * 3..(t * mv + i) * 3 + 3]
-                    .copy_from_slice(v.coords.as_slice());
-            }
-            for (i, f) in tpl.faces.iter().enumerate() {
-                normals[(t * mf + i) * 3..(t * mf + i) * 3 + 3]
-                    .copy_from_slice(f.normal.as_slice());
-                offsets[t * mf + i] = f.offset;
-            }
-            counts[2 * t] = tpl.vertices.len() as i32;
-            counts[2 * t + 1] = tpl.faces.len() as i32;
-            radius[t] = tpl.circumscribed_radius;
-        }
+        let t = TemplateTables::new(templates.iter().copied(), nt, mv, mf);
         let st = &self.stream;
-        let d_vertices = st.clone_htod(&vertices)?;
-        let d_normals = st.clone_htod(&normals)?;
-        let d_offsets = st.clone_htod(&offsets)?;
-        let d_counts = st.clone_htod(&counts)?;
-        let d_radius = st.clone_htod(&radius)?;
+        let d_vertices = st.clone_htod(&t.vertices)?;
+        let d_normals = st.clone_htod(&t.normals)?;
+        let d_offsets = st.clone_htod(&t.offsets)?;
+        let d_counts = st.clone_htod(&t.counts)?;
+        let d_radius = st.clone_htod(&t.radius)?;
         let table = ProbeTemplates {
             ptrs: [
                 ptr(&d_vertices, st),

@@ -2,6 +2,7 @@
 //! their facet grids, and the particles with their contact history (as a CSR over the upload
 //! order, which the next list build carries over).
 
+use super::layout::TemplateTables;
 use super::simulation::{
     CudaError, CudaSimulation, DeviceParticles, DeviceWalls, HistorySource, WallInfo, WallState,
 };
@@ -19,25 +20,7 @@ impl CudaSimulation {
             self.config.max_vertices,
             self.config.max_faces,
         );
-        let mut vertices = vec![0.0f64; nt * mv * 3];
-        let mut normals = vec![0.0f64; nt * mf * 3];
-        let mut offsets = vec![0.0f64; nt * mf];
-        let mut counts = vec![0i32; nt * 2];
-        let mut radius = vec![0.0f64; nt];
-        for (t, tpl) in s.templates.iter().enumerate() {
-            for (i, v) in tpl.vertices.iter().enumerate() {
-                vertices[(t * mv + i) * 3..(t * mv + i) * 3 + 3]
-                    .copy_from_slice(v.coords.as_slice());
-            }
-            for (i, f) in tpl.faces.iter().enumerate() {
-                normals[(t * mf + i) * 3..(t * mf + i) * 3 + 3]
-                    .copy_from_slice(f.normal.as_slice());
-                offsets[t * mf + i] = f.offset;
-            }
-            counts[2 * t] = tpl.vertices.len() as i32;
-            counts[2 * t + 1] = tpl.faces.len() as i32;
-            radius[t] = tpl.circumscribed_radius;
-        }
+        let t = TemplateTables::new(&s.templates, nt, mv, mf);
         fn set<T: DeviceRepr>(
             module: &Arc<CudaModule>,
             stream: &Arc<CudaStream>,
@@ -54,11 +37,11 @@ impl CudaSimulation {
             Ok(())
         }
         let m = &self.k.contact;
-        set(m, &self.stream, "pd_template_vertices", &vertices)?;
-        set(m, &self.stream, "pd_template_normals", &normals)?;
-        set(m, &self.stream, "pd_template_offsets", &offsets)?;
-        set(m, &self.stream, "pd_template_counts", &counts)?;
-        set(m, &self.stream, "pd_template_radius", &radius)?;
+        set(m, &self.stream, "pd_template_vertices", &t.vertices)?;
+        set(m, &self.stream, "pd_template_normals", &t.normals)?;
+        set(m, &self.stream, "pd_template_offsets", &t.offsets)?;
+        set(m, &self.stream, "pd_template_counts", &t.counts)?;
+        set(m, &self.stream, "pd_template_radius", &t.radius)?;
         Ok(())
     }
 
