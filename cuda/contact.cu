@@ -275,16 +275,25 @@ PD_DEVICE void sort_ids(unsigned int* ids, int n) {
     }
 }
 
+// A wall's rotation and translation at the current time.
+PD_DEVICE Quat<double> wall_rotation(const WallState& s) {
+    Quat<double> q;
+    q.x = s.rotation[0];
+    q.y = s.rotation[1];
+    q.z = s.rotation[2];
+    q.w = s.rotation[3];
+    return q;
+}
+PD_DEVICE V3<double> wall_translation(const WallState& s) {
+    return v3(s.translation[0], s.translation[1], s.translation[2]);
+}
+
 // A particle's pose in a wall's frame: local = wall_pose⁻¹ · pose, in nalgebra's order
 // (t = q⁻¹(−t_w) + q⁻¹ x_p).
 PD_DEVICE void wall_local_pose(const WallState& s, V3<double> xp, Quat<double> qp, V3<double>* local_t,
                                Quat<double>* local_q) {
-    Quat<double> qw;
-    qw.x = s.rotation[0];
-    qw.y = s.rotation[1];
-    qw.z = s.rotation[2];
-    qw.w = s.rotation[3];
-    V3<double> tw = v3(s.translation[0], s.translation[1], s.translation[2]);
+    Quat<double> qw = wall_rotation(s);
+    V3<double> tw = wall_translation(s);
     *local_t = rotate_inverse(qw, -tw) + rotate_inverse(qw, xp);
     Quat<double> qc;
     qc.w = qw.w;
@@ -464,12 +473,8 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
             }
         }
         if (!(total.volume > 0.0)) continue;
-        Quat<double> qw;
-        qw.x = s.rotation[0];
-        qw.y = s.rotation[1];
-        qw.z = s.rotation[2];
-        qw.w = s.rotation[3];
-        V3<double> tw = v3(s.translation[0], s.translation[1], s.translation[2]);
+        Quat<double> qw = wall_rotation(s);
+        V3<double> tw = wall_translation(s);
         total.centroid = first_moment / total.volume;
         total.moment_b = moment_origin - cross(total.centroid, total.dv_dxb);
         // To world: centroid = R c + t; S and M rotated.

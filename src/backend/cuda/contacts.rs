@@ -4,7 +4,7 @@
 use super::simulation::{CudaError, CudaSimulation, PairOutputs, WallState, cfg, ptr, zeros};
 use crate::pipeline::SimulationError;
 use crate::scene::WallMotion;
-use cudarc::driver::PushKernelArg;
+use cudarc::driver::{CudaSlice, PushKernelArg};
 use nalgebra::Vector3;
 use std::time::Instant;
 
@@ -73,41 +73,34 @@ impl CudaSimulation {
             // (the costly part: a particle on a finely meshed wall meets tens of facets), and
             // per particle the sums and the contact law.
             let mut counts = zeros::<u32>(&st, n)?;
-            let null = 0u64;
-            unsafe {
-                st.launch_builder(self.k.get("wall_candidates"))
-                    .arg(&ni)
-                    .arg(&view)
-                    .arg(&nw)
-                    .arg(&w.info)
-                    .arg(&w.states)
-                    .arg(&w.triangles)
-                    .arg(&w.cell_start)
-                    .arg(&w.cell_items)
-                    .arg(&mut counts)
-                    .arg(&null)
-                    .arg(&null)
-                    .launch(cfg(n))?;
-            }
+            // `wall_candidates` counts (null offset and item pointers) or lists.
+            let candidates = |counts: &mut CudaSlice<u32>, offset: u64, items: u64| {
+                // SAFETY: as below; `offset` and `items` are null or point to n + 1 offsets
+                // and 2 × (their total) ids.
+                unsafe {
+                    st.launch_builder(self.k.get("wall_candidates"))
+                        .arg(&ni)
+                        .arg(&view)
+                        .arg(&nw)
+                        .arg(&w.info)
+                        .arg(&w.states)
+                        .arg(&w.triangles)
+                        .arg(&w.cell_start)
+                        .arg(&w.cell_items)
+                        .arg(counts)
+                        .arg(&offset)
+                        .arg(&items)
+                        .launch(cfg(n))
+                }
+            };
+            candidates(&mut counts, 0, 0)?;
             let mut item_offset = zeros::<u32>(&st, n + 1)?;
             let n_items = self.scan(&counts, n, &mut item_offset)? as usize;
-            let mut items = zeros::<u32>(&st, 2 * n_items)?;
+            let items = zeros::<u32>(&st, 2 * n_items)?;
             let mut overlaps = zeros::<f64>(&st, 12 * n_items)?;
             let n_items_i = n_items as i32;
+            candidates(&mut counts, ptr(&item_offset, &st), ptr(&items, &st))?;
             unsafe {
-                st.launch_builder(self.k.get("wall_candidates"))
-                    .arg(&ni)
-                    .arg(&view)
-                    .arg(&nw)
-                    .arg(&w.info)
-                    .arg(&w.states)
-                    .arg(&w.triangles)
-                    .arg(&w.cell_start)
-                    .arg(&w.cell_items)
-                    .arg(&mut counts)
-                    .arg(&item_offset)
-                    .arg(&mut items)
-                    .launch(cfg(n))?;
                 if n_items > 0 {
                     st.launch_builder(self.k.get("wall_facet_overlaps"))
                         .arg(&n_items_i)

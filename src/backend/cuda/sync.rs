@@ -3,6 +3,7 @@
 //! pair slots and per-particle wall slots, and the step statistics.
 
 use super::simulation::{CudaError, CudaSimulation};
+use super::upload::{flat_quats, flat3};
 use crate::contact::{ContactHistory, ContactKey, ContactState};
 use crate::pipeline::Simulation;
 use cudarc::driver::CudaSlice;
@@ -141,19 +142,12 @@ impl CudaSimulation {
             return self.upload_from_host();
         }
         let st = &self.stream;
-        let flat =
-            |v: &[Vector3<f64>]| -> Vec<f64> { v.iter().flat_map(|x| [x.x, x.y, x.z]).collect() };
-        st.memcpy_htod(&flat(&p.position), &mut self.p.position)?;
-        st.memcpy_htod(&flat(&p.velocity), &mut self.p.velocity)?;
-        st.memcpy_htod(&flat(&p.angular_velocity), &mut self.p.angular_velocity)?;
-        st.memcpy_htod(&flat(&p.force), &mut self.p.force)?;
-        st.memcpy_htod(&flat(&p.torque), &mut self.p.torque)?;
-        let q: Vec<f64> = p
-            .orientation
-            .iter()
-            .flat_map(|q| [q.coords.x, q.coords.y, q.coords.z, q.coords.w])
-            .collect();
-        st.memcpy_htod(&q, &mut self.p.orientation)?;
+        st.memcpy_htod(&flat3(&p.position), &mut self.p.position)?;
+        st.memcpy_htod(&flat3(&p.velocity), &mut self.p.velocity)?;
+        st.memcpy_htod(&flat3(&p.angular_velocity), &mut self.p.angular_velocity)?;
+        st.memcpy_htod(&flat3(&p.force), &mut self.p.force)?;
+        st.memcpy_htod(&flat3(&p.torque), &mut self.p.torque)?;
+        st.memcpy_htod(&flat_quats(&p.orientation), &mut self.p.orientation)?;
         self.rebuild = true;
         Ok(())
     }

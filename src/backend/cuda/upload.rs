@@ -12,6 +12,21 @@ use nalgebra::{UnitQuaternion, Vector3};
 use std::collections::HashMap;
 use std::sync::Arc;
 
+/// Vectors as the kernels store them: xyz interleaved.
+pub(super) fn flat3(v: &[Vector3<f64>]) -> Vec<f64> {
+    v.iter().flat_map(|x| [x.x, x.y, x.z]).collect()
+}
+
+/// Quaternions as the kernels store them: x, y, z, w.
+pub(super) fn flat_quats(v: &[UnitQuaternion<f64>]) -> Vec<f64> {
+    v.iter()
+        .flat_map(|q| {
+            let c = q.coords;
+            [c.x, c.y, c.z, c.w]
+        })
+        .collect()
+}
+
 impl CudaSimulation {
     pub(super) fn upload_templates(&mut self) -> Result<(), CudaError> {
         let s = &self.host.scene;
@@ -119,16 +134,7 @@ impl CudaSimulation {
         let s = &h.scene;
         let n = p.len();
         self.n = n;
-        let flat =
-            |v: &[Vector3<f64>]| -> Vec<f64> { v.iter().flat_map(|x| [x.x, x.y, x.z]).collect() };
-        let quats = |v: &[UnitQuaternion<f64>]| -> Vec<f64> {
-            v.iter()
-                .flat_map(|q| {
-                    let c = q.coords;
-                    [c.x, c.y, c.z, c.w]
-                })
-                .collect()
-        };
+        let (flat, quats) = (flat3, flat_quats);
         let mut tmpl = Vec::with_capacity(n);
         let mut material = Vec::with_capacity(n);
         let (mut radius, mut cn, mut ct) = (Vec::new(), Vec::new(), Vec::new());
