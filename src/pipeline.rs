@@ -20,6 +20,7 @@ use crate::contact::{
     DampingTable, WallMesh, contact_forces,
 };
 use crate::geometry::overlap::{PairWorkspace, axis_separates, overlap_pair};
+use crate::geometry::sphere::sphere_lens;
 use crate::geometry::{Overlap, PosedPolytope};
 use crate::integrate::{drift, half_kick};
 use crate::neighbor::{Bounds, PairList};
@@ -444,6 +445,7 @@ impl Simulation {
         let p = &self.particles;
         let s = &self.scene;
         let step = self.step;
+        let spheres = s.spheres_only();
         self.pairs
             .pairs
             .par_iter()
@@ -458,33 +460,47 @@ impl Simulation {
                 if d.norm_squared() >= reach * reach {
                     return Ok(PairOutcome::default());
                 }
-                let ta = &s.templates[s.particle_types[p.kind[a] as usize].template];
-                let tb = &s.templates[s.particle_types[p.kind[b] as usize].template];
-                let pose_a = Isometry3::from_parts(p.position[a].into(), p.orientation[a]);
-                let pose_b = Isometry3::from_parts(xb.into(), p.orientation[b]);
-                let (body_a, body_b) = ((ta, p.scale[a], &pose_a), (tb, p.scale[b], &pose_b));
-                // Stage 4 shortcut: last step's separating axis, with a margin far above GJK's
-                // touching tolerance (1e-12 of the size in f64), so the verdict is GJK's.
-                if *axis != Vector3::zeros() && axis_separates(body_a, body_b, axis, 1e-9 * reach) {
-                    return Ok(PairOutcome {
-                        separating_axis: *axis,
-                        ..PairOutcome::default()
-                    });
-                }
-                // Stages 4–5: GJK, then the overlap.
-                let g = with_workspace(|ws| overlap_pair(ws, body_a, body_b)).map_err(|e| {
-                    SimulationError::Geometry {
-                        step,
-                        what: format!("particles {} and {}", p.id[a], p.id[b]),
-                        message: e.to_string(),
+                let overlap = if spheres {
+                    // Stages 4–5 for spheres: the lens in closed form.
+                    let o =
+                        sphere_lens(self.radius[a], self.radius[b], &d).to_world(&p.position[a]);
+                    if o.volume <= 0.0 {
+                        return Ok(PairOutcome::default());
                     }
-                })?;
-                if g.overlap.volume <= 0.0 {
-                    return Ok(PairOutcome {
-                        separating_axis: g.separating_axis.unwrap_or_default(),
-                        ..PairOutcome::default()
-                    });
-                }
+                    o
+                } else {
+                    let ta = &s.templates[s.particle_types[p.kind[a] as usize].template];
+                    let tb = &s.templates[s.particle_types[p.kind[b] as usize].template];
+                    let pose_a = Isometry3::from_parts(p.position[a].into(), p.orientation[a]);
+                    let pose_b = Isometry3::from_parts(xb.into(), p.orientation[b]);
+                    let (body_a, body_b) = ((ta, p.scale[a], &pose_a), (tb, p.scale[b], &pose_b));
+                    // Stage 4 shortcut: last step's separating axis, with a margin far above
+                    // GJK's touching tolerance (1e-12 of the size in f64), so the verdict is
+                    // GJK's.
+                    if *axis != Vector3::zeros()
+                        && axis_separates(body_a, body_b, axis, 1e-9 * reach)
+                    {
+                        return Ok(PairOutcome {
+                            separating_axis: *axis,
+                            ..PairOutcome::default()
+                        });
+                    }
+                    // Stages 4–5: GJK, then the overlap.
+                    let g = with_workspace(|ws| overlap_pair(ws, body_a, body_b)).map_err(|e| {
+                        SimulationError::Geometry {
+                            step,
+                            what: format!("particles {} and {}", p.id[a], p.id[b]),
+                            message: e.to_string(),
+                        }
+                    })?;
+                    if g.overlap.volume <= 0.0 {
+                        return Ok(PairOutcome {
+                            separating_axis: g.separating_axis.unwrap_or_default(),
+                            ..PairOutcome::default()
+                        });
+                    }
+                    g.overlap
+                };
                 // Stage 7: contact law.
                 let (params, table) = self.contact_parameters(a, Some(b), 0);
                 let key = ContactKey::particles(p.id[a], p.id[b]);
@@ -499,13 +515,13 @@ impl Simulation {
                     effective_mass: normal_effective_mass(
                         p,
                         &[(a, p.position[a]), (b, xb)],
-                        &g.overlap,
+                        &overlap,
                     ),
                 };
                 let forces = contact_forces(
                     &params,
                     &self.damping[table],
-                    &g.overlap,
+                    &overlap,
                     &kin,
                     &mut state,
                     dt,
@@ -541,15 +557,22 @@ impl Simulation {
                         if facets.is_empty() {
                             continue;
                         }
-                        let body: &mut PosedPolytope<f64> = &mut ws.a;
-                        body.place(tmpl, p.scale[i], &local, &Vector3::zeros());
-                        let o = mesh.contact(&mut ws.overlap, body, facets).map_err(|e| {
-                            SimulationError::Geometry {
-                                step,
-                                what: format!("particle {} and wall {}", p.id[i], s.walls[k].name),
-                                message: e.to_string(),
-                            }
-                        })?;
+                        let o = if tmpl.sphere {
+                            mesh.sphere_contact(&local.translation.vector, self.radius[i], facets)
+                        } else {
+                            let body: &mut PosedPolytope<f64> = &mut ws.a;
+                            body.place(tmpl, p.scale[i], &local, &Vector3::zeros());
+                            mesh.contact(&mut ws.overlap, body, facets).map_err(|e| {
+                                SimulationError::Geometry {
+                                    step,
+                                    what: format!(
+                                        "particle {} and wall {}",
+                                        p.id[i], s.walls[k].name
+                                    ),
+                                    message: e.to_string(),
+                                }
+                            })?
+                        };
                         if o.volume <= 0.0 {
                             continue;
                         }

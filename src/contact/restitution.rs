@@ -101,6 +101,16 @@ pub fn face_contact_time(m_eff: f64, c: f64, a: f64, v: f64) -> f64 {
     dimensionless_duration(p) * (m_eff * v.powf(1.0 - p) / k).powf(1.0 / (1.0 + p))
 }
 
+/// Contact duration of a head-on impact at speed `v` of two spheres of effective radius
+/// `r_eff = r₁r₂/(r₁ + r₂)` and effective mass `m_eff`, elastic constant `c`: for `δ ≪ r` the
+/// lens has `V = π r_eff δ²` and `A_n = 2π r_eff δ`, so the volume law is the power law
+/// `F = c V^{1/3} A_n = 2π^{4/3} c r_eff^{4/3} δ^{5/3}` (p = 5/3, against Hertz's 3/2).
+pub fn sphere_contact_time(m_eff: f64, c: f64, r_eff: f64, v: f64) -> f64 {
+    let p = 5.0 / 3.0;
+    let k = 2.0 * std::f64::consts::PI.powf(4.0 / 3.0) * c * r_eff.powf(4.0 / 3.0);
+    dimensionless_duration(p) * (m_eff * v.powf(1.0 - p) / k).powf(1.0 / (1.0 + p))
+}
+
 /// `γ` such that [`restitution_of`]`(γ, p) = e`, by bisection (restitution decreases with γ).
 pub fn damping_for(e: f64, p: f64) -> f64 {
     if e >= 1.0 {

@@ -14,6 +14,7 @@
 
 use crate::geometry::clip::{facet_prism, prism_overlap};
 use crate::geometry::overlap::{OverlapError, OverlapWorkspace};
+use crate::geometry::sphere::sphere_facet;
 use crate::geometry::{Overlap, Plane, PosedPolytope};
 use nalgebra::Vector3;
 use std::collections::HashMap;
@@ -125,25 +126,58 @@ impl WallMesh {
         body: &PosedPolytope<f64>,
         facets: &[u32],
     ) -> Result<Overlap<f64>, OverlapError> {
-        let mut total = Overlap::default();
-        let mut first_moment = Vector3::zeros();
-        let mut moment_origin = Vector3::zeros(); // Σ (M_f + c_f × S_f), about the origin
+        let mut sum = FacetSum::default();
         for &f in facets {
-            let o = prism_overlap(ws, body, &self.prisms[f as usize])?;
-            if o.volume > 0.0 {
-                total.volume += o.volume;
-                first_moment += o.centroid * o.volume;
-                total.dv_dxb += o.dv_dxb;
-                moment_origin += o.moment_b + o.centroid.cross(&o.dv_dxb);
-                total.depth = total.depth.max(o.depth);
-                total.thickness = total.thickness.max(o.thickness);
-            }
+            sum.add(&prism_overlap(ws, body, &self.prisms[f as usize])?);
         }
+        Ok(sum.total())
+    }
+
+    /// As [`WallMesh::contact`] for an exact sphere of radius `r` centred at `c` (wall frame):
+    /// each facet's share of the cap behind its plane ([`sphere_facet`], the sphere fast path).
+    pub fn sphere_contact(&self, c: &Vector3<f64>, r: f64, facets: &[u32]) -> Overlap<f64> {
+        let mut sum = FacetSum::default();
+        for &f in facets {
+            let f = f as usize;
+            sum.add(&sphere_facet(
+                c,
+                r,
+                &self.triangles[f],
+                &self.prisms[f][0].normal,
+            ));
+        }
+        sum.total()
+    }
+}
+
+/// The sum of a particle's facet overlaps in facet order: volumes, first moments and `S` add;
+/// the surface moments are carried about the origin and moved to the total centroid.
+#[derive(Default)]
+struct FacetSum {
+    total: Overlap<f64>,
+    first_moment: Vector3<f64>,
+    moment_origin: Vector3<f64>, // Σ (M_f + c_f × S_f), about the origin
+}
+
+impl FacetSum {
+    fn add(&mut self, o: &Overlap<f64>) {
+        if o.volume > 0.0 {
+            self.total.volume += o.volume;
+            self.first_moment += o.centroid * o.volume;
+            self.total.dv_dxb += o.dv_dxb;
+            self.moment_origin += o.moment_b + o.centroid.cross(&o.dv_dxb);
+            self.total.depth = self.total.depth.max(o.depth);
+            self.total.thickness = self.total.thickness.max(o.thickness);
+        }
+    }
+
+    fn total(self) -> Overlap<f64> {
+        let mut total = self.total;
         if total.volume > 0.0 {
-            total.centroid = first_moment / total.volume;
-            total.moment_b = moment_origin - total.centroid.cross(&total.dv_dxb);
+            total.centroid = self.first_moment / total.volume;
+            total.moment_b = self.moment_origin - total.centroid.cross(&total.dv_dxb);
         }
-        Ok(total)
+        total
     }
 }
 

@@ -12,6 +12,7 @@
 //!   Eq. 4–9; Feng, Han & Owen 2012 for `S`).
 //! - [`clip`]: polyhedron against a triangle facet (seed Alg. VII, Sutherland–Hodgman).
 //! - [`polytope`]: a template placed in a pair frame (vertices and face planes).
+//! - [`sphere`]: the sphere fast path: lens and cap overlaps in closed form.
 
 pub mod clip;
 pub mod gjk;
@@ -20,6 +21,7 @@ pub mod overlap;
 pub mod polytope;
 pub mod quickhull;
 mod real;
+pub mod sphere;
 
 pub use clip::{FacetContact, facet_contact, section_polygon, sutherland_hodgman};
 pub use gjk::gjk_intersect;

@@ -358,6 +358,12 @@ pub fn parse_scene(text: &str, base_dir: &Path, file_name: &str) -> Result<Scene
 }
 
 impl Scene {
+    /// Whether every particle is a sphere: the scene then takes the sphere fast path (DESIGN.md
+    /// §1), and validation guarantees it has no polyhedra.
+    pub fn spheres_only(&self) -> bool {
+        !self.templates.is_empty() && self.templates.iter().all(|t| t.sphere)
+    }
+
     /// The time step (s): the fixed one, or the fraction of the Rayleigh step.
     pub fn time_step(&self) -> f64 {
         match self.simulation.dt {
@@ -392,7 +398,8 @@ impl Scene {
 
 /// Face-to-face contact time of each particle type with itself at the impact speed `v`
 /// (validation.md §6; see [`crate::contact::restitution::face_contact_time`]): its largest face,
-/// its smallest scale.
+/// its smallest scale. For a sphere, the head-on sphere–sphere time
+/// ([`crate::contact::restitution::sphere_contact_time`]).
 pub fn face_contact_times(scene: &Scene, v: f64) -> Vec<(String, f64)> {
     scene
         .particle_types
@@ -420,10 +427,13 @@ pub fn face_contact_times(scene: &Scene, v: f64) -> Vec<(String, f64)> {
                 * s;
             let mass = m.density * t.volume * s.powi(3);
             let c = 2.0 * m.youngs_modulus / (t.equivalent_radius * s);
-            (
-                ty.name.clone(),
-                crate::contact::restitution::face_contact_time(0.5 * mass, c, area, v),
-            )
+            let time = if t.sphere {
+                let r_eff = 0.5 * t.circumscribed_radius * s;
+                crate::contact::restitution::sphere_contact_time(0.5 * mass, c, r_eff, v)
+            } else {
+                crate::contact::restitution::face_contact_time(0.5 * mass, c, area, v)
+            };
+            (ty.name.clone(), time)
         })
         .collect()
 }

@@ -408,6 +408,23 @@ impl Validator<'_> {
             });
             scales.push(self.scale(&k("scale"), p.scale.as_ref()));
         }
+        // The sphere fast path replaces the polyhedral stages for the whole scene (DESIGN.md §1);
+        // a sphere–polyhedron contact has no formula.
+        let is_sphere = |t: &ParticleType| templates.get(t.template).is_some_and(|t| t.sphere);
+        if let (Some(s), Some(q)) = (
+            types.iter().position(is_sphere),
+            types.iter().position(|t| !is_sphere(t)),
+        ) {
+            self.err(
+                &format!("particle_types[{s}].generator"),
+                format!(
+                    "spheres (\"{}\") and polyhedra (\"{}\") cannot be mixed in one scene: \
+                     sphere–polyhedron contacts are not supported; use only spheres, or a \
+                     faceted polyhedron (e.g. kind = \"icosahedron\") in their place",
+                    types[s].name, types[q].name
+                ),
+            );
+        }
         (templates, types, scales)
     }
 

@@ -5,7 +5,7 @@
 
 use super::{ConvexTemplate, MeshFile, ShapeError};
 use crate::rng::Rng;
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use std::f64::consts::{PI, TAU};
 
 /// The golden ratio φ = (1 + √5)/2, which fixes the dodecahedron's and icosahedron's vertices.
@@ -45,15 +45,19 @@ pub enum Generator {
         seed: u64,
         aspect: [f64; 3],
     },
+    /// Sphere of diameter `size`: an exact sphere for contacts and mass properties (the sphere
+    /// fast path, [`crate::geometry::sphere`]), drawn as an 80-face geodesic polyhedron.
+    Sphere { size: f64 },
 }
 
 /// Names accepted by [`Generator::parse`].
-pub const GENERATOR_NAMES: [&str; 5] = [
+pub const GENERATOR_NAMES: [&str; 6] = [
     "tetrahedron",
     "cube",
     "octahedron",
     "dodecahedron",
     "icosahedron",
+    "sphere",
 ];
 
 impl Generator {
@@ -66,6 +70,7 @@ impl Generator {
             "octahedron" => Generator::Octahedron { size },
             "dodecahedron" => Generator::Dodecahedron { size },
             "icosahedron" => Generator::Icosahedron { size },
+            "sphere" => Generator::Sphere { size },
             _ => {
                 return Err(ShapeError::BadParameter {
                     source_name: name.to_string(),
@@ -91,6 +96,7 @@ impl Generator {
             Generator::Icosahedron { .. } => "icosahedron".into(),
             Generator::Prism { sides, .. } => format!("prism{sides}"),
             Generator::RandomHull { points, seed, .. } => format!("random_hull{points}_seed{seed}"),
+            Generator::Sphere { .. } => "sphere".into(),
         }
     }
 
@@ -112,7 +118,8 @@ impl Generator {
             | Generator::Cube { size }
             | Generator::Octahedron { size }
             | Generator::Dodecahedron { size }
-            | Generator::Icosahedron { size } => length("size", *size),
+            | Generator::Icosahedron { size }
+            | Generator::Sphere { size } => length("size", *size),
             Generator::Cuboid { a, b, c } => {
                 length("a", *a)?;
                 length("b", *b)?;
@@ -193,6 +200,7 @@ impl Generator {
             Generator::Icosahedron { size } => {
                 scaled(cyclic(0.0, 1.0, PHI), (1.0 + PHI * PHI).sqrt(), *size)
             }
+            Generator::Sphere { size } => geodesic_points(*size / 2.0),
             Generator::Prism {
                 sides,
                 diameter,
@@ -220,8 +228,37 @@ impl Generator {
 
     /// Builds the template (convex hull, merged faces, principal frame) of this shape.
     pub fn build(&self) -> Result<ConvexTemplate, ShapeError> {
-        ConvexTemplate::from_points(&self.name(), &self.points()?)
+        let t = ConvexTemplate::from_points(&self.name(), &self.points()?)?;
+        Ok(match self {
+            Generator::Sphere { size } => t.into_sphere(size / 2.0),
+            _ => t,
+        })
     }
+}
+
+/// The 42 vertices of the icosahedron with each edge split at its midpoint, projected onto the
+/// sphere of radius `r` (a geodesic polyhedron of 80 triangles): the drawing of a sphere.
+fn geodesic_points(r: f64) -> Vec<Point3<f64>> {
+    let ico: Vec<Vector3<f64>> = cyclic(0.0, 1.0, PHI)
+        .into_iter()
+        .map(|p| Vector3::new(p[0], p[1], p[2]).normalize())
+        .collect();
+    let mut pts: Vec<Vector3<f64>> = ico.clone();
+    // The 30 edges join the vertex pairs at the smallest distance.
+    let mut edge = f64::MAX;
+    for i in 0..ico.len() {
+        for j in i + 1..ico.len() {
+            edge = edge.min((ico[i] - ico[j]).norm());
+        }
+    }
+    for i in 0..ico.len() {
+        for j in i + 1..ico.len() {
+            if (ico[i] - ico[j]).norm() < edge * 1.01 {
+                pts.push((ico[i] + ico[j]).normalize());
+            }
+        }
+    }
+    pts.into_iter().map(|v| Point3::from(v * r)).collect()
 }
 
 /// The 8 points (±a, ±b, ±c).

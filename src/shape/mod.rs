@@ -67,6 +67,10 @@ pub struct ConvexTemplate {
     pub circumscribed_radius: f64,
     /// Radius of the sphere with the same volume, `(3V / 4π)^(1/3)`.
     pub equivalent_radius: f64,
+    /// Whether the particle is an exact sphere of radius `circumscribed_radius` (the sphere fast
+    /// path, DESIGN.md §1): contacts use [`crate::geometry::sphere`], and `vertices`/`faces` are
+    /// only its drawing.
+    pub sphere: bool,
 }
 
 /// Errors building a template. Each names the source (file or generator) and the problem.
@@ -206,6 +210,7 @@ impl ConvexTemplate {
             file_to_body,
             circumscribed_radius,
             equivalent_radius: (3.0 * mass.volume / (4.0 * std::f64::consts::PI)).cbrt(),
+            sphere: false,
         };
         Ok((template, poly.exact_hull_volume))
     }
@@ -233,6 +238,20 @@ impl ConvexTemplate {
         t.circumscribed_radius *= s;
         t.equivalent_radius *= s;
         Ok(t)
+    }
+
+    /// This polyhedron as the drawing of an exact sphere of radius `r` about the centroid: the
+    /// mass properties become the sphere's (`V = 4πr³/3`, `I = 2Vr²/5` per unit density), both
+    /// radii `r`, and contacts use the sphere formulas.
+    pub(crate) fn into_sphere(mut self, r: f64) -> ConvexTemplate {
+        let volume = 4.0 / 3.0 * std::f64::consts::PI * r * r * r;
+        self.volume = volume;
+        self.principal_inertia = Vector3::repeat(0.4 * volume * r * r);
+        self.circumscribed_radius = r;
+        self.equivalent_radius = r;
+        self.file_to_body = Isometry3::identity();
+        self.sphere = true;
+        self
     }
 
     /// Largest number of vertices on one face (sizes the clipping buffers).
