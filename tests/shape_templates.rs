@@ -749,11 +749,13 @@ fn errors_name_their_source() {
         "{e}"
     );
 
-    let e = err_text(Generator::parse("sphere", 1.0).unwrap_err());
+    let e = err_text(Generator::parse("ellipsoid", 1.0).unwrap_err());
     assert!(
-        e.contains("sphere") && e.contains("dodecahedron, icosahedron"),
+        e.contains("ellipsoid") && e.contains("dodecahedron, icosahedron, sphere"),
         "{e}"
     );
+    let e = err_text(Generator::parse("sphere", 0.0).unwrap_err());
+    assert!(e.contains("sphere") && e.contains("positive"), "{e}");
     let e = err_text(Generator::parse("cube", -1.0).unwrap_err());
     assert!(e.contains("positive"), "{e}");
     let e = err_text(
@@ -1061,4 +1063,29 @@ fn generators_deserialize_from_toml() {
     .unwrap();
     assert_eq!(g, mineral_grain());
     assert!(toml::from_str::<Generator>("kind = \"cube\"\nsize = 1.0\nedge = 2.0\n").is_err());
+}
+
+/// The sphere generator: an exact sphere's mass properties and radii, drawn as the 80-face
+/// geodesic polyhedron with every vertex on the sphere; scaling keeps it a sphere.
+#[test]
+fn sphere_template_has_exact_mass_properties() {
+    let t = Generator::Sphere { size: 2.0 }.build().unwrap();
+    assert!(t.sphere);
+    let pi = std::f64::consts::PI;
+    assert!((t.volume - 4.0 / 3.0 * pi).abs() <= 1e-15 * t.volume);
+    for k in 0..3 {
+        assert!((t.principal_inertia[k] - 0.4 * t.volume).abs() <= 1e-15 * t.volume);
+    }
+    assert_eq!((t.circumscribed_radius, t.equivalent_radius), (1.0, 1.0));
+    assert_eq!((t.vertices.len(), t.faces.len()), (42, 80));
+    for v in &t.vertices {
+        assert!((v.coords.norm() - 1.0).abs() <= 1e-15, "{v}");
+    }
+    let s = t.scaled(0.01).unwrap();
+    assert!(s.sphere);
+    assert!((s.volume - 4.0 / 3.0 * pi * 1e-6).abs() <= 1e-15 * s.volume);
+    assert!(
+        (s.principal_inertia[0] - 0.4 * s.volume * 1e-4).abs() <= 1e-15 * s.principal_inertia[0]
+    );
+    assert_eq!(s.circumscribed_radius, 0.01);
 }
