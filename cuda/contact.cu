@@ -10,6 +10,7 @@
 #include "state.cuh"
 #include "overlap.cuh"
 #include "prism.cuh"
+#include "sphere.cuh"
 #include "contact_law.cuh"
 
 using namespace pd;
@@ -99,15 +100,24 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
         store3(axes, k, zero3<double>());
         return;
     }
+    Quat<double> qa = load_quat(p.orientation, a), qb = load_quat(p.orientation, b);
+#if PD_SPHERES
+    // Stages 4–5 for spheres: the lens in closed form (Simulation::pair_contacts).
+    Overlap<double> ov = sphere_lens(p.radius[a], p.radius[b], d);
+    if (!(ov.volume > 0.0)) {
+        return;
+    }
+    ov.centroid = ov.centroid + xa;
+#else
     BodyRef A, B;
     A.tpl = template_view(p.tmpl[a]);
     A.scale = p.scale[a];
     A.pos = xa;
-    A.rot = load_quat(p.orientation, a);
+    A.rot = qa;
     B.tpl = template_view(p.tmpl[b]);
     B.scale = p.scale[b];
     B.pos = xb;
-    B.rot = load_quat(p.orientation, b);
+    B.rot = qb;
     // Stage 4 shortcut: last step's separating axis, with a margin far above GJK's touching
     // tolerance, so the verdict is GJK's.
     V3<double> axis = load3(axes, k);
@@ -128,6 +138,8 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
         return;
     }
     store3(axes, k, zero3<double>());
+    Overlap<double> ov = g.overlap;
+#endif
     // Stage 7: the contact law.
     unsigned int ma = p.material[a], mb = p.material[b];
     const PairMaterial& pm = materials[ma * (unsigned int)n_materials + mb];
@@ -143,12 +155,12 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
     kin.v_b = load3(p.velocity, b);
     kin.w_a = load3(p.angular_velocity, a);
     kin.w_b = load3(p.angular_velocity, b);
-    double area = norm(g.overlap.dv_dxb);
+    double area = norm(ov.dv_dxb);
     if (area > 0.0) {
-        V3<double> nrm = (-g.overlap.dv_dxb) / area;
+        V3<double> nrm = (-ov.dv_dxb) / area;
         double inverse = 0.0;
-        inverse += inverse_mass_term(p.mass[a], load3(p.inertia, a), A.rot, xa, g.overlap.centroid, nrm);
-        inverse += inverse_mass_term(p.mass[b], load3(p.inertia, b), B.rot, xb, g.overlap.centroid, nrm);
+        inverse += inverse_mass_term(p.mass[a], load3(p.inertia, a), qa, xa, ov.centroid, nrm);
+        inverse += inverse_mass_term(p.mass[b], load3(p.inertia, b), qb, xb, ov.centroid, nrm);
         kin.effective_mass = 1.0 / inverse;
     } else {
         kin.effective_mass = min_(p.mass[a], p.mass[b]);
@@ -157,7 +169,7 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
 #if PD_FRICTION
     spring = load3(spring_in, k);
 #endif
-    ContactForces f = contact_forces(params, pm.damping, g.overlap, kin, &spring, dt);
+    ContactForces f = contact_forces(params, pm.damping, ov, kin, &spring, dt);
     store3(out.forces, 3 * k, f.force_b);
     store3(out.forces, 3 * k + 1, f.torque_a);
     store3(out.forces, 3 * k + 2, f.torque_b);
@@ -388,8 +400,8 @@ extern "C" __global__ void wall_candidates(int n, ParticleView p, int n_walls, c
 // particle placed in the wall's frame, clipped by the facet's prism. overlaps[12 m ...] =
 // volume, centroid (3), S (3), M (3), depth, thickness, in the wall's frame.
 extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, int n_walls, ParticleView p,
-                                               const WallState* states, const double* prisms, double* overlaps,
-                                               unsigned int* error) {
+                                               const WallState* states, const double* triangles,
+                                               const double* prisms, double* overlaps, unsigned int* error) {
     int mm = blockIdx.x * blockDim.x + threadIdx.x;
     if (mm >= n_items) {
         return;
@@ -402,6 +414,13 @@ extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, 
     V3<double> local_t;
     Quat<double> local_q;
     wall_local_pose(states[k], load3(p.position, i), load_quat(p.orientation, i), &local_t, &local_q);
+#if PD_SPHERES
+    // The sphere's share of its cap behind the facet (WallMesh::sphere_contact).
+    V3<double> tri[3];
+    for (int q = 0; q < 3; ++q) tri[q] = load3(triangles + 9 * f, q);
+    V3<double> facet_normal = v3(prisms[16 * f], prisms[16 * f + 1], prisms[16 * f + 2]);
+    Overlap<double> o = sphere_facet(local_t, p.radius[i], tri, facet_normal);
+#else
     PosedPolytope<double> body;
     OverlapWorkspace<double> ws;
     place(body, template_view(p.tmpl[i]), p.scale[i], local_t, local_q, zero3<double>());
@@ -416,6 +435,7 @@ extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, 
         report_error(error, status, (unsigned int)i);
         o = overlap_zero<double>();
     }
+#endif
     double* out = overlaps + 12 * m;
     out[0] = o.volume;
     store3(out + 1, 0, o.centroid);

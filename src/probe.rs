@@ -118,6 +118,12 @@ fn load_shapes(
                 .and_then(|g| g.build())
                 .map_err(|e| anyhow!("shapes.{name}.generator: {e}"))?,
         };
+        if template.sphere {
+            return Err(anyhow!(
+                "shapes.{name}.generator: the probe computes polyhedral overlaps and a \"sphere\" \
+                 is not a polyhedron; use \"icosahedron\" or a vertex list"
+            ));
+        }
         let body_to_input = template.file_to_body.inverse();
         out.insert(
             name.clone(),

@@ -13,6 +13,7 @@ fn configs() -> Vec<KernelConfig> {
         walls: true,
         friction: true,
         periodic: false,
+        spheres: false,
         templates: 1,
         max_vertices: 20,
         max_faces: 12,
@@ -39,6 +40,22 @@ fn configs() -> Vec<KernelConfig> {
             templates: 2,
             max_vertices: 256,
             max_faces: 128,
+            ..base.clone()
+        },
+        // The sphere fast path, with and without walls.
+        KernelConfig {
+            spheres: true,
+            max_vertices: 42,
+            max_faces: 80,
+            ..base.clone()
+        },
+        KernelConfig {
+            spheres: true,
+            walls: false,
+            periodic: true,
+            precision: Precision::Mixed,
+            max_vertices: 42,
+            max_faces: 80,
             ..base
         },
     ]

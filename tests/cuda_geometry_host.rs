@@ -929,3 +929,97 @@ fn parity(what: &str, produce: Producer) {
         );
     }
 }
+
+/// The sphere fast path (`cuda/sphere.cuh`) against `geometry::sphere`, bit for bit, on random
+/// lenses (apart, touching, shallow, deep, nested, radius ratios up to 1:10) and random caps
+/// under triangles (disk inside, across edges and corners, apart, sphere behind the plane).
+#[test]
+fn cuda_sphere_headers_match_the_rust_reference_bitwise() {
+    use polydem::geometry::sphere::{sphere_facet, sphere_lens};
+    let mut rng = Rng::new(31);
+    let mut uniform = |lo: f64, hi: f64| rng.range(lo, hi);
+    let mut contacts = 0;
+    let mut text = String::new();
+    let mut want = Vec::new();
+    let n = 2000;
+    writeln!(text, "lenses {n}").unwrap();
+    for i in 0..n {
+        let (ra, rb) = (uniform(0.1, 1.0), uniform(0.1, 1.0));
+        let dir = Vector3::new(uniform(-1.0, 1.0), uniform(-1.0, 1.0), uniform(-1.0, 1.0));
+        let dist = match i % 4 {
+            0 => (ra + rb) * uniform(0.999, 1.001), // about to touch
+            1 => (ra + rb) * uniform(0.5, 1.2),
+            2 => (ra - rb).abs() * uniform(0.0, 1.0), // nested
+            _ => (ra + rb) * uniform(0.0, 2.0),
+        };
+        let d = dir.normalize() * dist;
+        hex(&mut text, ra);
+        hex(&mut text, rb);
+        hex3(&mut text, &d);
+        text.push('\n');
+        let mut l = format!("L {i}");
+        let o = sphere_lens(ra, rb, &d);
+        contacts += usize::from(o.volume > 0.0);
+        put_overlap(&mut l, &o);
+        want.push(l);
+    }
+    writeln!(text, "caps {n}").unwrap();
+    for i in 0..n {
+        let tri = [0, 1, 2]
+            .map(|_| Vector3::new(uniform(-1.0, 1.0), uniform(-1.0, 1.0), uniform(-0.2, 0.2)));
+        let nrm = (tri[1] - tri[0]).cross(&(tri[2] - tri[0])).normalize();
+        let r = uniform(0.05, 1.0);
+        let on = (tri[0] + tri[1] + tri[2]) / 3.0
+            + Vector3::new(uniform(-1.0, 1.0), uniform(-1.0, 1.0), uniform(-1.0, 1.0));
+        let c = on + nrm * (r * uniform(-1.2, 1.1));
+        hex3(&mut text, &c);
+        hex(&mut text, r);
+        for v in &tri {
+            hex3(&mut text, v);
+        }
+        hex3(&mut text, &nrm);
+        text.push('\n');
+        let mut l = format!("C {i}");
+        let o = sphere_facet(&c, r, &tri, &nrm);
+        contacts += usize::from(o.volume > 0.0);
+        put_overlap(&mut l, &o);
+        want.push(l);
+    }
+    let root = repo_root();
+    let dir = temp_dir("cuda-sphere-host");
+    let exe = build_harness(&root, &dir);
+    let cases = dir.join("spheres.txt");
+    std::fs::write(&cases, text).unwrap();
+    let out = Command::new(&exe)
+        .arg("--spheres")
+        .arg(&cases)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "harness failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let got: Vec<String> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| l.trim_end().to_string())
+        .collect();
+    assert_eq!(got.len(), want.len());
+    let mismatches: Vec<_> = got
+        .iter()
+        .zip(&want)
+        .filter(|(g, w)| g.trim() != w.trim())
+        .map(|(g, w)| format!("C++  {g}\nRust {w}"))
+        .collect();
+    println!(
+        "{} sphere cases, {contacts} with some overlap, {} differ",
+        want.len(),
+        mismatches.len()
+    );
+    assert!(
+        mismatches.is_empty(),
+        "{}",
+        mismatches[..mismatches.len().min(5)].join("\n")
+    );
+}

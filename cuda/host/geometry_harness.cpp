@@ -3,6 +3,7 @@
 //
 // Build: c++ -O2 -std=c++17 -ffp-contract=off -I cuda cuda/host/geometry_harness.cpp
 // Usage: geometry_harness CASES_FILE      (results on stdout)
+//        geometry_harness --spheres FILE   (the sphere fast path, sphere.cuh; format below)
 //        geometry_harness --sizes          (workspace sizes in bytes for the compiled capacities)
 //
 // Input (whitespace-separated tokens; every floating-point number is the 16-hex-digit bit
@@ -17,9 +18,12 @@
 //   P i  {status intersects axis(3) volume centroid(3) S(3) M(3) depth thickness} for double,
 //        then the same for float, then axis_separates (0/1)
 //   F i  {prism_status status volume centroid(3) S(3) M(3) depth thickness} for double, then float
+// Sphere input: "lenses N" N × { ra rb d(3) }, then "caps N" N × { c(3) r tri(9) n(3) }; output
+//   L i {volume centroid(3) S(3) M(3) depth thickness} and C i {the same}.
 
 #include "overlap.cuh"
 #include "prism.cuh"
+#include "sphere.cuh"
 
 #include <cinttypes>
 #include <cstdio>
@@ -148,12 +152,46 @@ void print_sizes() {
                 sizeof(pd::OverlapWorkspace<float>), sizeof(pd::DualHull<float>));
 }
 
+int run_spheres(const char* path) {
+    in = std::fopen(path, "r");
+    if (!in) {
+        std::perror(path);
+        return 2;
+    }
+    read_word("lenses");
+    long nl = read_int();
+    for (long i = 0; i < nl; ++i) {
+        double ra = read_f64(), rb = read_f64();
+        pd::V3<double> d = read_v3();
+        std::printf("L %ld", i);
+        put_overlap(pd::sphere_lens(ra, rb, d));
+        std::printf("\n");
+    }
+    read_word("caps");
+    long nc = read_int();
+    for (long i = 0; i < nc; ++i) {
+        pd::V3<double> c = read_v3();
+        double r = read_f64();
+        pd::V3<double> tri[3];
+        for (int k = 0; k < 3; ++k) tri[k] = read_v3();
+        pd::V3<double> n = read_v3();
+        std::printf("C %ld", i);
+        put_overlap(pd::sphere_facet(c, r, tri, n));
+        std::printf("\n");
+    }
+    std::fclose(in);
+    return 0;
+}
+
 } // namespace
 
 int main(int argc, char** argv) {
     if (argc == 2 && std::strcmp(argv[1], "--sizes") == 0) {
         print_sizes();
         return 0;
+    }
+    if (argc == 3 && std::strcmp(argv[1], "--spheres") == 0) {
+        return run_spheres(argv[2]);
     }
     if (argc != 2) {
         std::fprintf(stderr, "usage: geometry_harness CASES_FILE | --sizes\n");

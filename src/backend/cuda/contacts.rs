@@ -108,6 +108,7 @@ impl CudaSimulation {
                         .arg(&nw)
                         .arg(&view)
                         .arg(&w.states)
+                        .arg(&w.triangles)
                         .arg(&w.prisms)
                         .arg(&mut overlaps)
                         .arg(&mut self.error)

@@ -17,6 +17,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("quickhull.cuh", include_str!("../../../cuda/quickhull.cuh")),
     ("overlap.cuh", include_str!("../../../cuda/overlap.cuh")),
     ("prism.cuh", include_str!("../../../cuda/prism.cuh")),
+    ("sphere.cuh", include_str!("../../../cuda/sphere.cuh")),
     (
         "contact_law.cuh",
         include_str!("../../../cuda/contact_law.cuh"),
@@ -50,6 +51,9 @@ pub struct KernelConfig {
     pub friction: bool,
     /// Some axis is periodic (pair image shifts stored).
     pub periodic: bool,
+    /// Every particle is a sphere: stages 4–5 and the wall overlaps are the sphere formulas
+    /// (`cuda/sphere.cuh`, always in f64), and no polyhedral workspace is compiled.
+    pub spheres: bool,
     /// Number of templates, and the largest vertex and face counts among them: the sizes of the
     /// constant-memory template tables and of the per-thread geometry workspace.
     pub templates: usize,
@@ -67,6 +71,7 @@ impl KernelConfig {
             walls: !scene.walls.is_empty(),
             friction: scene.pairs.any_friction(),
             periodic: scene.domain.periodic.iter().any(|&p| p),
+            spheres: scene.spheres_only(),
             templates: scene.templates.len().max(1),
             max_vertices: scene
                 .templates
@@ -95,6 +100,7 @@ impl KernelConfig {
             format!("-DPD_WALLS={}", flag(self.walls)),
             format!("-DPD_FRICTION={}", flag(self.friction)),
             format!("-DPD_PERIODIC={}", flag(self.periodic)),
+            format!("-DPD_SPHERES={}", flag(self.spheres)),
             format!("-DPD_TEMPLATES={}", self.templates),
             format!("-DPD_MAX_TEMPLATE_VERTICES={}", self.max_vertices),
             format!("-DPD_MAX_TEMPLATE_FACES={}", self.max_faces),

@@ -143,6 +143,7 @@ impl GeometryProbe {
             walls: false,
             friction: false,
             periodic: false,
+            spheres: false,
             templates: 1,
             max_vertices,
             max_faces,
