@@ -97,10 +97,11 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
     store3(spring_out, k, zero3<double>());
     // Stage 3: bounding spheres.
     if (norm2(d) >= reach * reach) {
+#if !PD_SPHERES
         store3(axes, k, zero3<double>());
+#endif
         return;
     }
-    Quat<double> qa = load_quat(p.orientation, a), qb = load_quat(p.orientation, b);
 #if PD_SPHERES
     // Stages 4–5 for spheres: the lens in closed form (Simulation::pair_contacts).
     Overlap<double> ov = sphere_lens(p.radius[a], p.radius[b], d);
@@ -109,6 +110,7 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
     }
     ov.centroid = ov.centroid + xa;
 #else
+    Quat<double> qa = load_quat(p.orientation, a), qb = load_quat(p.orientation, b);
     BodyRef A, B;
     A.tpl = template_view(p.tmpl[a]);
     A.scale = p.scale[a];
@@ -155,6 +157,10 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
     kin.v_b = load3(p.velocity, b);
     kin.w_a = load3(p.angular_velocity, a);
     kin.w_b = load3(p.angular_velocity, b);
+#if PD_SPHERES
+    // The lens's centroid is on the line of centres: no lever arm, no rotational term.
+    kin.effective_mass = 1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b]);
+#else
     double area = norm(ov.dv_dxb);
     if (area > 0.0) {
         V3<double> nrm = (-ov.dv_dxb) / area;
@@ -165,6 +171,7 @@ extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const d
     } else {
         kin.effective_mass = min_(p.mass[a], p.mass[b]);
     }
+#endif
     V3<double> spring = zero3<double>();
 #if PD_FRICTION
     spring = load3(spring_in, k);

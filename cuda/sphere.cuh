@@ -64,15 +64,53 @@ PD_HD double clamp01(double x) {
     return x;
 }
 
+// sphere::atan2: atan2 from + − × ÷ only, so that host, GPU and Rust round identically.
+PD_HD double portable_atan2(double y, double x) {
+    const double PI_2 = 1.57079632679489661923;
+    const double PI_6 = 0.52359877559829887308;
+    const double SQRT3 = 1.7320508075688772;
+    const double TAN_PI_12 = 0.2679491924311227;
+    if (y == 0.0 && x >= 0.0) return 0.0;
+    if (x == 0.0 && y == 0.0) return 1.0 / x < 0.0 ? copysign(sphere_pi(), y) : 0.0;  // x = -0: ±π
+    double ax = abs_(x), ay = abs_(y);
+    bool swap = ay > ax;
+    double t = swap ? ax / ay : ay / ax;
+    double base = 0.0;
+    if (t > TAN_PI_12) {
+        t = (SQRT3 * t - 1.0) / (SQRT3 + t);
+        base = PI_6;
+    }
+    double t2 = t * t;
+    double series = 0.0;
+    for (int k = 14; k >= 0; --k) {
+        double term = 1.0 / (double)(2 * k + 1);
+        series = (k % 2 == 0 ? term : -term) + t2 * series;
+    }
+    double angle = base + t * series;
+    if (swap) angle = PI_2 - angle;
+    if (x < 0.0) angle = sphere_pi() - angle;
+    return y < 0.0 ? -angle : angle;
+}
+
 // sphere::sector: the signed sector of radius a from direction s to direction e; adds its area
-// and first moment.
+// and first moment (half-angle sine and cosine without sin/cos, as in Rust).
 PD_HD void disk_sector(double a, double sx, double sy, double ex, double ey, double* area, double* mx, double* my) {
-    double theta = atan2(cross2(sx, sy, ex, ey), sx * ex + sy * ey);
+    double sn_raw = cross2(sx, sy, ex, ey), cs_raw = sx * ex + sy * ey;
+    double theta = portable_atan2(sn_raw, cs_raw);
     if (theta == 0.0) return;
     double ns = sqrt_(sx * sx + sy * sy);
     double ux = sx / ns, uy = sy / ns;
     double px = -uy, py = ux;
-    double sh = sin(0.5 * theta), ch = cos(0.5 * theta);
+    double rho = sqrt_(sn_raw * sn_raw + cs_raw * cs_raw);
+    double c = cs_raw / rho, sn = sn_raw / rho;
+    double sh, ch;
+    if (c > -0.5) {
+        ch = sqrt_(0.5 * (1.0 + c));
+        sh = sn / (2.0 * ch);
+    } else {
+        sh = copysign(sqrt_(0.5 * (1.0 - c)), sn);
+        ch = sn / (2.0 * sh);
+    }
     double bx = ux * ch + px * sh, by = uy * ch + py * sh;
     double k = 2.0 / 3.0 * a * a * a * sh;
     *area += 0.5 * a * a * theta;
@@ -86,6 +124,17 @@ PD_HD void disk_polygon(double a, const double* px, const double* py, int n, dou
     *area = 0.0;
     *mx = 0.0;
     *my = 0.0;
+    // A disk clear of every edge: the whole disk, exactly.
+    bool inside = true;
+    for (int k = 0; k < n && inside; ++k) {
+        int j = (k + 1) % n;
+        double e0 = px[j] - px[k], e1 = py[j] - py[k];
+        inside = cross2(e0, e1, -px[k], -py[k]) >= a * sqrt_(e0 * e0 + e1 * e1);
+    }
+    if (inside) {
+        *area = sphere_pi() * a * a;
+        return;
+    }
     for (int k = 0; k < n; ++k) {
         int j = (k + 1) % n;
         double p0 = px[k], p1 = py[k], q0 = px[j], q1 = py[j];

@@ -512,11 +512,12 @@ impl Simulation {
                     v_b: p.velocity[b],
                     w_a: p.angular_velocity[a],
                     w_b: p.angular_velocity[b],
-                    effective_mass: normal_effective_mass(
-                        p,
-                        &[(a, p.position[a]), (b, xb)],
-                        &overlap,
-                    ),
+                    // A lens's centroid is on the line of centres: no rotational term.
+                    effective_mass: if spheres {
+                        1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b])
+                    } else {
+                        normal_effective_mass(p, &[(a, p.position[a]), (b, xb)], &overlap)
+                    },
                 };
                 let forces = contact_forces(
                     &params,

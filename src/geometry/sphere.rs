@@ -89,9 +89,18 @@ pub fn sphere_lens(r_a: f64, r_b: f64, d: &Vector3<f64>) -> Overlap<f64> {
 /// sum over the polygon's edges PQ of the signed disk ∩ triangle (O, P, Q), each a triangle
 /// where the edge runs inside the circle and a circular sector where it runs outside.
 pub fn disk_polygon(a: f64, poly: &[Vector2<f64>]) -> (f64, Vector2<f64>) {
+    let n = poly.len();
+    // The common case, a disk clear of every edge (on the inner side of each by at least a):
+    // the whole disk, exactly.
+    if (0..n).all(|k| {
+        let (p, q) = (poly[k], poly[(k + 1) % n]);
+        let e = q - p;
+        cross2(&e, &(-p)) >= a * e.norm()
+    }) {
+        return (PI * a * a, Vector2::zeros());
+    }
     let mut area = 0.0;
     let mut moment = Vector2::zeros();
-    let n = poly.len();
     for k in 0..n {
         let (p, q) = (poly[k], poly[(k + 1) % n]);
         let e = q - p;
@@ -124,18 +133,74 @@ pub fn disk_polygon(a: f64, poly: &[Vector2<f64>]) -> (f64, Vector2<f64>) {
 
 /// The signed circular sector of radius `a` from the direction of `s` to that of `e`
 /// (counter-clockwise positive): area `a²θ/2` and first moment `(2/3) a³ sin(θ/2) b̂`, with
-/// `b̂` the bisecting direction.
+/// `b̂` the bisecting direction. Only `+ − × ÷ √` and [`atan2`] (this module's, not libm's):
+/// the GPU twin then rounds identically, and double-precision runs stay bitwise equal.
 fn sector(a: f64, s: &Vector2<f64>, e: &Vector2<f64>) -> (f64, Vector2<f64>) {
-    let theta = cross2(s, e).atan2(s.dot(e));
+    let (sin, cos) = (cross2(s, e), s.dot(e));
+    let theta = atan2(sin, cos);
     if theta == 0.0 {
         return (0.0, Vector2::zeros());
     }
     let ns = s.norm();
     let u = s / ns;
     let perp = Vector2::new(-u.y, u.x);
-    let (sh, ch) = (0.5 * theta).sin_cos();
+    // Half-angle sine and cosine from the unnormalised sin θ, cos θ (length ρ): cos(θ/2) =
+    // √((1 + cos θ)/2) and sin(θ/2) = sin θ / (2 cos(θ/2)) while θ is within ±120°; beyond,
+    // sin(θ/2) = ±√((1 − cos θ)/2) first, which avoids the cancellation in 1 + cos θ.
+    let rho = (sin * sin + cos * cos).sqrt();
+    let (c, sn) = (cos / rho, sin / rho);
+    let (sh, ch) = if c > -0.5 {
+        let ch = (0.5 * (1.0 + c)).sqrt();
+        (sn / (2.0 * ch), ch)
+    } else {
+        let sh = (0.5 * (1.0 - c)).sqrt().copysign(sn);
+        (sh, sn / (2.0 * sh))
+    };
     let bisector = u * ch + perp * sh;
     (0.5 * a * a * theta, bisector * (2.0 / 3.0 * a * a * a * sh))
+}
+
+/// `atan2(y, x)` in (−π, π] from `+ − × ÷` only, within a few ulp of libm's, so that the CPU and
+/// the GPU (cuda/sphere.cuh `portable_atan2`) compute it identically. The ratio `t ≤ 1` is
+/// reduced by `atan t = π/6 + atan((√3 t − 1)/(√3 + t))` to `|t| ≤ tan(π/12)` ≈ 0.268, where 15
+/// terms of the alternating series `t − t³/3 + …` leave a truncation error below 1e-18.
+pub fn atan2(y: f64, x: f64) -> f64 {
+    const PI_2: f64 = std::f64::consts::FRAC_PI_2;
+    const PI_6: f64 = std::f64::consts::FRAC_PI_6;
+    const SQRT3: f64 = 1.732_050_807_568_877_2;
+    const TAN_PI_12: f64 = 0.267_949_192_431_122_7;
+    if y == 0.0 && x >= 0.0 {
+        return 0.0;
+    }
+    if x == 0.0 && y == 0.0 {
+        return if x.is_sign_negative() {
+            PI.copysign(y)
+        } else {
+            0.0
+        };
+    }
+    let (ax, ay) = (x.abs(), y.abs());
+    let swap = ay > ax;
+    let t = if swap { ax / ay } else { ay / ax };
+    let (t, base) = if t > TAN_PI_12 {
+        ((SQRT3 * t - 1.0) / (SQRT3 + t), PI_6)
+    } else {
+        (t, 0.0)
+    };
+    let t2 = t * t;
+    let mut series = 0.0;
+    for k in (0..15).rev() {
+        let term = 1.0 / (2 * k + 1) as f64;
+        series = if k % 2 == 0 { term } else { -term } + t2 * series;
+    }
+    let mut angle = base + t * series;
+    if swap {
+        angle = PI_2 - angle;
+    }
+    if x < 0.0 {
+        angle = PI - angle;
+    }
+    if y < 0.0 { -angle } else { angle }
 }
 
 fn cross2(a: &Vector2<f64>, b: &Vector2<f64>) -> f64 {
@@ -191,6 +256,33 @@ pub fn sphere_facet(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn portable_atan2_is_within_a_few_ulp_of_libm() {
+        let mut rng = crate::rng::Rng::new(3);
+        let mut worst = 0.0f64;
+        for k in 0..200_000 {
+            let scale = 10f64.powi((k % 13) as i32 - 6);
+            let (y, x) = (rng.range(-1.0, 1.0) * scale, rng.range(-1.0, 1.0));
+            let (a, b) = (atan2(y, x), y.atan2(x));
+            worst = worst.max((a - b).abs() / (b.abs() * f64::EPSILON).max(f64::MIN_POSITIVE));
+        }
+        println!("portable atan2: worst {worst:.2} ulp of libm");
+        assert!(worst <= 4.0, "worst {worst} ulp");
+        for (y, x) in [
+            (0.0, 1.0),
+            (1.0, 0.0),
+            (0.0, -1.0),
+            (-1.0, 0.0),
+            (1.0, 1.0),
+            (-1.0, -1.0),
+        ] {
+            assert!(
+                (atan2(y, x) - f64::atan2(y, x)).abs() <= 4.0 * f64::EPSILON,
+                "{y} {x}"
+            );
+        }
+    }
 
     /// The lens volume by integrating the cross-section area along the axis (Simpson, 20 000
     /// intervals): an oracle that uses neither cap formula.
