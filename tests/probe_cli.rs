@@ -136,8 +136,13 @@ fn bad_input_names_the_pair_and_field() {
             vec!["shapes.m.mesh", "no/such/file.stl"],
         ),
         (
-            r#"{"shapes": {"g": {"generator": "sphere", "size": 1.0}}, "pairs": []}"#.to_string(),
+            r#"{"shapes": {"g": {"generator": "ellipsoid", "size": 1.0}}, "pairs": []}"#
+                .to_string(),
             vec!["shapes.g.generator", "dodecahedron"],
+        ),
+        (
+            r#"{"shapes": {"g": {"generator": "sphere", "size": 1.0}}, "pairs": []}"#.to_string(),
+            vec!["shapes.g.generator", "not a polyhedron", "icosahedron"],
         ),
         (
             r#"{"shapes": {}, "pairs": [], "extra": 1}"#.to_string(),
