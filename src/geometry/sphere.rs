@@ -262,7 +262,7 @@ mod tests {
         let mut rng = crate::rng::Rng::new(3);
         let mut worst = 0.0f64;
         for k in 0..200_000 {
-            let scale = 10f64.powi((k % 13) as i32 - 6);
+            let scale = 10f64.powi(k % 13 - 6);
             let (y, x) = (rng.range(-1.0, 1.0) * scale, rng.range(-1.0, 1.0));
             let (a, b) = (atan2(y, x), y.atan2(x));
             worst = worst.max((a - b).abs() / (b.abs() * f64::EPSILON).max(f64::MIN_POSITIVE));
