@@ -227,7 +227,26 @@ pub fn point_triangle_distance(x: &Vector3<f64>, t: &[Vector3<f64>; 3]) -> f64 {
     (x - (a + ab * (vb * denom) + ac * (vc * denom))).norm()
 }
 
-/// Facets binned by their bounding boxes on a uniform grid over the mesh.
+/// Whether triangle `t` meets the axis-aligned box of centre `c` and half-widths `h`, by the
+/// separating-axis theorem: the box's three axes, the triangle's normal and the nine cross
+/// products of a box axis with a triangle edge (Akenine-Möller's triangle–box test).
+fn triangle_meets_box(t: &[Vector3<f64>; 3], c: &Vector3<f64>, h: &Vector3<f64>) -> bool {
+    let v = t.map(|p| p - c);
+    let separated = |axis: &Vector3<f64>| {
+        let p = v.map(|q| axis.dot(&q));
+        let r = h.x * axis.x.abs() + h.y * axis.y.abs() + h.z * axis.z.abs();
+        p[0].min(p[1]).min(p[2]) > r || p[0].max(p[1]).max(p[2]) < -r
+    };
+    let edges = [v[1] - v[0], v[2] - v[1], v[0] - v[2]];
+    let axes = [Vector3::x(), Vector3::y(), Vector3::z()];
+    !(axes.iter().any(&separated)
+        || separated(&edges[0].cross(&edges[1]))
+        || axes
+            .iter()
+            .any(|a| edges.iter().any(|e| separated(&a.cross(e)))))
+}
+
+/// Facets binned on a uniform grid over the mesh, each in the cells its triangle meets.
 #[derive(Clone, Debug)]
 struct FacetGrid {
     min: Vector3<f64>,
@@ -264,13 +283,22 @@ impl FacetGrid {
         };
         let cells = dims[0] * dims[1] * dims[2];
         let mut lists: Vec<Vec<u32>> = vec![Vec::new(); cells];
+        // A facet is listed in the cells of its bounding box that the triangle itself meets
+        // (separating-axis test on cells widened by a hair, so that rounding never drops a cell
+        // the triangle touches): a long slanted facet, like the generators of a cone, then sits
+        // in the cells along its surface, not in the whole column its bounding box spans.
+        let half = Vector3::repeat(0.5 * size * (1.0 + 1e-9));
         for (f, t) in tris.iter().enumerate() {
             let (a, b) = (t[0].inf(&t[1]).inf(&t[2]), t[0].sup(&t[1]).sup(&t[2]));
             let (ca, cb) = (grid.coords(&a), grid.coords(&b));
             for z in ca[2]..=cb[2] {
                 for y in ca[1]..=cb[1] {
                     for x in ca[0]..=cb[0] {
-                        lists[(z * dims[1] + y) * dims[0] + x].push(f as u32);
+                        let centre = lo
+                            + Vector3::new(x as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5) * size;
+                        if triangle_meets_box(t, &centre, &half) {
+                            lists[(z * dims[1] + y) * dims[0] + x].push(f as u32);
+                        }
                     }
                 }
             }
@@ -326,6 +354,47 @@ mod tests {
     use super::*;
     use crate::shape::Generator;
     use nalgebra::{Isometry3, UnitQuaternion};
+
+    /// The facets the grid finds near a point are exactly those within reach (brute force over
+    /// every facet), on a cone of long slanted slivers (a hopper) where the triangle–cell test
+    /// lists each facet in far fewer cells than its bounding box spans.
+    #[test]
+    fn facets_near_finds_every_facet_within_reach_of_a_cone() {
+        let n = 64;
+        let ring = |r: f64, z: f64, k: usize| {
+            let a = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
+            Vector3::new(r * a.cos(), r * a.sin(), z)
+        };
+        let mut tris = Vec::new();
+        for k in 0..n {
+            let (a, b) = (ring(0.02, 0.0, k), ring(0.02, 0.0, k + 1));
+            let (c, d) = (ring(0.3, 0.3, k), ring(0.3, 0.3, k + 1));
+            tris.push([a, d, c]);
+            tris.push([a, b, d]);
+        }
+        let mesh = WallMesh::new(&tris, 0.01);
+        let listed = mesh.grid.items.len();
+        let mut rng = crate::rng::Rng::new(11);
+        let (mut found, mut out) = (0, Vec::new());
+        for _ in 0..4000 {
+            let x = Vector3::new(
+                rng.range(-0.32, 0.32),
+                rng.range(-0.32, 0.32),
+                rng.range(-0.02, 0.32),
+            );
+            let reach = rng.range(0.001, 0.02);
+            mesh.facets_near(&x, reach, &mut out);
+            let brute: Vec<u32> = (0..tris.len() as u32)
+                .filter(|&f| point_triangle_distance(&x, &mesh.triangles[f as usize]) <= reach)
+                .collect();
+            assert_eq!(out, brute, "at {x}, reach {reach}");
+            found += out.len();
+        }
+        assert!(found > 500, "{found} facets found in all");
+        // Bounding-box binning lists each sliver in the ~2500 cells of its box (3e5 entries).
+        println!("cone: {listed} cell entries for {} facets", tris.len());
+        assert!(listed < 40_000, "{listed} cell entries");
+    }
 
     fn body(pose: &Isometry3<f64>) -> Box<PosedPolytope<f64>> {
         let t = Generator::Cube { size: 3f64.sqrt() }.build().unwrap(); // unit edge
