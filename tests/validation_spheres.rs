@@ -148,6 +148,15 @@ fn head_on(
     (2.0 * r - min_distance, in_contact as f64 * dt, v_out / v)
 }
 
+/// A soft grain material (E = 10 MPa), for the wall cases.
+fn soft() -> Material {
+    Material {
+        e: 1e7,
+        nu: 0.3,
+        rho: 2500.0,
+    }
+}
+
 fn glass() -> Material {
     Material {
         e: 4.8e10,
@@ -215,15 +224,7 @@ fn restitution_sweep(device: Device) {
 }
 
 fn rest_on_wall(device: Device) {
-    let (m, r, g): (Material, f64, f64) = (
-        Material {
-            e: 1e7,
-            nu: 0.3,
-            rho: 2500.0,
-        },
-        0.01,
-        9.81,
-    );
+    let (m, r, g): (Material, f64, f64) = (soft(), 0.01, 9.81);
     let mass = m.rho * 4.0 / 3.0 * PI * r.powi(3);
     let c = m.e / r; // the wall's term vanishes
     // Equilibrium cap height: c V(h)^{1/3} π a(h)² = m g, by bisection.
@@ -275,27 +276,15 @@ fn rest_on_wall(device: Device) {
 }
 
 fn sliding_to_rolling(device: Device) {
-    let (m, r, g, mu, v0): (Material, f64, f64, f64, f64) = (
-        Material {
-            e: 1e7,
-            nu: 0.3,
-            rho: 2500.0,
-        },
-        0.01,
-        9.81,
-        0.3,
-        1.0,
-    );
+    let (m, r, g, mu, v0): (Material, f64, f64, f64, f64) = (soft(), 0.01, 9.81, 0.3, 1.0);
     let mut sim = simulation(&m, 0.5, mu, -g, 1e-5, r, true);
     let t = sim.scene.templates[0].clone();
-    let mass = m.rho * 4.0 / 3.0 * PI * r.powi(3);
     // Start near the static overlap (its height hardly matters for the sliding phase).
     let centre = Vector3::new(-0.3, 0.1, r - 2e-5);
     sim.particles
         .push(0, 0, 1.0, centre, UnitQuaternion::identity(), &t, m.rho);
     sim.particles.velocity[0] = Vector3::new(v0, 0.0, 0.0);
     sim.refresh().unwrap();
-    let _ = mass;
     let t_star = 2.0 * v0 / (7.0 * mu * g);
     let dt = 1e-5;
     let mut e = engine(sim, device);

@@ -44,7 +44,7 @@ pub fn sphere_lens(r_a: f64, r_b: f64, d: &Vector3<f64>) -> Overlap<f64> {
     let delta = r_a + r_b - dist;
     if delta <= 0.0 {
         return Overlap {
-            depth: -0.5 * (-delta),
+            depth: 0.5 * delta,
             thickness: delta,
             ..Overlap::default()
         };
