@@ -6,6 +6,7 @@
 
 pub mod backend;
 pub mod contact;
+pub mod domain;
 pub mod geometry;
 pub mod integrate;
 pub mod io;

@@ -2,9 +2,11 @@
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+use polydem::domain::{Comm, SerialComm};
 use polydem::probe::{Precision, probe_overlap, probe_wall};
 use polydem::run::{BackendChoice, RunOptions};
 use std::path::PathBuf;
+use std::sync::Arc;
 
 #[derive(Parser)]
 #[command(
@@ -102,21 +104,44 @@ enum ShapeAction {
     },
 }
 
+/// The communicator of this process: MPI's world when started by an MPI launcher (and built
+/// with the `mpi` feature), else a single rank.
+fn communicator() -> Arc<dyn Comm> {
+    #[cfg(feature = "mpi")]
+    if polydem::domain::comm::launched_under_mpi() {
+        if let Some(c) = polydem::domain::comm::MpiComm::init() {
+            return Arc::new(c);
+        }
+    }
+    Arc::new(SerialComm)
+}
+
 fn main() {
+    let cli = Cli::parse();
+    let comm = match cli.command {
+        Command::Run { .. } | Command::Bench { .. } => communicator(),
+        _ => Arc::new(SerialComm),
+    };
+    // Ranks other than 0 log warnings and errors only, unless RUST_LOG says otherwise.
+    let default = if comm.rank() == 0 { "info" } else { "warn" };
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default)),
         )
         .init();
-    if let Err(e) = run(Cli::parse()) {
+    if let Err(e) = run(cli, comm.clone()) {
+        if comm.size() > 1 {
+            eprintln!("error (rank {} of {}): {e:#}", comm.rank(), comm.size());
+            comm.abort(1);
+        }
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }
 }
 
-fn run(cli: Cli) -> Result<()> {
+fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<()> {
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     match cli.command {
@@ -134,16 +159,22 @@ fn run(cli: Cli) -> Result<()> {
             max_steps,
             gpu_precision,
         } => {
-            let summary = polydem::run::run(&RunOptions {
-                scene,
-                backend,
-                out: dir,
-                restart,
-                max_steps,
-                precision: gpu_precision,
-            })?;
-            use std::io::Write;
-            writeln!(out, "{}", serde_json::to_string_pretty(&summary)?)?;
+            let rank = comm.rank();
+            let summary = polydem::run::run_on(
+                &RunOptions {
+                    scene,
+                    backend,
+                    out: dir,
+                    restart,
+                    max_steps,
+                    precision: gpu_precision,
+                },
+                comm,
+            )?;
+            if rank == 0 {
+                use std::io::Write;
+                writeln!(out, "{}", serde_json::to_string_pretty(&summary)?)?;
+            }
             Ok(())
         }
         Command::Bench {
@@ -154,15 +185,21 @@ fn run(cli: Cli) -> Result<()> {
             steps,
             json: _,
         } => {
-            let report = polydem::run::bench(&polydem::run::BenchOptions {
-                scene,
-                backend,
-                precision: gpu_precision,
-                warmup,
-                steps,
-            })?;
-            use std::io::Write;
-            writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
+            let rank = comm.rank();
+            let report = polydem::run::bench_on(
+                &polydem::run::BenchOptions {
+                    scene,
+                    backend,
+                    precision: gpu_precision,
+                    warmup,
+                    steps,
+                },
+                comm,
+            )?;
+            if rank == 0 {
+                use std::io::Write;
+                writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
+            }
             Ok(())
         }
         Command::Check { scene } => {

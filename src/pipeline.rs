@@ -19,6 +19,10 @@ use crate::contact::{
     ContactForces, ContactHistory, ContactKey, ContactKinematics, ContactParameters, ContactState,
     DampingTable, WallMesh, contact_forces,
 };
+use crate::domain::halo::{build_ghosts, refresh_ghosts};
+use crate::domain::migration::{read_particle, write_particle};
+use crate::domain::pack::{Reader, Writer};
+use crate::domain::{Aabb, Comm, DecompositionError, Parallel};
 use crate::geometry::overlap::{PairWorkspace, axis_separates, overlap_pair};
 use crate::geometry::sphere::sphere_lens;
 use crate::geometry::{Overlap, PosedPolytope};
@@ -28,6 +32,7 @@ use crate::scene::{Inserter, Scene, SceneError};
 use crate::state::Particles;
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Seconds spent in each stage, cumulative.
@@ -65,6 +70,10 @@ pub enum SimulationError {
         what: String,
         message: String,
     },
+    #[error(transparent)]
+    Decomposition(#[from] DecompositionError),
+    #[error("step {step}: {message}")]
+    Domain { step: u64, message: String },
     #[error(
         "step {step}: particle {id} has a non-finite {field}; the time step is probably too large for the contact stiffness (see `polydem check`)"
     )]
@@ -118,8 +127,11 @@ pub struct Simulation {
     pub timers: StageTimers,
     /// Observables of the last force evaluation.
     pub stats: StepStats,
-    /// Force on each wall from the last force evaluation.
+    /// Force on each wall from the last force evaluation (this rank's particles' share in a
+    /// decomposed run).
     pub wall_forces: Vec<Vector3<f64>>,
+    /// This rank's part of a decomposed run (`None`: one rank, the whole domain).
+    pub parallel: Option<Box<Parallel>>,
     pairs: PairList,
     /// Per pair of `pairs`, the axis that separated it at the last evaluation (zero: none
     /// known), tried before GJK ([`axis_separates`]); cleared when the list is rebuilt.
@@ -133,6 +145,21 @@ pub struct Simulation {
 impl Simulation {
     /// A simulation at t = 0: particles of count insertions placed, forces evaluated.
     pub fn new(scene: Scene) -> Result<Self, SimulationError> {
+        Self::new_in(scene, None)
+    }
+
+    /// [`Simulation::new`] for this rank of a run decomposed over `comm`'s ranks
+    /// (DESIGN.md §6): the rank owns the particles in its subdomain and holds ghosts of its
+    /// neighbours' outer regions. On one rank it is [`Simulation::new`].
+    pub fn new_parallel(scene: Scene, comm: Arc<dyn Comm>) -> Result<Self, SimulationError> {
+        if comm.size() == 1 {
+            return Self::new(scene);
+        }
+        let par = Parallel::new(comm, &scene)?;
+        Self::new_in(scene, Some(Box::new(par)))
+    }
+
+    fn new_in(scene: Scene, parallel: Option<Box<Parallel>>) -> Result<Self, SimulationError> {
         let n_mat = scene.materials.len();
         let mut damping: Vec<DampingTable> = Vec::with_capacity(n_mat * n_mat);
         for a in 0..n_mat {
@@ -174,6 +201,7 @@ impl Simulation {
             timers: StageTimers::default(),
             stats: StepStats::default(),
             wall_forces: vec![Vector3::zeros(); n_walls],
+            parallel,
             pairs: PairList::default(),
             separating_axes: Vec::new(),
             bounds,
@@ -181,6 +209,7 @@ impl Simulation {
             damping,
             dirty: true,
         };
+        sim.restrict_walls();
         sim.exchange()?;
         sim.forces()?;
         Ok(sim)
@@ -225,11 +254,48 @@ impl Simulation {
         Ok(sim)
     }
 
+    /// [`Simulation::restore`] for this rank of a decomposed run: rank 0 passes the
+    /// checkpoint's particles and history, the other ranks none; the first step's exchange
+    /// sends every particle to its owner. The stored forces are kept as on one rank, so the run
+    /// continues bitwise, on any rank count.
+    #[allow(clippy::too_many_arguments)]
+    pub fn restore_parallel(
+        scene: Scene,
+        comm: Arc<dyn Comm>,
+        particles: Particles,
+        history: ContactHistory,
+        inserter: Inserter,
+        time: f64,
+        step: u64,
+        next_id: u64,
+    ) -> Result<Self, SimulationError> {
+        if comm.size() == 1 {
+            return Self::restore(scene, particles, history, inserter, time, step, next_id);
+        }
+        let mut s = scene.clone();
+        s.insertions.clear();
+        let par = Parallel::new(comm, &s)?;
+        let mut sim = Simulation::new_in(s, Some(Box::new(par)))?;
+        sim.scene = scene;
+        sim.particles = particles;
+        sim.history = history;
+        sim.inserter = inserter;
+        sim.time = time;
+        sim.step = step;
+        sim.next_id = next_id;
+        sim.dirty = true;
+        sim.refresh_radii();
+        Ok(sim)
+    }
+
     /// Re-evaluates forces after the particle state was edited directly (tests, set-up
     /// tools): neighbour lists and radii are rebuilt, the contact history is kept as is.
     pub fn refresh(&mut self) -> Result<(), SimulationError> {
         self.dirty = true;
         self.refresh_radii();
+        if self.parallel.is_some() {
+            self.parallel_exchange()?;
+        }
         let saved = self.history.clone();
         self.forces_with_history_step(0.0)?;
         self.history = saved;
@@ -272,17 +338,24 @@ impl Simulation {
         self.exchange()
     }
 
-    /// Stage 1: insert due particles, drop those outside a closed domain, wrap periodic axes.
+    /// Stage 1: insert due particles, drop those outside a closed domain, wrap periodic axes;
+    /// in a decomposed run also migration and the halo exchange.
     fn exchange(&mut self) -> Result<(), SimulationError> {
         let t0 = Instant::now();
         let before = self.particles.len();
-        let report = self.inserter.insert(
-            self.time,
-            &mut self.particles,
-            &self.scene,
-            &mut self.next_id,
-        )?;
-        if report.inserted > 0 || self.particles.len() != before {
+        let inserted = if self.parallel.is_some() {
+            self.insert_distributed()?
+        } else {
+            self.inserter
+                .insert(
+                    self.time,
+                    &mut self.particles,
+                    &self.scene,
+                    &mut self.next_id,
+                )?
+                .inserted
+        };
+        if inserted > 0 || self.particles.len() != before {
             self.dirty = true;
         }
         let b = self.bounds;
@@ -301,8 +374,163 @@ impl Simulation {
             self.dirty = true;
         }
         self.refresh_radii();
+        if self.parallel.is_some() {
+            self.parallel_exchange()?;
+        }
         self.timers.exchange += t0.elapsed().as_secs_f64();
         Ok(())
+    }
+
+    /// Insertion in a decomposed run: every rank runs the same inserter (same generator, same
+    /// draws) against the bounding spheres of all ranks' particles near the insertion regions,
+    /// gathered from every rank, so it places exactly the particles one rank would; each rank
+    /// keeps those whose centroid is in its box. Returns how many were placed in all.
+    fn insert_distributed(&mut self) -> Result<u64, SimulationError> {
+        if !self.inserter.pending(self.time, &self.scene) {
+            return Ok(0);
+        }
+        let t0 = Instant::now();
+        let par = self.parallel.as_deref().expect("a decomposed run");
+        let s = &self.scene;
+        // A new sphere inside its region can touch spheres up to 2 r_max from it.
+        let reach = 2.0 * s.max_bounding_radius() * (1.0 + 1e-9) + 1e-12;
+        let regions: Vec<Aabb> = s
+            .insertions
+            .iter()
+            .map(|ins| {
+                let (lo, hi) = ins.region.aabb();
+                Aabb { lo, hi }.grown(reach)
+            })
+            .collect();
+        let offsets = par.subdomains.image_offsets(None);
+        let shifts: Vec<Vector3<f64>> = offsets.iter().map(|o| par.subdomains.shift(o)).collect();
+        let p = &self.particles;
+        let mut w = Writer::default();
+        for i in 0..p.len() {
+            let near = shifts.iter().any(|sh| {
+                let x = p.position[i] + sh;
+                regions.iter().any(|r| r.distance(&x) == 0.0)
+            });
+            if near {
+                w.u64(p.id[i]);
+                w.u32(p.kind[i]);
+                w.f64(p.scale[i]);
+                w.v3(&p.position[i]);
+            }
+        }
+        let mut occupied = Particles::default();
+        for buf in par.comm.all_gather(&w.buf) {
+            let mut r = Reader::new(&buf);
+            while !r.done() {
+                let (id, kind, scale, x) = (r.u64(), r.u32(), r.f64(), r.v3());
+                let ty = &s.particle_types[kind as usize];
+                occupied.push(
+                    id,
+                    kind,
+                    scale,
+                    x,
+                    nalgebra::UnitQuaternion::identity(),
+                    &s.templates[ty.template],
+                    0.0,
+                );
+            }
+        }
+        let first_new = occupied.len();
+        let report = self
+            .inserter
+            .insert(self.time, &mut occupied, s, &mut self.next_id)?;
+        let me = par.rank();
+        let mut w = Writer::default();
+        let mut kept = 0;
+        for i in first_new..occupied.len() {
+            if par.subdomains.contains(me, &occupied.position[i]) {
+                write_particle(&mut w, &occupied, i);
+                kept += 1;
+            }
+        }
+        let mut r = Reader::new(&w.buf);
+        for _ in 0..kept {
+            read_particle(&mut r, &mut self.particles);
+        }
+        if let Some(par) = self.parallel.as_deref_mut() {
+            par.timers.insert += t0.elapsed().as_secs_f64();
+        }
+        Ok(report.inserted)
+    }
+
+    /// The decomposed part of stage 1. All ranks decide together whether the neighbour lists
+    /// are rebuilt (some rank inserted, removed, or has a particle that moved half the skin);
+    /// at a rebuild the boxes may be redrawn, particles migrate and the ghosts are chosen
+    /// afresh, otherwise the same ghosts are refreshed.
+    fn parallel_exchange(&mut self) -> Result<(), SimulationError> {
+        let need = self.dirty
+            || self
+                .pairs
+                .moved_beyond_half_skin(&self.particles.position, &self.bounds);
+        let step = self.step;
+        let domain_error = |message: String| SimulationError::Domain { step, message };
+        let par = self.parallel.as_deref_mut().expect("a decomposed run");
+        let t0 = Instant::now();
+        // The first collective of the step: time spent here is waiting for the slowest rank.
+        let rebuild = par.comm.any(need);
+        par.timers.wait += t0.elapsed().as_secs_f64();
+        if !rebuild {
+            let t0 = Instant::now();
+            refresh_ghosts(&*par.comm, &par.plan, &self.particles, &mut par.ghosts);
+            par.timers.halo += t0.elapsed().as_secs_f64();
+            return Ok(());
+        }
+        let t0 = Instant::now();
+        let redrawn = par.rebalance_if_needed(&self.particles)?;
+        par.timers.balance += t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        let moved = crate::domain::migration::migrate(
+            &*par.comm,
+            &par.subdomains,
+            &mut self.particles,
+            &mut self.history,
+        );
+        par.timers.migrated += moved as u64;
+        par.timers.migrate += t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        par.plan = crate::domain::halo::HaloPlan::new(
+            &par.subdomains,
+            par.rank(),
+            &self.particles.position,
+        );
+        par.ghosts = build_ghosts(&*par.comm, &par.plan, &self.particles, &self.scene);
+        par.timers.rebuilds += 1;
+        par.check_ghosts(&self.particles).map_err(domain_error)?;
+        par.timers.halo += t0.elapsed().as_secs_f64();
+        self.dirty = true;
+        self.refresh_radii();
+        if redrawn {
+            self.restrict_walls();
+        }
+        Ok(())
+    }
+
+    /// The wall meshes this rank needs: in a decomposed run, of each wall that does not move,
+    /// the facets that reach the rank's box plus the halo; moving walls and single-rank runs
+    /// keep every facet.
+    fn restrict_walls(&mut self) {
+        let cell = 2.0 * self.scene.max_bounding_radius() + self.scene.simulation.neighbor.skin;
+        let region = self.parallel.as_deref().map(|p| {
+            let b = p.own_box().grown(p.subdomains.halo);
+            (b.lo, b.hi)
+        });
+        self.walls = self
+            .scene
+            .walls
+            .iter()
+            .map(|w| {
+                let full = WallMesh::new(&w.triangles, cell);
+                match &region {
+                    Some((lo, hi)) if w.motion.is_static() => full.restricted(lo, hi, cell),
+                    _ => full,
+                }
+            })
+            .collect();
     }
 
     fn refresh_radii(&mut self) {
@@ -322,21 +550,55 @@ impl Simulation {
     }
 
     fn forces_with_history_step(&mut self, dt: f64) -> Result<(), SimulationError> {
+        let t_forces = Instant::now();
+        // Ghosts join the particle arrays after the owned ones for the pair stages.
+        let owned = self.particles.len();
+        if let Some(par) = self.parallel.as_deref() {
+            self.particles.extend_from(&par.ghosts.particles);
+            let types = &self.scene.particle_types;
+            let templates = &self.scene.templates;
+            let g = &par.ghosts.particles;
+            self.radius.extend((0..g.len()).map(|i| {
+                templates[types[g.kind[i] as usize].template].circumscribed_radius * g.scale[i]
+            }));
+        }
         // Stage 2: neighbour list.
         let t0 = Instant::now();
         let skin = self.scene.simulation.neighbor.skin;
-        if self.dirty
-            || self
-                .pairs
-                .needs_rebuild(&self.particles.position, &self.bounds)
-        {
-            self.pairs.build(
-                &self.particles.position,
-                &self.radius,
-                &self.particles.id,
-                &self.bounds,
-                skin,
-            );
+        let rebuild = match self.parallel {
+            // Decided by all ranks together in the exchange.
+            Some(_) => self.dirty,
+            None => {
+                self.dirty
+                    || self
+                        .pairs
+                        .needs_rebuild(&self.particles.position, &self.bounds)
+            }
+        };
+        if rebuild {
+            match self.parallel.as_deref() {
+                Some(par) => {
+                    let mut bins = self.particles.position[..owned].to_vec();
+                    bins.extend(par.ghost_bins());
+                    self.pairs.build_in(
+                        &self.particles.position,
+                        &bins,
+                        &self.radius,
+                        &self.particles.id,
+                        owned,
+                        &self.bounds,
+                        &par.search_region(),
+                        skin,
+                    );
+                }
+                None => self.pairs.build(
+                    &self.particles.position,
+                    &self.radius,
+                    &self.particles.id,
+                    &self.bounds,
+                    skin,
+                ),
+            }
             self.separating_axes = vec![Vector3::zeros(); self.pairs.pairs.len()];
             self.dirty = false;
         }
@@ -344,7 +606,10 @@ impl Simulation {
 
         // Stages 3–7 for particle pairs.
         let t0 = Instant::now();
-        let outcomes = self.pair_contacts(dt)?;
+        let outcomes = self.pair_contacts(dt);
+        self.particles.truncate(owned);
+        self.radius.truncate(owned);
+        let outcomes = outcomes?;
         for (axis, o) in self.separating_axes.iter_mut().zip(&outcomes) {
             *axis = o.separating_axis;
         }
@@ -386,7 +651,15 @@ impl Simulation {
         let mut entries: Vec<(ContactKey, ContactState)> =
             outcomes.iter().filter_map(|o| o.state).collect();
         let mut wall_forces = vec![Vector3::zeros(); self.walls.len()];
-        let mut energy: f64 = outcomes.iter().map(|o| o.forces.elastic_energy).sum();
+        // A pair across two ranks is evaluated on both; it counts where its lower-id member
+        // (the pair's first) is owned, so that sums over ranks count it once.
+        let counted = |k: usize| self.pairs.pairs[k][0] < owned as u32;
+        let mut energy: f64 = outcomes
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| counted(*k))
+            .map(|(_, o)| o.forces.elastic_energy)
+            .sum();
         let mut wall_contacts = 0;
         for w in &wall_outcomes {
             energy += w.energy;
@@ -396,12 +669,19 @@ impl Simulation {
                 wall_forces[*k] += f;
             }
         }
-        self.stats.contacts = outcomes.iter().filter(|o| o.state.is_some()).count() as u64;
+        self.stats.contacts = outcomes
+            .iter()
+            .enumerate()
+            .filter(|(k, o)| o.state.is_some() && counted(*k))
+            .count() as u64;
         self.stats.wall_contacts = wall_contacts;
         self.stats.elastic_energy = energy;
         self.wall_forces = wall_forces;
         self.history = ContactHistory::from_entries(entries);
         self.timers.reduce += t0.elapsed().as_secs_f64();
+        if let Some(par) = self.parallel.as_deref_mut() {
+            par.cost += t_forces.elapsed().as_secs_f64();
+        }
         Ok(())
     }
 
@@ -708,7 +988,7 @@ fn normal_effective_mass(p: &Particles, bodies: &[(usize, Vector3<f64>)], o: &Ov
 }
 
 /// Removes the particles at the (sorted) local indices `remove`, keeping the others' order.
-fn remove_particles(p: &mut Particles, remove: &[usize]) {
+pub(crate) fn remove_particles(p: &mut Particles, remove: &[usize]) {
     let mut keep = vec![true; p.len()];
     for &i in remove {
         keep[i] = false;

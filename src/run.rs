@@ -5,6 +5,8 @@
 use crate::backend;
 use crate::backend::Engine;
 use crate::backend::cuda::{CudaSimulation, Precision};
+use crate::domain::collect::{GlobalStats, gather_state, global_stats};
+use crate::domain::{Comm, SerialComm};
 use crate::io::checkpoint::fnv1a64;
 use crate::io::{
     Checkpoint, FrameView, FrameWriter, SeriesRow, SeriesWriter, WallView, read_checkpoint,
@@ -114,22 +116,31 @@ impl Schedule {
     }
 }
 
-/// Output of a run in progress.
+/// Output of a run in progress. Every rank writes its own frame piece; rank 0 writes the
+/// collections, walls, series, checkpoints and summary from whole-run values.
 struct Outputs {
     dir: PathBuf,
     frames: Option<FrameWriter>,
-    series: SeriesWriter,
+    series: Option<SeriesWriter>,
     type_template: Vec<usize>,
+    comm: Arc<dyn Comm>,
 }
 
 impl Outputs {
     fn frame(&mut self, sim: &Simulation) -> Result<()> {
         let s = &sim.scene;
+        let rank = self.comm.rank();
+        let ranks = self.comm.size();
+        let wall_forces = if ranks > 1 {
+            global_stats(&*self.comm, sim).wall_forces
+        } else {
+            sim.wall_forces.clone()
+        };
         let view = FrameView {
             particles: &sim.particles,
             templates: &s.templates,
             type_template: &self.type_template,
-            rank: 0,
+            rank: rank as u32,
             fields: &s.output.fields,
         };
         if let Some(fw) = self.frames.as_mut() {
@@ -148,7 +159,7 @@ impl Outputs {
                 .walls
                 .iter()
                 .zip(&placed)
-                .zip(&sim.wall_forces)
+                .zip(&wall_forces)
                 .map(|((w, tris), f)| WallView {
                     name: &w.name,
                     triangles: tris,
@@ -161,94 +172,227 @@ impl Outputs {
             let particles_dir = self.dir.join("particles");
             std::fs::create_dir_all(&particles_dir)
                 .with_context(|| format!("{}: cannot create", particles_dir.display()))?;
-            let path = particles_dir.join(format!("step_{:010}.csv", sim.step));
-            write_particle_csv(&path, sim.time, &view)?;
+            let name = if ranks > 1 {
+                format!("step_{:010}_r{rank:04}.csv", sim.step)
+            } else {
+                format!("step_{:010}.csv", sim.step)
+            };
+            write_particle_csv(&particles_dir.join(name), sim.time, &view)?;
         }
+        // The .pvtu names every rank's piece: all are on disk before the frame is complete.
+        self.comm.barrier();
         Ok(())
     }
 
     fn series(&mut self, sim: &Simulation) -> Result<()> {
-        let (kt, kr, pg) = sim.energies();
-        self.series.append(&SeriesRow {
-            step: sim.step,
-            time: sim.time,
-            kinetic_translational: kt,
-            kinetic_rotational: kr,
-            potential_gravity: pg,
-            elastic: sim.stats.elastic_energy,
-            contacts: sim.stats.contacts,
-            wall_contacts: sim.stats.wall_contacts,
-            wall_forces: sim.wall_forces.clone(),
-        })?;
+        let g = whole_run(&*self.comm, sim);
+        let (kt, kr, pg) = g.energies;
+        if let Some(series) = self.series.as_mut() {
+            series.append(&SeriesRow {
+                step: sim.step,
+                time: sim.time,
+                kinetic_translational: kt,
+                kinetic_rotational: kr,
+                potential_gravity: pg,
+                elastic: g.stats.elastic_energy,
+                contacts: g.stats.contacts,
+                wall_contacts: g.stats.wall_contacts,
+                wall_forces: g.wall_forces,
+            })?;
+        }
         Ok(())
     }
 }
 
-/// The checkpoint of the current state.
-fn checkpoint_of(sim: &Simulation, hash: u64) -> Result<Checkpoint> {
+/// The whole run's observables: this rank's on one rank, sums over ranks otherwise.
+fn whole_run(comm: &dyn Comm, sim: &Simulation) -> GlobalStats {
+    if comm.size() > 1 {
+        return global_stats(comm, sim);
+    }
+    GlobalStats {
+        particles: sim.particles.len() as u64,
+        stats: sim.stats,
+        energies: sim.energies(),
+        wall_forces: sim.wall_forces.clone(),
+    }
+}
+
+/// The checkpoint of the current state; in a decomposed run the whole run's state gathered on
+/// rank 0 (`None` on the other ranks), in the single-rank layout: particles by global id.
+fn checkpoint_of(comm: &dyn Comm, sim: &Simulation, hash: u64) -> Result<Option<Checkpoint>> {
     let inserter = serde_json::to_vec(&sim.inserter.state())?;
-    Ok(Checkpoint {
+    let (particles, history, removed) = if comm.size() > 1 {
+        let removed = comm.sum_u64(&[sim.stats.removed])[0];
+        match gather_state(comm, sim, 0) {
+            Some((p, h)) => (p, h, removed),
+            None => return Ok(None),
+        }
+    } else {
+        (
+            sim.particles.clone(),
+            sim.history.clone(),
+            sim.stats.removed,
+        )
+    };
+    Ok(Some(Checkpoint {
         step: sim.step,
         time: sim.time,
-        particles: sim.particles.clone(),
-        history: sim.history.clone(),
+        particles,
+        history,
         rng_state: sim.inserter.state().rng,
         inserter,
         next_id: sim.next_id,
         scene_hash: hash,
-        extra: vec![("removed".into(), sim.stats.removed.to_le_bytes().to_vec())],
-    })
+        extra: vec![("removed".into(), removed.to_le_bytes().to_vec())],
+    }))
 }
 
-fn save_checkpoint(sim: &Simulation, dir: &Path, hash: u64) -> Result<PathBuf> {
+/// Writes the checkpoint (a collective call in a decomposed run; rank 0 writes) and returns
+/// its path.
+fn save_checkpoint(comm: &dyn Comm, sim: &Simulation, dir: &Path, hash: u64) -> Result<PathBuf> {
     let ckdir = dir.join("checkpoints");
-    std::fs::create_dir_all(&ckdir)
-        .with_context(|| format!("{}: cannot create", ckdir.display()))?;
     let path = ckdir.join(format!("step_{:010}.ckpt", sim.step));
-    let checkpoint = checkpoint_of(sim, hash)?;
-    write_checkpoint(&path, &checkpoint)?;
-    // The newest is also `latest.ckpt`, so that a restart needs no step number.
-    write_checkpoint(&ckdir.join("latest.ckpt"), &checkpoint)?;
+    if let Some(checkpoint) = checkpoint_of(comm, sim, hash)? {
+        std::fs::create_dir_all(&ckdir)
+            .with_context(|| format!("{}: cannot create", ckdir.display()))?;
+        write_checkpoint(&path, &checkpoint)?;
+        // The newest is also `latest.ckpt`, so that a restart needs no step number.
+        write_checkpoint(&ckdir.join("latest.ckpt"), &checkpoint)?;
+    }
+    comm.barrier();
     Ok(path)
 }
 
-/// `polydem run`: returns the summary it also writes to `summary.json`.
+/// What every rank needs of a checkpoint to restart: all but the particles and history, which
+/// stay on rank 0 until the first exchange sends them to their owners.
+struct RestartHeader {
+    step: u64,
+    time: f64,
+    next_id: u64,
+    inserter: Vec<u8>,
+    removed: u64,
+}
+
+/// Reads a checkpoint on rank 0 and shares its header with every rank; rank 0 also gets the
+/// particles and history. An unreadable checkpoint stops every rank with rank 0's message.
+fn read_restart(
+    comm: &dyn Comm,
+    path: &Path,
+    hash: u64,
+) -> Result<(RestartHeader, Option<Checkpoint>)> {
+    use crate::domain::pack::{Reader, Writer};
+    let mut w = Writer::default();
+    let mut local = None;
+    if comm.rank() == 0 {
+        match read_checkpoint(path)
+            .map_err(anyhow::Error::from)
+            .and_then(|c| c.check_scene(hash, path).map(|_| c).map_err(Into::into))
+        {
+            Ok(c) => {
+                let removed = c
+                    .extra
+                    .iter()
+                    .find(|(k, _)| k == "removed")
+                    .and_then(|(_, b)| b.as_slice().try_into().ok().map(u64::from_le_bytes))
+                    .unwrap_or(0);
+                w.u64(0);
+                w.u64(c.step);
+                w.f64(c.time);
+                w.u64(c.next_id);
+                w.u64(removed);
+                w.bytes(&c.inserter);
+                local = Some(c);
+            }
+            Err(e) => {
+                w.u64(1);
+                w.bytes(format!("{e:#}").as_bytes());
+            }
+        }
+    }
+    let mut buf = w.buf;
+    comm.broadcast(&mut buf, 0);
+    let mut r = Reader::new(&buf);
+    if r.u64() != 0 {
+        bail!("{}", String::from_utf8_lossy(r.bytes()));
+    }
+    let header = RestartHeader {
+        step: r.u64(),
+        time: r.f64(),
+        next_id: r.u64(),
+        removed: r.u64(),
+        inserter: r.bytes().to_vec(),
+    };
+    Ok((header, local))
+}
+
+/// `polydem run` on one rank: returns the summary it also writes to `summary.json`.
 pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
+    run_on(opts, Arc::new(SerialComm))
+}
+
+/// The backend of a decomposed run: the CPU (GPU ranks are not built yet); an explicit
+/// `--backend cuda` is refused rather than silently run elsewhere.
+fn choose_parallel_backend(choice: BackendChoice, ranks: usize) -> Result<&'static str> {
+    match choice {
+        BackendChoice::Cuda => bail!(
+            "--backend cuda on {ranks} ranks: the decomposed run has only the CPU backend so \
+             far; use --backend cpu (or auto), or run one rank on the GPU"
+        ),
+        BackendChoice::Auto => {
+            tracing::info!("{ranks} ranks: running on the CPU backend");
+            Ok("cpu")
+        }
+        BackendChoice::Cpu => Ok("cpu"),
+    }
+}
+
+/// `polydem run` on the ranks of `comm` (one rank: [`run`]). Rank 0 returns the summary and
+/// writes `summary.json`; the other ranks return the same summary without writing it.
+pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Value> {
     let mut scene = load_scene(&opts.scene).map_err(|e| anyhow!("{e}"))?;
     if let Some(out) = &opts.out {
         scene.output.dir = out.clone();
     }
-    let backend_name = choose_backend(opts.backend)?;
+    let ranks = comm.size();
+    let rank = comm.rank();
+    let backend_name = if ranks > 1 {
+        choose_parallel_backend(opts.backend, ranks)?
+    } else {
+        choose_backend(opts.backend)?
+    };
     let hash = scene_hash(&opts.scene)?;
     let dir = scene.output.dir.clone();
-    std::fs::create_dir_all(&dir)
-        .with_context(|| format!("{}: cannot create the output directory", dir.display()))?;
+    if rank == 0 {
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create the output directory", dir.display()))?;
+    }
+    comm.barrier();
     let type_template: Vec<usize> = scene.particle_types.iter().map(|t| t.template).collect();
     let wall_names: Vec<String> = scene.walls.iter().map(|w| w.name.clone()).collect();
     let series_path = dir.join("series.csv");
 
     let (sim, resumed) = match &opts.restart {
         Some(path) => {
-            let c = read_checkpoint(path)?;
-            c.check_scene(hash, path)?;
-            let state: InserterState = serde_json::from_slice(&c.inserter)
+            let (header, local) = read_restart(&*comm, path, hash)?;
+            let state: InserterState = serde_json::from_slice(&header.inserter)
                 .with_context(|| format!("{}: insertion state", path.display()))?;
             let inserter = Inserter::try_restore(&scene, &state)
                 .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-            let mut sim = Simulation::restore(
+            let (particles, history) = local.map(|c| (c.particles, c.history)).unwrap_or_default();
+            let mut sim = Simulation::restore_parallel(
                 scene,
-                c.particles,
-                c.history,
+                comm.clone(),
+                particles,
+                history,
                 inserter,
-                c.time,
-                c.step,
-                c.next_id,
+                header.time,
+                header.step,
+                header.next_id,
             )?;
-            if let Some((_, b)) = c.extra.iter().find(|(k, _)| k == "removed") {
-                sim.stats.removed = b.as_slice().try_into().map(u64::from_le_bytes).unwrap_or(0);
-            }
+            // The removal count is the whole run's; rank 0 carries it.
+            sim.stats.removed = if rank == 0 { header.removed } else { 0 };
             tracing::info!(
-                "restarted from {} at step {} (t = {} s)",
+                "restarted from {} at step {} (t = {} s) on {ranks} rank(s)",
                 path.display(),
                 sim.step,
                 sim.time
@@ -259,7 +403,7 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
             let sim = if backend_name == "cuda" {
                 Simulation::new_unevaluated(scene)?
             } else {
-                Simulation::new(scene)?
+                Simulation::new_parallel(scene, comm.clone())?
             };
             (sim, false)
         }
@@ -280,25 +424,27 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
     };
     let sim = engine.host();
     let s = &sim.scene;
+    let (nr, r) = (ranks as u32, rank as u32);
     let frames = if s.output.formats.vtu && s.output.frame_interval.is_some() {
         Some(if resumed {
-            FrameWriter::resume(&dir, 1, sim.time)?
+            FrameWriter::resume_rank(&dir, nr, r, sim.time)?
         } else {
-            FrameWriter::new(&dir, 1)?
+            FrameWriter::new_rank(&dir, nr, r)?
         })
     } else {
         None
     };
-    let series = if resumed {
-        SeriesWriter::resume(&series_path, &wall_names, sim.time)?
-    } else {
-        SeriesWriter::new(&series_path, &wall_names)?
+    let series = match (rank, resumed) {
+        (0, true) => Some(SeriesWriter::resume(&series_path, &wall_names, sim.time)?),
+        (0, false) => Some(SeriesWriter::new(&series_path, &wall_names)?),
+        _ => None,
     };
     let mut out = Outputs {
         dir: dir.clone(),
         frames,
         series,
         type_template,
+        comm: comm.clone(),
     };
     let mut frame_at = Schedule::new(s.output.frame_interval, sim.time);
     let mut series_at = Schedule::new(Some(s.output.series_interval), sim.time);
@@ -319,7 +465,7 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
     }
     let sim = engine.host();
     let total_steps = ((end_time - sim.time) / sim.dt).ceil().max(0.0) as u64;
-    let bar = std::io::stderr().is_terminal().then(|| {
+    let bar = (rank == 0 && std::io::stderr().is_terminal()).then(|| {
         let b = indicatif::ProgressBar::new(total_steps);
         b.set_style(
             indicatif::ProgressStyle::with_template(
@@ -349,20 +495,25 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
             out.series(engine.synced()?)?;
         }
         if checkpoint_at.due(t, dt) {
-            save_checkpoint(engine.synced()?, &dir, hash)?;
+            save_checkpoint(&*comm, engine.synced()?, &dir, hash)?;
         }
         let sim = engine.host();
         let done = sim.step - step0;
+        // Whole-run counts at deterministic steps only: every rank joins the sums.
+        let (n_all, contacts_all) = if done % 100 == 0 || done % log_every == 0 {
+            let g = whole_run(&*comm, sim);
+            (g.particles, g.stats.contacts + g.stats.wall_contacts)
+        } else {
+            (0, 0)
+        };
         if let Some(b) = &bar {
             b.set_position(done);
             if done % 100 == 0 {
                 b.set_message(format!(
-                    "t = {t:.4} s, {} particles, {} contacts",
-                    sim.particles.len(),
-                    sim.stats.contacts + sim.stats.wall_contacts
+                    "t = {t:.4} s, {n_all} particles, {contacts_all} contacts"
                 ));
             }
-        } else if done % log_every == 0 {
+        } else if done % log_every == 0 && rank == 0 {
             let elapsed = start.elapsed().as_secs_f64();
             let rate = done as f64 / elapsed.max(1e-9);
             let eta = (total_steps.saturating_sub(done)) as f64 / rate.max(1e-9);
@@ -371,13 +522,20 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
                 sim.step,
                 t,
                 rate,
-                sim.particles.len(),
-                sim.stats.contacts + sim.stats.wall_contacts,
+                n_all,
+                contacts_all,
                 eta
             );
         }
-        if interrupted.load(Ordering::SeqCst) {
-            let path = save_checkpoint(engine.synced()?, &dir, hash)?;
+        // Ctrl-C reaches every rank through the launcher, not necessarily in the same step:
+        // ranks agree on it every 10 steps.
+        let stop = if ranks > 1 {
+            done % 10 == 0 && comm.any(interrupted.load(Ordering::SeqCst))
+        } else {
+            interrupted.load(Ordering::SeqCst)
+        };
+        if stop {
+            let path = save_checkpoint(&*comm, engine.synced()?, &dir, hash)?;
             tracing::warn!(
                 "interrupted: checkpoint written to {}; resume with --restart {}",
                 path.display(),
@@ -396,14 +554,19 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
         out.frame(sim)?;
         out.series(sim)?;
         if sim.scene.output.checkpoint_interval.is_some() {
-            save_checkpoint(sim, &dir, hash)?;
+            save_checkpoint(&*comm, sim, &dir, hash)?;
         }
     }
-    let (kt, kr, pg) = sim.energies();
+    let g = whole_run(&*comm, sim);
+    let (kt, kr, pg) = g.energies;
+    let particle_steps = comm.sum_u64(&[particle_steps])[0];
     let threads = rayon::current_num_threads();
+    let parallel = parallel_report(&*comm, sim);
     let summary = json!({
         "scene": opts.scene.display().to_string(),
         "backend": backend_name,
+        "ranks": ranks,
+        "parallel": parallel,
         "threads": threads,
         "steps": sim.step - step0,
         "final_step": sim.step,
@@ -412,20 +575,44 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
         "wall_seconds": wall,
         "particle_steps_per_second": particle_steps as f64 / wall.max(1e-12),
         "particle_steps_per_second_per_thread": particle_steps as f64 / wall.max(1e-12) / threads as f64,
-        "particles": sim.particles.len(),
-        "particles_removed": sim.stats.removed,
-        "contacts": sim.stats.contacts,
-        "wall_contacts": sim.stats.wall_contacts,
-        "energy": {"kinetic_translational": kt, "kinetic_rotational": kr, "potential_gravity": pg, "elastic": sim.stats.elastic_energy},
+        "particles": g.particles,
+        "particles_removed": g.stats.removed,
+        "contacts": g.stats.contacts,
+        "wall_contacts": g.stats.wall_contacts,
+        "energy": {"kinetic_translational": kt, "kinetic_rotational": kr, "potential_gravity": pg, "elastic": g.stats.elastic_energy},
         "stage_seconds": sim.timers,
         "interrupted": stopped_by_user,
     });
-    write_atomic(
-        &dir.join("summary.json"),
-        serde_json::to_string_pretty(&summary)?.as_bytes(),
-    )
-    .with_context(|| format!("{}: cannot write summary.json", dir.display()))?;
+    if rank == 0 {
+        write_atomic(
+            &dir.join("summary.json"),
+            serde_json::to_string_pretty(&summary)?.as_bytes(),
+        )
+        .with_context(|| format!("{}: cannot write summary.json", dir.display()))?;
+    }
     Ok(summary)
+}
+
+/// Per-rank particle counts, stage seconds and the decomposition's own timers, gathered from
+/// every rank (a collective call; `null` on one rank).
+fn parallel_report(comm: &dyn Comm, sim: &Simulation) -> serde_json::Value {
+    let Some(par) = sim.parallel.as_deref() else {
+        return serde_json::Value::Null;
+    };
+    let local = json!({
+        "rank": comm.rank(),
+        "particles": sim.particles.len(),
+        "ghosts": par.ghosts.particles.len(),
+        "box": {"lo": par.own_box().lo.as_slice(), "hi": par.own_box().hi.as_slice()},
+        "stage_seconds": sim.timers,
+        "decomposition_seconds": par.timers,
+    });
+    let parts: Vec<serde_json::Value> = comm
+        .all_gather(local.to_string().as_bytes())
+        .iter()
+        .map(|b| serde_json::from_slice(b).unwrap_or(serde_json::Value::Null))
+        .collect();
+    json!({ "per_rank": parts })
 }
 
 /// `polydem check`: validates the scene and reports the time-step estimates and counts.
@@ -473,25 +660,39 @@ pub struct BenchOptions {
 /// per-stage seconds, contacts and candidate pairs per particle and (on the GPU) the bytes of
 /// device memory per particle (DESIGN.md §9).
 pub fn bench(opts: &BenchOptions) -> Result<serde_json::Value> {
+    bench_on(opts, Arc::new(SerialComm))
+}
+
+/// `polydem bench` on the ranks of `comm`: the same report for the whole run (particle-steps
+/// per second of all ranks together, stage seconds of rank 0) plus each rank's particles,
+/// stage seconds and the decomposition's exchange and waiting times.
+pub fn bench_on(opts: &BenchOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Value> {
     let scene = load_scene(&opts.scene).map_err(|e| anyhow!("{e}"))?;
-    let backend_name = choose_backend(opts.backend)?;
+    let ranks = comm.size();
+    let backend_name = if ranks > 1 {
+        choose_parallel_backend(opts.backend, ranks)?
+    } else {
+        choose_backend(opts.backend)?
+    };
     let t_setup = Instant::now();
     let mut engine = if backend_name == "cuda" {
         let c = CudaSimulation::from_scene(scene, 0, opts.precision).map_err(|e| anyhow!("{e}"))?;
         Engine::Cuda(Box::new(c))
     } else {
-        Engine::Cpu(Box::new(Simulation::new(scene)?))
+        Engine::Cpu(Box::new(Simulation::new_parallel(scene, comm.clone())?))
     };
     let setup = t_setup.elapsed().as_secs_f64();
     for _ in 0..opts.warmup {
         engine.step()?;
     }
     let timers_before = engine.host().timers;
-    let n = engine.host().particles.len();
+    let n = comm.sum_u64(&[engine.host().particles.len() as u64])[0] as usize;
+    comm.barrier();
     let start = Instant::now();
     for _ in 0..opts.steps {
         engine.step()?;
     }
+    comm.barrier();
     let wall = start.elapsed().as_secs_f64();
     let t = engine.host().timers;
     let stages = json!({
@@ -516,9 +717,13 @@ pub fn bench(opts: &BenchOptions) -> Result<serde_json::Value> {
     };
     let sim = engine.synced()?;
     let per_particle = |x: usize| x as f64 / n.max(1) as f64;
+    let g = whole_run(&*comm, sim);
+    let parallel = parallel_report(&*comm, sim);
     Ok(json!({
         "scene": opts.scene.display().to_string(),
         "backend": backend_name,
+        "ranks": ranks,
+        "parallel": parallel,
         "precision": if backend_name == "cuda" { format!("{:?}", opts.precision).to_lowercase() } else { "double".into() },
         "device": device,
         "particles": n,
@@ -527,8 +732,8 @@ pub fn bench(opts: &BenchOptions) -> Result<serde_json::Value> {
         "setup_seconds": setup,
         "particle_steps_per_second": (n as f64 * opts.steps as f64) / wall.max(1e-12),
         "stage_seconds": stages,
-        "contacts_per_particle": 2.0 * sim.stats.contacts as f64 / n.max(1) as f64,
-        "wall_contacts": sim.stats.wall_contacts,
+        "contacts_per_particle": 2.0 * g.stats.contacts as f64 / n.max(1) as f64,
+        "wall_contacts": g.stats.wall_contacts,
         "candidate_pairs_per_particle": pairs.map(per_particle),
         "device_bytes_per_particle": bytes.map(per_particle),
     }))

@@ -106,6 +106,37 @@ impl Particles {
             .push(template.principal_inertia * (density * scale.powi(5)));
     }
 
+    /// Appends every particle of `other`.
+    pub fn extend_from(&mut self, other: &Particles) {
+        self.id.extend_from_slice(&other.id);
+        self.kind.extend_from_slice(&other.kind);
+        self.scale.extend_from_slice(&other.scale);
+        self.position.extend_from_slice(&other.position);
+        self.velocity.extend_from_slice(&other.velocity);
+        self.orientation.extend_from_slice(&other.orientation);
+        self.angular_velocity
+            .extend_from_slice(&other.angular_velocity);
+        self.force.extend_from_slice(&other.force);
+        self.torque.extend_from_slice(&other.torque);
+        self.mass.extend_from_slice(&other.mass);
+        self.inertia.extend_from_slice(&other.inertia);
+    }
+
+    /// Keeps the first `n` particles.
+    pub fn truncate(&mut self, n: usize) {
+        self.id.truncate(n);
+        self.kind.truncate(n);
+        self.scale.truncate(n);
+        self.position.truncate(n);
+        self.velocity.truncate(n);
+        self.orientation.truncate(n);
+        self.angular_velocity.truncate(n);
+        self.force.truncate(n);
+        self.torque.truncate(n);
+        self.mass.truncate(n);
+        self.inertia.truncate(n);
+    }
+
     /// Translational plus rotational kinetic energy of particle `i`.
     pub fn kinetic_energy(&self, i: usize) -> f64 {
         let w_body = self.orientation[i].inverse_transform_vector(&self.angular_velocity[i]);

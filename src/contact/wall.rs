@@ -86,6 +86,28 @@ impl WallMesh {
         }
     }
 
+    /// The facets that meet the box `lo..hi`, with their prisms as built on the whole mesh
+    /// (bisector side planes need the facets' neighbours, which may lie outside), in the
+    /// original order, and a grid of cells about `cell` wide over them: for any point whose
+    /// reach stays inside the box, [`WallMesh::facets_near`] then lists the same facets in the
+    /// same order as on the whole mesh, so sums over them are bitwise the same. A rank of a
+    /// decomposed run keeps only the facets that reach its subdomain plus the halo.
+    pub fn restricted(&self, lo: &Vector3<f64>, hi: &Vector3<f64>, cell: f64) -> WallMesh {
+        let centre = 0.5 * (lo + hi);
+        let half = 0.5 * (hi - lo) * (1.0 + 1e-9);
+        let keep: Vec<usize> = (0..self.triangles.len())
+            .filter(|&f| triangle_meets_box(&self.triangles[f], &centre, &half))
+            .collect();
+        let triangles: Vec<_> = keep.iter().map(|&f| self.triangles[f]).collect();
+        let prisms = keep.iter().map(|&f| self.prisms[f]).collect();
+        let grid = FacetGrid::new(&triangles, cell);
+        WallMesh {
+            triangles,
+            prisms,
+            grid,
+        }
+    }
+
     /// Number of facets.
     pub fn len(&self) -> usize {
         self.triangles.len()

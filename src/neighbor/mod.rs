@@ -84,6 +84,20 @@ impl PairList {
             .any(|(x, r)| bounds.displacement(r, x).norm_squared() > limit)
     }
 
+    /// Whether some of the first `positions.len()` particles moved more than half the skin
+    /// since the last build (the owned particles of a decomposed run: ghosts are checked by
+    /// their owners). True before the first build.
+    pub fn moved_beyond_half_skin(&self, positions: &[Vector3<f64>], bounds: &Bounds) -> bool {
+        if self.builds == 0 || positions.len() > self.reference.len() {
+            return true;
+        }
+        let limit = 0.25 * self.skin * self.skin;
+        positions
+            .par_iter()
+            .zip(self.reference.par_iter())
+            .any(|(x, r)| bounds.displacement(r, x).norm_squared() > limit)
+    }
+
     /// Builds the list for particles at `positions` with bounding radii `radii` and global ids
     /// `ids`, keeping pairs closer than `r_i + r_j + skin`.
     pub fn build(
@@ -92,6 +106,35 @@ impl PairList {
         radii: &[f64],
         ids: &[u64],
         bounds: &Bounds,
+        skin: f64,
+    ) {
+        self.build_in(
+            positions,
+            positions,
+            radii,
+            ids,
+            positions.len(),
+            bounds,
+            bounds,
+            skin,
+        );
+    }
+
+    /// [`PairList::build`] for a rank's owned particles (the first `owned`) and its ghosts (the
+    /// rest): particles are binned at `bins` on a grid over `region` (periodic only where the
+    /// rank spans the domain), but the pair test and the periodic shift use the minimum-image
+    /// displacement of the true `positions` in the whole `bounds`, bitwise as on one rank.
+    /// Pairs of two ghosts are left out: their owners evaluate them.
+    #[allow(clippy::too_many_arguments)]
+    pub fn build_in(
+        &mut self,
+        positions: &[Vector3<f64>],
+        bins: &[Vector3<f64>],
+        radii: &[f64],
+        ids: &[u64],
+        owned: usize,
+        bounds: &Bounds,
+        region: &Bounds,
         skin: f64,
     ) {
         let n = positions.len();
@@ -107,9 +150,9 @@ impl PairList {
         }
         let r_max = radii.iter().cloned().fold(0.0, f64::max);
         let cutoff = 2.0 * r_max + skin;
-        let grid = Grid::new(bounds, cutoff, 4 * n);
+        let grid = Grid::new(region, cutoff, 4 * n);
         // Bin: cell of each particle, then particles sorted by cell (counting sort).
-        let cell: Vec<usize> = positions.par_iter().map(|x| grid.cell_of(x)).collect();
+        let cell: Vec<usize> = bins.par_iter().map(|x| grid.cell_of(x)).collect();
         let mut start = vec![0u32; grid.cells() + 1];
         for &c in &cell {
             start[c + 1] += 1;
@@ -130,7 +173,7 @@ impl PairList {
             for c in grid.neighbours(cell[i]) {
                 for &j in &sorted[start[c] as usize..start[c + 1] as usize] {
                     let j = j as usize;
-                    if ids[j] <= ids[i] {
+                    if ids[j] <= ids[i] || (i >= owned && j >= owned) {
                         continue;
                     }
                     let d = bounds.displacement(&xi, &positions[j]);

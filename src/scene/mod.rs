@@ -118,6 +118,48 @@ pub struct Scene {
     pub walls: Vec<Wall>,
     /// `[output]`.
     pub output: OutputSettings,
+    /// `[parallel]`.
+    pub parallel: ParallelSettings,
+}
+
+/// How subdomains are laid out over the ranks (`[parallel] decomposition`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Decomposition {
+    /// Recursive coordinate bisection, recomputed when the load is imbalanced.
+    Rcb,
+    /// A fixed Cartesian grid: ranks per axis, or `None` to choose from the domain's shape.
+    Grid(Option<[u32; 3]>),
+}
+
+/// What recursive bisection balances (`[parallel] weight`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BalanceWeight {
+    /// Owned particles per rank.
+    Count,
+    /// Measured seconds of force evaluation per rank, spread over its particles.
+    Cost,
+}
+
+/// `[parallel]`, resolved.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParallelSettings {
+    pub decomposition: Decomposition,
+    pub weight: BalanceWeight,
+    /// Rebalance when max load / mean load exceeds this.
+    pub imbalance_threshold: f64,
+    /// Neighbour-list rebuilds between load checks.
+    pub balance_interval: u64,
+}
+
+impl Default for ParallelSettings {
+    fn default() -> Self {
+        ParallelSettings {
+            decomposition: Decomposition::Rcb,
+            weight: BalanceWeight::Count,
+            imbalance_threshold: 1.2,
+            balance_interval: 1,
+        }
+    }
 }
 
 /// `[simulation]`, resolved.

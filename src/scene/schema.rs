@@ -45,6 +45,41 @@ pub struct SceneFile {
     /// `[output]`.
     #[serde(default)]
     pub output: Option<OutputSection>,
+    /// `[parallel]`: the domain decomposition over MPI ranks.
+    #[serde(default)]
+    pub parallel: Option<ParallelSection>,
+}
+
+/// `[parallel]`: how the domain is split over MPI ranks (ignored on one rank).
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParallelSection {
+    /// `"rcb"` (recursive coordinate bisection, rebalanced) or `"grid"` (fixed Cartesian grid).
+    pub decomposition: Option<DecompositionName>,
+    /// Ranks per axis for `decomposition = "grid"`; their product must equal the rank count.
+    pub grid: Option<[u32; 3]>,
+    /// What the bisection balances: `"count"` (particles) or `"cost"` (measured step time).
+    pub weight: Option<BalanceWeightName>,
+    /// Rebalance when the largest rank load exceeds this multiple of the mean (> 1).
+    pub imbalance_threshold: Option<f64>,
+    /// Neighbour-list rebuilds between load checks (≥ 1).
+    pub balance_interval: Option<u64>,
+}
+
+/// Values of `parallel.decomposition`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum DecompositionName {
+    Rcb,
+    Grid,
+}
+
+/// Values of `parallel.weight`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BalanceWeightName {
+    Count,
+    Cost,
 }
 
 /// `[simulation]`: time stepping and the random seed.

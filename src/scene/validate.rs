@@ -167,6 +167,7 @@ impl Validator<'_> {
         let pairs = self.pairs(&raw.material_pairs, &mat_index, &particle_types, &walls);
         let raw_output = raw.output.unwrap_or_default();
         let output = self.output(&raw_output);
+        let parallel = self.parallel(raw.parallel.as_ref());
         let mut scene = Scene {
             file: self.base.join(file_name),
             simulation: simulation.clone(),
@@ -180,6 +181,7 @@ impl Validator<'_> {
             insertions: Vec::new(),
             walls,
             output,
+            parallel,
         };
         scene.insertions = self.insertions(&raw.insertions, &scene);
         if !self.errors.is_empty() {
@@ -281,6 +283,59 @@ impl Validator<'_> {
             max,
             periodic: d.periodic,
         }
+    }
+
+    fn parallel(&mut self, p: Option<&schema::ParallelSection>) -> ParallelSettings {
+        let mut out = ParallelSettings::default();
+        let Some(p) = p else {
+            return out;
+        };
+        let grid = p.grid.map(|g| {
+            if g.contains(&0) {
+                self.err(
+                    "parallel.grid",
+                    format!("ranks per axis must be ≥ 1, got {g:?}"),
+                );
+            }
+            g
+        });
+        out.decomposition = match p.decomposition {
+            Some(schema::DecompositionName::Grid) => Decomposition::Grid(grid),
+            Some(schema::DecompositionName::Rcb) | None => {
+                if grid.is_some() {
+                    self.err(
+                        "parallel.grid",
+                        "only with decomposition = \"grid\" (recursive bisection places its own cuts)",
+                    );
+                }
+                Decomposition::Rcb
+            }
+        };
+        if let Some(w) = p.weight {
+            out.weight = match w {
+                schema::BalanceWeightName::Count => BalanceWeight::Count,
+                schema::BalanceWeightName::Cost => BalanceWeight::Cost,
+            };
+        }
+        if let Some(t) = p.imbalance_threshold {
+            if !(t > 1.0 && t.is_finite()) {
+                self.err(
+                    "parallel.imbalance_threshold",
+                    format!("must be a finite number > 1 (max load / mean load), got {t}"),
+                );
+            }
+            out.imbalance_threshold = t;
+        }
+        if let Some(n) = p.balance_interval {
+            if n == 0 {
+                self.err(
+                    "parallel.balance_interval",
+                    "must be ≥ 1 (neighbour-list rebuilds)",
+                );
+            }
+            out.balance_interval = n;
+        }
+        out
     }
 
     fn materials(&mut self, list: &[schema::MaterialSection]) -> Vec<Material> {

@@ -62,6 +62,11 @@ pub enum WallMotion {
 }
 
 impl WallMotion {
+    /// Whether the wall never moves.
+    pub fn is_static(&self) -> bool {
+        matches!(self, WallMotion::Fixed)
+    }
+
     /// Angular speed ω (rad/s) of a rotation, from rpm.
     pub fn omega(rpm: f64) -> f64 {
         TAU * rpm / 60.0

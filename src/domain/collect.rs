@@ -1,0 +1,95 @@
+//! Whole-run views of a decomposed run, for output: observables summed over ranks, and the
+//! checkpoint gathered on rank 0 in the single-rank layout (particles by global id, history by
+//! key), so a checkpoint does not depend on the rank count that wrote it and restarts on any.
+
+use super::comm::Comm;
+use super::migration::{pack_particles, unpack_particles};
+use crate::contact::ContactHistory;
+use crate::pipeline::{Simulation, StepStats};
+use crate::state::Particles;
+use nalgebra::Vector3;
+
+/// Observables of the whole run.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GlobalStats {
+    pub particles: u64,
+    pub stats: StepStats,
+    /// Kinetic (translational, rotational) and gravitational potential energy.
+    pub energies: (f64, f64, f64),
+    pub wall_forces: Vec<Vector3<f64>>,
+}
+
+/// Sums this rank's observables with every other rank's (a collective call).
+pub fn global_stats(comm: &dyn Comm, sim: &Simulation) -> GlobalStats {
+    let (kt, kr, pg) = sim.energies();
+    let s = &sim.stats;
+    let mut f = vec![kt, kr, pg, s.elastic_energy];
+    for w in &sim.wall_forces {
+        f.extend_from_slice(w.as_slice());
+    }
+    let f = comm.sum_f64(&f);
+    let u = comm.sum_u64(&[
+        sim.particles.len() as u64,
+        s.contacts,
+        s.wall_contacts,
+        s.removed,
+    ]);
+    GlobalStats {
+        particles: u[0],
+        stats: StepStats {
+            contacts: u[1],
+            wall_contacts: u[2],
+            elastic_energy: f[3],
+            removed: u[3],
+        },
+        energies: (f[0], f[1], f[2]),
+        wall_forces: f[4..]
+            .chunks_exact(3)
+            .map(|c| Vector3::new(c[0], c[1], c[2]))
+            .collect(),
+    }
+}
+
+/// Every rank's particles and history on `root`, particles sorted by global id (a collective
+/// call; `None` on the other ranks).
+pub fn gather_state(
+    comm: &dyn Comm,
+    sim: &Simulation,
+    root: usize,
+) -> Option<(Particles, ContactHistory)> {
+    let all: Vec<usize> = (0..sim.particles.len()).collect();
+    let mut sends = vec![Vec::new(); comm.size()];
+    sends[root] = pack_particles(&sim.particles, &all, &sim.history);
+    let received = comm.all_to_all(&sends);
+    if comm.rank() != root {
+        return None;
+    }
+    let mut p = Particles::default();
+    let mut entries = Vec::new();
+    for buf in &received {
+        entries.extend(unpack_particles(buf, &mut p));
+    }
+    Some((sorted_by_id(&p), ContactHistory::from_entries(entries)))
+}
+
+/// The particles reordered by global id.
+pub fn sorted_by_id(p: &Particles) -> Particles {
+    let mut order: Vec<usize> = (0..p.len()).collect();
+    order.sort_unstable_by_key(|&i| p.id[i]);
+    macro_rules! gather {
+        ($($f:ident),*) => { Particles { $($f: order.iter().map(|&i| p.$f[i]).collect(),)* } };
+    }
+    gather!(
+        id,
+        kind,
+        scale,
+        position,
+        velocity,
+        orientation,
+        angular_velocity,
+        force,
+        torque,
+        mass,
+        inertia
+    )
+}

@@ -1,0 +1,231 @@
+//! The halo: ghost (virtual-region) copies of the neighbours' outer-region particles
+//! (seed paper Sec. 2.6, DESIGN.md §6).
+//!
+//! At each neighbour-list rebuild a rank decides which of its particles each neighbour needs:
+//! those within the halo width (the pair-list cutoff `2 r_max + skin`) of the neighbour's box,
+//! or of a periodic image of it. Particles farther than the halo from every face of their own
+//! box (the inner region) are never looked at. The chosen particles go out with the ghost
+//! payload — global id, type, scale, centroid, velocity, orientation, angular velocity — and
+//! the periodic image they were chosen for; mass and inertia follow from type and scale on the
+//! receiving side, by the same arithmetic as on the owner. Between rebuilds the same particles
+//! are sent in the same order with only what changes each step (centroid, velocity, orientation,
+//! angular velocity: 104 bytes a ghost), so the receiver's pair list stays valid.
+//!
+//! Ghosts keep their true (wrapped) centroid: the pair search takes the minimum-image
+//! displacement from it exactly as a single rank does, so a pair across a periodic seam gets
+//! bitwise the shift it gets on one rank. The image only decides where the ghost is binned.
+
+use super::decomposition::Subdomains;
+use super::pack::{Reader, Writer};
+use crate::scene::Scene;
+use crate::state::Particles;
+use nalgebra::Vector3;
+
+/// Which owned particles go to whom, fixed from one rebuild to the next.
+#[derive(Clone, Debug, Default)]
+pub struct HaloPlan {
+    /// Neighbour ranks, sorted ([`Subdomains::neighbours`]).
+    pub neighbours: Vec<usize>,
+    /// Per neighbour: local index of each particle sent, with its image offset.
+    pub sends: Vec<Vec<(u32, [i8; 3])>>,
+    /// Own particles needed as ghosts of this rank itself, at a periodic image (a box that
+    /// does not span a periodic axis but is its only rank along it cannot occur with boxes at
+    /// least 2 × halo wide, yet the case is kept general).
+    pub self_images: Vec<(u32, [i8; 3])>,
+}
+
+/// Ghost particles and where they are binned.
+#[derive(Clone, Debug, Default)]
+pub struct Ghosts {
+    /// The ghosts' state (force and torque unused), neighbour by neighbour in
+    /// [`HaloPlan::neighbours`] order, then this rank's own images.
+    pub particles: Particles,
+    /// Image offset of each ghost.
+    pub images: Vec<[i8; 3]>,
+}
+
+impl HaloPlan {
+    /// The plan for `rank` holding `positions` (its owned particles).
+    pub fn new(sub: &Subdomains, rank: usize, positions: &[Vector3<f64>]) -> Self {
+        let neighbours = sub.neighbours(rank);
+        let own = sub.boxes[rank];
+        let h = sub.halo;
+        // Axes along which this box has a boundary that another box lies behind.
+        let bounded: Vec<usize> = (0..3).filter(|&k| !sub.spans(rank, k)).collect();
+        let targets: Vec<(usize, Vec<[i8; 3]>)> = neighbours
+            .iter()
+            .map(|&r| (r, sub.image_offsets(Some(r))))
+            .chain(std::iter::once((rank, sub.image_offsets(Some(rank)))))
+            .collect();
+        let shifts: Vec<Vec<Vector3<f64>>> = targets
+            .iter()
+            .map(|(_, offs)| offs.iter().map(|o| sub.shift(o)).collect())
+            .collect();
+        let mut sends = vec![Vec::new(); neighbours.len()];
+        let mut self_images = Vec::new();
+        for (i, x) in positions.iter().enumerate() {
+            // Inner region: farther than the halo from every boundary of the own box.
+            if bounded
+                .iter()
+                .all(|&k| x[k] - own.lo[k] >= h && own.hi[k] - x[k] >= h)
+            {
+                continue;
+            }
+            for (t, (r, offs)) in targets.iter().enumerate() {
+                let b = &sub.boxes[*r];
+                for (o, s) in offs.iter().zip(&shifts[t]) {
+                    if *r == rank && *o == [0, 0, 0] {
+                        continue;
+                    }
+                    if b.distance(&(x + s)) < h {
+                        if *r == rank {
+                            self_images.push((i as u32, *o));
+                        } else {
+                            sends[t].push((i as u32, *o));
+                        }
+                    }
+                }
+            }
+        }
+        HaloPlan {
+            neighbours,
+            sends,
+            self_images,
+        }
+    }
+
+    /// Ghosts sent in all.
+    pub fn sent(&self) -> usize {
+        self.sends.iter().map(Vec::len).sum()
+    }
+}
+
+/// Full ghost record of particle `i` at image `o`.
+fn write_ghost(w: &mut Writer, p: &Particles, i: usize, o: &[i8; 3]) {
+    w.u64(p.id[i]);
+    w.u32(p.kind[i]);
+    w.u32(u32::from_le_bytes([o[0] as u8, o[1] as u8, o[2] as u8, 0]));
+    w.f64(p.scale[i]);
+    write_motion(w, p, i);
+}
+
+/// What changes from step to step.
+fn write_motion(w: &mut Writer, p: &Particles, i: usize) {
+    w.v3(&p.position[i]);
+    w.v3(&p.velocity[i]);
+    w.quat(&p.orientation[i]);
+    w.v3(&p.angular_velocity[i]);
+}
+
+/// Appends a ghost read from a full record.
+fn read_ghost(r: &mut Reader, scene: &Scene, g: &mut Ghosts) {
+    let id = r.u64();
+    let kind = r.u32();
+    let o = r.u32().to_le_bytes();
+    let scale = r.f64();
+    let (x, v, q, w) = (r.v3(), r.v3(), r.quat(), r.v3());
+    let ty = &scene.particle_types[kind as usize];
+    let density = scene.materials[ty.material].density;
+    let p = &mut g.particles;
+    p.push(
+        id,
+        kind,
+        scale,
+        x,
+        q,
+        &scene.templates[ty.template],
+        density,
+    );
+    let i = p.len() - 1;
+    p.velocity[i] = v;
+    p.angular_velocity[i] = w;
+    g.images.push([o[0] as i8, o[1] as i8, o[2] as i8]);
+}
+
+/// Ghost payload bytes per particle at a rebuild and between rebuilds.
+pub const GHOST_BYTES_FULL: usize = 8 + 4 + 4 + 8 + 13 * 8;
+pub const GHOST_BYTES_MOTION: usize = 13 * 8;
+
+/// Sends every neighbour its ghosts (full records) and returns the ghosts received.
+pub fn build_ghosts(
+    comm: &dyn super::comm::Comm,
+    plan: &HaloPlan,
+    owned: &Particles,
+    scene: &Scene,
+) -> Ghosts {
+    let sends: Vec<(usize, Vec<u8>)> = plan
+        .neighbours
+        .iter()
+        .zip(&plan.sends)
+        .map(|(&r, list)| {
+            let mut w = Writer::default();
+            w.buf.reserve(list.len() * GHOST_BYTES_FULL);
+            for (i, o) in list {
+                write_ghost(&mut w, owned, *i as usize, o);
+            }
+            (r, w.buf)
+        })
+        .collect();
+    let received = comm.neighbor_exchange(&sends, &plan.neighbours);
+    let mut g = Ghosts::default();
+    for buf in &received {
+        let mut r = Reader::new(buf);
+        while !r.done() {
+            read_ghost(&mut r, scene, &mut g);
+        }
+    }
+    let mut w = Writer::default();
+    for (i, o) in &plan.self_images {
+        write_ghost(&mut w, owned, *i as usize, o);
+    }
+    let mut r = Reader::new(&w.buf);
+    while !r.done() {
+        read_ghost(&mut r, scene, &mut g);
+    }
+    g
+}
+
+/// Sends the same particles as the last [`build_ghosts`], motion only, and overwrites the
+/// ghosts' motion in the same order.
+pub fn refresh_ghosts(
+    comm: &dyn super::comm::Comm,
+    plan: &HaloPlan,
+    owned: &Particles,
+    ghosts: &mut Ghosts,
+) {
+    let sends: Vec<(usize, Vec<u8>)> = plan
+        .neighbours
+        .iter()
+        .zip(&plan.sends)
+        .map(|(&r, list)| {
+            let mut w = Writer::default();
+            w.buf.reserve(list.len() * GHOST_BYTES_MOTION);
+            for (i, _) in list {
+                write_motion(&mut w, owned, *i as usize);
+            }
+            (r, w.buf)
+        })
+        .collect();
+    let received = comm.neighbor_exchange(&sends, &plan.neighbours);
+    let mut w = Writer::default();
+    for (i, _) in &plan.self_images {
+        write_motion(&mut w, owned, *i as usize);
+    }
+    let p = &mut ghosts.particles;
+    let mut k = 0;
+    for buf in received.iter().chain(std::iter::once(&w.buf)) {
+        let mut r = Reader::new(buf);
+        while !r.done() {
+            p.position[k] = r.v3();
+            p.velocity[k] = r.v3();
+            p.orientation[k] = r.quat();
+            p.angular_velocity[k] = r.v3();
+            k += 1;
+        }
+    }
+    assert_eq!(
+        k,
+        p.len(),
+        "halo refresh: ghost count changed between rebuilds"
+    );
+}
