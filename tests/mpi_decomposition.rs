@@ -1,0 +1,277 @@
+//! Domain decomposition over real MPI ranks (DESIGN.md §6): the built `polydem` binary under
+//! `mpirun --oversubscribe -n 2..4`, held to the single-rank run of the same scene.
+//!
+//! The reference is exact: a checkpoint holds every particle field (sorted by global id), the
+//! contact history and the insertion state, gathered on rank 0 in the single-rank layout, so
+//! "the same physics" is checked as byte-identical checkpoint files. That the runs really were
+//! decomposed (particles migrated, ghosts were exchanged, boxes were redrawn) is checked from
+//! each rank's report in `summary.json`.
+//!
+//! Needs Open MPI's `mpirun` (scripts/setup.sh installs openmpi-bin); each rank runs one rayon
+//! thread.
+
+mod common;
+
+use common::{polydem_bin, repo_root, temp_dir};
+use polydem::io::read_checkpoint;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+/// `polydem run SCENE` on `ranks` ranks (1: without mpirun) into `out`, with extra arguments.
+fn run(ranks: usize, scene: &str, out: &Path, extra: &[&str]) -> Output {
+    let bin = polydem_bin();
+    let scene = repo_root().join(scene);
+    let mut cmd = if ranks == 1 {
+        Command::new(&bin)
+    } else {
+        let mut c = Command::new("mpirun");
+        c.args(["--oversubscribe", "-n", &ranks.to_string()])
+            .arg(&bin);
+        c
+    };
+    cmd.arg("run")
+        .arg(&scene)
+        .args(["--backend", "cpu", "--out"])
+        .arg(out)
+        .args(extra)
+        .env("RAYON_NUM_THREADS", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("RUST_LOG", "warn");
+    cmd.output().unwrap_or_else(|e| {
+        panic!(
+            "cannot start {} ({e}); the MPI tests need Open MPI's mpirun: run `make test`, which \
+             installs openmpi-bin",
+            if ranks == 1 { "polydem" } else { "mpirun" }
+        )
+    })
+}
+
+/// As [`run`], and asserts that it succeeded; returns rank 0's summary.
+fn run_ok(ranks: usize, scene: &str, out: &Path, extra: &[&str]) -> Value {
+    let o = run(ranks, scene, out, extra);
+    assert!(
+        o.status.success(),
+        "{ranks} rank(s) of {scene} failed:\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).expect("summary JSON on stdout")
+}
+
+/// The single-rank runs, made once for all tests.
+fn reference(scene: &'static str) -> PathBuf {
+    static POUR: OnceLock<PathBuf> = OnceLock::new();
+    static PERIODIC: OnceLock<PathBuf> = OnceLock::new();
+    let cell = if scene.contains("pour") {
+        &POUR
+    } else {
+        &PERIODIC
+    };
+    cell.get_or_init(|| {
+        let dir = temp_dir(&format!("mpi-ref-{}", scene.replace('/', "_")));
+        run_ok(1, scene, &dir, &[]);
+        dir
+    })
+    .clone()
+}
+
+/// The checkpoint `name` of `a` and of `b` are byte for byte the same.
+fn same_checkpoint(a: &Path, b: &Path, name: &str, what: &str) {
+    let (pa, pb) = (
+        a.join("checkpoints").join(name),
+        b.join("checkpoints").join(name),
+    );
+    let (x, y) = (std::fs::read(&pa).unwrap(), std::fs::read(&pb).unwrap());
+    if x != y {
+        let (ca, cb) = (read_checkpoint(&pa).unwrap(), read_checkpoint(&pb).unwrap());
+        let worst = ca
+            .particles
+            .position
+            .iter()
+            .zip(&cb.particles.position)
+            .map(|(p, q)| (p - q).norm())
+            .fold(0.0, f64::max);
+        panic!(
+            "{what}: {name} differs from the single-rank run ({} vs {} particles, {} vs {} \
+             contacts, largest position difference {worst:e} m)",
+            ca.particles.len(),
+            cb.particles.len(),
+            ca.history.len(),
+            cb.history.len()
+        );
+    }
+}
+
+/// Every particle exactly once: `expected` particles with distinct global ids.
+fn no_particle_lost_or_duplicated(dir: &Path, expected: usize) {
+    let c = read_checkpoint(&dir.join("checkpoints/latest.ckpt")).unwrap();
+    let mut ids = c.particles.id.clone();
+    ids.sort_unstable();
+    ids.dedup();
+    assert_eq!(c.particles.len(), expected, "particles in the checkpoint");
+    assert_eq!(ids.len(), expected, "distinct global ids");
+}
+
+/// Sums of a per-rank decomposition counter.
+fn per_rank_sum(summary: &Value, key: &str) -> u64 {
+    summary["parallel"]["per_rank"]
+        .as_array()
+        .expect("per-rank report")
+        .iter()
+        .map(|r| r["decomposition_seconds"][key].as_u64().unwrap())
+        .sum()
+}
+
+/// A dense pour into a walled box (count and rate insertion, friction, recursive bisection
+/// rebalanced as the bed forms) on 2, 3 and 4 ranks: the checkpoints at steps 1000 and 2000
+/// are byte-identical to the single-rank run's.
+#[test]
+fn pour_on_2_3_4_ranks_is_bitwise_the_single_rank_run() {
+    let one = reference("launch/mpi/pour.toml");
+    no_particle_lost_or_duplicated(&one, 280);
+    for ranks in [2, 3, 4] {
+        let dir = temp_dir(&format!("mpi-pour-{ranks}"));
+        let s = run_ok(ranks, "launch/mpi/pour.toml", &dir, &[]);
+        assert_eq!(s["ranks"], ranks);
+        assert_eq!(s["particles"], 280);
+        for step in ["step_0000001000.ckpt", "step_0000002000.ckpt"] {
+            same_checkpoint(&one, &dir, step, &format!("{ranks} ranks"));
+        }
+        no_particle_lost_or_duplicated(&dir, 280);
+        // It was a decomposed run: particles crossed boxes, ghosts were held, boxes redrawn.
+        let migrated = per_rank_sum(&s, "migrated");
+        let rebalances = per_rank_sum(&s, "rebalances");
+        let ghosts: u64 = s["parallel"]["per_rank"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r["ghosts"].as_u64().unwrap())
+            .sum();
+        println!("{ranks} ranks: {migrated} migrations, {rebalances} rebalances, {ghosts} ghosts");
+        assert!(migrated > 50, "{ranks} ranks: only {migrated} migrations");
+        assert!(
+            rebalances > 0,
+            "{ranks} ranks: the boxes were never redrawn"
+        );
+        assert!(ghosts > 10, "{ranks} ranks: {ghosts} ghosts at the end");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+/// A checkpoint written by 4 ranks at step 1000, restarted on 2 ranks, ends at step 2000
+/// byte-identical to the single-rank run (and the 4-rank checkpoint itself is the single-rank
+/// one, so it also restarts on 1 rank).
+#[test]
+fn checkpoint_of_4_ranks_restarts_on_2() {
+    let one = reference("launch/mpi/pour.toml");
+    let four = temp_dir("mpi-ckpt-4");
+    run_ok(4, "launch/mpi/pour.toml", &four, &["--max-steps", "1000"]);
+    same_checkpoint(&one, &four, "step_0000001000.ckpt", "4 ranks, first half");
+    let two = temp_dir("mpi-ckpt-2");
+    let ck = four.join("checkpoints/step_0000001000.ckpt");
+    let s = run_ok(
+        2,
+        "launch/mpi/pour.toml",
+        &two,
+        &["--restart", ck.to_str().unwrap()],
+    );
+    assert_eq!(s["final_step"], 2000);
+    same_checkpoint(&one, &two, "step_0000002000.ckpt", "restart on 2 ranks");
+    no_particle_lost_or_duplicated(&two, 280);
+    let _ = std::fs::remove_dir_all(&four);
+    let _ = std::fs::remove_dir_all(&two);
+}
+
+/// Colliding streams in a fully periodic box on a fixed 2 × 1 × 2 grid: pairs across periodic
+/// seams and subdomain edges and corners, bitwise as on one rank.
+#[test]
+fn periodic_box_on_a_4_rank_grid_is_bitwise_the_single_rank_run() {
+    let one = reference("launch/mpi/periodic.toml");
+    let dir = temp_dir("mpi-periodic-4");
+    let s = run_ok(4, "launch/mpi/periodic.toml", &dir, &[]);
+    for step in ["step_0000001000.ckpt", "step_0000002000.ckpt"] {
+        same_checkpoint(&one, &dir, step, "periodic, 4 ranks");
+    }
+    no_particle_lost_or_duplicated(&dir, 180);
+    assert!(per_rank_sum(&s, "migrated") > 50);
+    // A fixed grid is never redrawn.
+    assert_eq!(per_rank_sum(&s, "rebalances"), 0);
+    // Contacts happened, across the seams among them (the streams wrap around).
+    let series = std::fs::read_to_string(dir.join("series.csv")).unwrap();
+    let peak = series
+        .lines()
+        .skip(1)
+        .filter_map(|l| l.split(',').nth(6)?.parse::<u64>().ok())
+        .max()
+        .unwrap();
+    assert!(peak > 20, "at most {peak} contacts");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Each rank writes its own piece of every frame and rank 0 a `.pvtu` naming all of them; the
+/// pieces hold every particle once, with the writing rank in the `rank` field.
+#[test]
+fn frames_have_one_piece_per_rank() {
+    let cells_in = |path: &Path| -> usize {
+        std::fs::read_to_string(path)
+            .unwrap()
+            .split("NumberOfCells=\"")
+            .nth(1)
+            .and_then(|t| t.split('"').next())
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let one = reference("launch/mpi/pour.toml");
+    let expected = cells_in(&one.join("frames/step_0000000500_r0000.vtu"));
+    let dir = temp_dir("mpi-frames-3");
+    run_ok(3, "launch/mpi/pour.toml", &dir, &["--max-steps", "500"]);
+    let frames = dir.join("frames");
+    let pvtu = std::fs::read_to_string(frames.join("step_0000000500.pvtu")).unwrap();
+    let mut cells = 0;
+    let mut ids = Vec::new();
+    for r in 0..3 {
+        let piece = format!("step_0000000500_r{r:04}.vtu");
+        assert!(pvtu.contains(&piece), "{piece} not in the .pvtu");
+        let n = cells_in(&frames.join(&piece));
+        cells += n;
+        ids.push(n);
+    }
+    assert_eq!(cells, expected, "cells over the pieces: {ids:?}");
+    assert!(
+        ids.iter().all(|&n| n > 0),
+        "a rank wrote no particle: {ids:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// What cannot run is refused on every rank with a message that says why: a grid whose
+/// product is not the rank count, and the GPU backend on several ranks.
+#[test]
+fn bad_parallel_requests_are_refused_clearly() {
+    let dir = temp_dir("mpi-refused");
+    let o = run(2, "launch/mpi/periodic.toml", &dir, &[]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("[parallel] grid = [2, 1, 2]") && err.contains("2 ranks"),
+        "{err}"
+    );
+    let o = Command::new("mpirun")
+        .args(["--oversubscribe", "-n", "2"])
+        .arg(polydem_bin())
+        .arg("run")
+        .arg(repo_root().join("launch/mpi/pour.toml"))
+        .args(["--backend", "cuda", "--out"])
+        .arg(&dir)
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--backend cuda on 2 ranks"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
