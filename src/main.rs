@@ -108,10 +108,10 @@ enum ShapeAction {
 /// with the `mpi` feature), else a single rank.
 fn communicator() -> Arc<dyn Comm> {
     #[cfg(feature = "mpi")]
-    if polydem::domain::comm::launched_under_mpi() {
-        if let Some(c) = polydem::domain::comm::MpiComm::init() {
-            return Arc::new(c);
-        }
+    if polydem::domain::comm::launched_under_mpi()
+        && let Some(c) = polydem::domain::comm::MpiComm::init()
+    {
+        return Arc::new(c);
     }
     Arc::new(SerialComm)
 }

@@ -418,6 +418,54 @@ mod tests {
         assert!(listed < 40_000, "{listed} cell entries");
     }
 
+    /// A mesh restricted to a box lists, for points whose reach stays in the box, the same
+    /// facets in the same order as the whole mesh (mapped back to the whole mesh's indices).
+    #[test]
+    fn restricted_mesh_finds_the_same_facets_in_the_same_order() {
+        let n = 48;
+        let ring = |r: f64, z: f64, k: usize| {
+            let a = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
+            Vector3::new(r * a.cos(), r * a.sin(), z)
+        };
+        let mut tris = Vec::new();
+        for k in 0..n {
+            let (a, b) = (ring(0.05, 0.0, k), ring(0.05, 0.0, k + 1));
+            let (c, d) = (ring(0.3, 0.3, k), ring(0.3, 0.3, k + 1));
+            tris.push([a, d, c]);
+            tris.push([a, b, d]);
+        }
+        let full = WallMesh::new(&tris, 0.02);
+        let (lo, hi) = (Vector3::new(0.0, -0.1, 0.0), Vector3::new(0.35, 0.2, 0.35));
+        let part = full.restricted(&lo, &hi, 0.02);
+        assert!(
+            part.len() < full.len() && part.len() > 10,
+            "{} facets",
+            part.len()
+        );
+        let index: Vec<usize> = part
+            .triangles
+            .iter()
+            .map(|t| full.triangles.iter().position(|u| u == t).unwrap())
+            .collect();
+        assert!(index.windows(2).all(|w| w[0] < w[1]), "original order kept");
+        let mut rng = crate::rng::Rng::new(5);
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        let mut found = 0;
+        for _ in 0..3000 {
+            let reach = rng.range(0.005, 0.03);
+            let x = Vector3::from_fn(|k, _| rng.range(lo[k] + reach, hi[k] - reach));
+            full.facets_near(&x, reach, &mut a);
+            part.facets_near(&x, reach, &mut b);
+            let mapped: Vec<u32> = b.iter().map(|&f| index[f as usize] as u32).collect();
+            assert_eq!(a, mapped, "at {x}");
+            for (&f, &g) in a.iter().zip(&b) {
+                assert_eq!(full.prisms[f as usize], part.prisms[g as usize]);
+            }
+            found += a.len();
+        }
+        assert!(found > 300, "{found}");
+    }
+
     fn body(pose: &Isometry3<f64>) -> Box<PosedPolytope<f64>> {
         let t = Generator::Cube { size: 3f64.sqrt() }.build().unwrap(); // unit edge
         let mut b = Box::<PosedPolytope<f64>>::default();

@@ -248,11 +248,11 @@ impl Subdomains {
         let e = domain.max - domain.min;
         let mut best: Option<(f64, [u32; 3])> = None;
         for px in 1..=ranks {
-            if ranks % px != 0 {
+            if !ranks.is_multiple_of(px) {
                 continue;
             }
             for py in 1..=ranks / px {
-                if (ranks / px) % py != 0 {
+                if !(ranks / px).is_multiple_of(py) {
                     continue;
                 }
                 let g = [px, py, ranks / px / py];

@@ -229,3 +229,59 @@ pub fn refresh_ghosts(
         "halo refresh: ghost count changed between rebuilds"
     );
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::neighbor::Bounds;
+    use crate::rng::Rng;
+
+    /// The plan sends a particle to a rank at an image exactly when that image lies within the
+    /// halo of the rank's box (brute force over every rank and image), on a periodic grid of
+    /// 3 × 2 × 1 boxes where one rank spans z.
+    #[test]
+    fn plan_matches_brute_force_over_ranks_and_images() {
+        let domain = Bounds {
+            min: Vector3::new(0.0, 0.0, 0.0),
+            max: Vector3::new(3.0, 2.0, 1.0),
+            periodic: [true, false, true],
+        };
+        let halo = 0.2;
+        let sub = Subdomains::grid(domain, halo, [3, 2, 1]);
+        let mut rng = Rng::new(21);
+        for rank in 0..6 {
+            let b = sub.boxes[rank];
+            let x: Vec<Vector3<f64>> = (0..3000)
+                .map(|_| Vector3::from_fn(|k, _| rng.range(b.lo[k], b.hi[k])))
+                .collect();
+            let plan = HaloPlan::new(&sub, rank, &x);
+            let mut got: Vec<(usize, u32, [i8; 3])> = Vec::new();
+            for (t, &r) in plan.neighbours.iter().enumerate() {
+                got.extend(plan.sends[t].iter().map(|&(i, o)| (r, i, o)));
+            }
+            got.extend(plan.self_images.iter().map(|&(i, o)| (rank, i, o)));
+            got.sort_unstable();
+            let mut want = Vec::new();
+            for r in 0..6 {
+                for o in sub.image_offsets(Some(r)) {
+                    if r == rank && o == [0, 0, 0] {
+                        continue;
+                    }
+                    for (i, p) in x.iter().enumerate() {
+                        if sub.boxes[r].distance(&(p + sub.shift(&o))) < halo {
+                            want.push((r, i as u32, o));
+                        }
+                    }
+                }
+            }
+            want.sort_unstable();
+            assert_eq!(got.len(), want.len(), "rank {rank}");
+            assert_eq!(got, want, "rank {rank}");
+            // z is spanned by every box: no image along it, and no self images at all.
+            assert!(got.iter().all(|g| g.2[2] == 0));
+            assert!(plan.self_images.is_empty());
+            // Every rank is sent something: x wraps around, y has two rows.
+            assert!(plan.sent() > 100);
+        }
+    }
+}

@@ -290,15 +290,15 @@ impl Validator<'_> {
         let Some(p) = p else {
             return out;
         };
-        let grid = p.grid.map(|g| {
-            if g.contains(&0) {
-                self.err(
-                    "parallel.grid",
-                    format!("ranks per axis must be ≥ 1, got {g:?}"),
-                );
-            }
-            g
-        });
+        let grid = p.grid;
+        if let Some(g) = grid
+            && g.contains(&0)
+        {
+            self.err(
+                "parallel.grid",
+                format!("ranks per axis must be ≥ 1, got {g:?}"),
+            );
+        }
         out.decomposition = match p.decomposition {
             Some(schema::DecompositionName::Grid) => Decomposition::Grid(grid),
             Some(schema::DecompositionName::Rcb) | None => {
