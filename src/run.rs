@@ -686,6 +686,12 @@ pub fn bench_on(opts: &BenchOptions, comm: Arc<dyn Comm>) -> Result<serde_json::
         engine.step()?;
     }
     let timers_before = engine.host().timers;
+    if let Engine::Cpu(sim) = &mut engine
+        && let Some(par) = sim.parallel.as_deref_mut()
+    {
+        // The per-rank decomposition timers of the report cover the timed steps only.
+        par.timers = Default::default();
+    }
     let n = comm.sum_u64(&[engine.host().particles.len() as u64])[0] as usize;
     comm.barrier();
     let start = Instant::now();
