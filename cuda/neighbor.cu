@@ -88,13 +88,21 @@ extern "C" __global__ void gather_u32(int n, const unsigned int* src, unsigned i
 // cell_start[c] .. cell_start[c+1]): partners j with a higher global id, in the 27 cells around
 // i's, within the bounding-sphere reach plus skin. Calls visit(j, shift) with the periodic image
 // shift to add to x_j.
+//
+// In a decomposed run (PD_GHOSTS) `ghost[i]` marks the neighbours' particles held as ghosts;
+// pairs of two ghosts are skipped (their owners evaluate them). Otherwise `ghost` is not read.
 template <class Visit>
 PD_DEVICE void for_each_partner(int i, const double* position, const double* radius, const pd_u64* id,
-                                const unsigned int* cell_start, const GridParams& grid, double skin,
-                                Visit visit) {
+                                const unsigned int* ghost, const unsigned int* cell_start,
+                                const GridParams& grid, double skin, Visit visit) {
     V3<double> xi = load3(position, i);
     double ri = radius[i];
     pd_u64 idi = id[i];
+#if PD_GHOSTS
+    bool ghost_i = ghost[i] != 0u;
+#else
+    (void)ghost;
+#endif
     int cell = cell_of(grid, xi);
     int a = cell % grid.dims[0];
     int b = (cell / grid.dims[0]) % grid.dims[1];
@@ -111,6 +119,11 @@ PD_DEVICE void for_each_partner(int i, const double* position, const double* rad
                     if (id[j] <= idi) {
                         continue;
                     }
+#if PD_GHOSTS
+                    if (ghost_i && ghost[j] != 0u) {
+                        continue;
+                    }
+#endif
                     V3<double> xj = load3(position, (int)j);
                     V3<double> d = displacement(grid, xi, xj);
                     double reach = ri + radius[j] + skin;
@@ -129,29 +142,30 @@ struct CountVisit {
 };
 
 extern "C" __global__ void count_pairs(int n, const double* position, const double* radius, const pd_u64* id,
-                                       const unsigned int* cell_start, GridParams grid, double skin,
-                                       unsigned int* counts) {
+                                       const unsigned int* ghost, const unsigned int* cell_start,
+                                       GridParams grid, double skin, unsigned int* counts) {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) {
         return;
     }
     CountVisit v;
     v.count = 0;
-    for_each_partner(i, position, radius, id, cell_start, grid, skin, [&](int j, V3<double> s) { v(j, s); });
+    for_each_partner(i, position, radius, id, ghost, cell_start, grid, skin, [&](int j, V3<double> s) { v(j, s); });
     counts[i] = v.count;
 }
 
 // Pairs (i, j) at pair_offset[i] ..; shifts (three doubles per pair) only when some axis is
 // periodic (`periodic` = 1).
 extern "C" __global__ void fill_pairs(int n, const double* position, const double* radius, const pd_u64* id,
-                                      const unsigned int* cell_start, GridParams grid, double skin,
-                                      const unsigned int* pair_offset, int2* pairs, double* shift, int periodic) {
+                                      const unsigned int* ghost, const unsigned int* cell_start,
+                                      GridParams grid, double skin, const unsigned int* pair_offset,
+                                      int2* pairs, double* shift, int periodic) {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) {
         return;
     }
     unsigned int k = pair_offset[i];
-    for_each_partner(i, position, radius, id, cell_start, grid, skin, [&](int j, V3<double> s) {
+    for_each_partner(i, position, radius, id, ghost, cell_start, grid, skin, [&](int j, V3<double> s) {
         pairs[k] = make_int2(i, j);
         if (periodic) {
             shift[3 * (size_t)k] = s.x;

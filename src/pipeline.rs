@@ -338,6 +338,34 @@ impl Simulation {
         self.exchange()
     }
 
+    /// Stage 1 of a rebuild step on the host copy of a GPU rank's state: insertion, removal,
+    /// and in a decomposed run balancing, migration and the ghosts chosen afresh (all ranks
+    /// call it in the same step).
+    pub fn rebuild_exchange_on_host(&mut self) -> Result<(), SimulationError> {
+        self.dirty = true;
+        self.exchange()
+    }
+
+    /// [`Simulation::new_parallel`] without the first force evaluation, for a backend that
+    /// evaluates it itself: particles of count insertions placed and, in a decomposed run,
+    /// sent to their owners with the ghosts chosen.
+    pub fn new_parallel_unevaluated(
+        scene: Scene,
+        comm: Arc<dyn Comm>,
+    ) -> Result<Self, SimulationError> {
+        if comm.size() == 1 {
+            return Self::new_unevaluated(scene);
+        }
+        let mut s = scene.clone();
+        s.insertions.clear();
+        let mut sim = Simulation::new_parallel(s, comm)?;
+        sim.scene = scene;
+        sim.inserter = Inserter::new(&sim.scene);
+        sim.dirty = true;
+        sim.exchange()?;
+        Ok(sim)
+    }
+
     /// Stage 1: insert due particles, drop those outside a closed domain, wrap periodic axes;
     /// in a decomposed run also migration and the halo exchange.
     fn exchange(&mut self) -> Result<(), SimulationError> {

@@ -330,20 +330,25 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
     run_on(opts, Arc::new(SerialComm))
 }
 
-/// The backend of a decomposed run: the CPU (GPU ranks are not built yet); an explicit
-/// `--backend cuda` is refused rather than silently run elsewhere.
-fn choose_parallel_backend(choice: BackendChoice, ranks: usize) -> Result<&'static str> {
-    match choice {
-        BackendChoice::Cuda => bail!(
-            "--backend cuda on {ranks} ranks: the decomposed run has only the CPU backend so \
-             far; use --backend cpu (or auto), or run one rank on the GPU"
-        ),
-        BackendChoice::Auto => {
-            tracing::info!("{ranks} ranks: running on the CPU backend");
-            Ok("cpu")
-        }
-        BackendChoice::Cpu => Ok("cpu"),
+/// The backend of a decomposed run and, on the GPU, the device of this rank: its node-local
+/// rank modulo the GPUs it sees (DESIGN.md §6).
+fn choose_parallel_backend(
+    choice: BackendChoice,
+    comm: &dyn Comm,
+) -> Result<(&'static str, usize)> {
+    let name = choose_backend(choice)?;
+    if name == "cpu" {
+        return Ok(("cpu", 0));
     }
+    let gpus = backend::cuda_info().gpus.len().max(1);
+    let local = crate::domain::comm::node_local_rank().unwrap_or(comm.rank());
+    let ordinal = local % gpus;
+    tracing::info!(
+        "{} ranks on the GPU: rank {} on GPU {ordinal} of {gpus}",
+        comm.size(),
+        comm.rank()
+    );
+    Ok(("cuda", ordinal))
 }
 
 /// `polydem run` on the ranks of `comm` (one rank: [`run`]). Rank 0 returns the summary and
@@ -355,10 +360,10 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
     }
     let ranks = comm.size();
     let rank = comm.rank();
-    let backend_name = if ranks > 1 {
-        choose_parallel_backend(opts.backend, ranks)?
+    let (backend_name, ordinal) = if ranks > 1 {
+        choose_parallel_backend(opts.backend, &*comm)?
     } else {
-        choose_backend(opts.backend)?
+        (choose_backend(opts.backend)?, 0)
     };
     let hash = scene_hash(&opts.scene)?;
     let dir = scene.output.dir.clone();
@@ -401,7 +406,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
         }
         None => {
             let sim = if backend_name == "cuda" {
-                Simulation::new_unevaluated(scene)?
+                Simulation::new_parallel_unevaluated(scene, comm.clone())?
             } else {
                 Simulation::new_parallel(scene, comm.clone())?
             };
@@ -409,7 +414,8 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
         }
     };
     let mut engine = if backend_name == "cuda" {
-        let mut c = CudaSimulation::new(sim, 0, opts.precision).map_err(|e| anyhow!("{e}"))?;
+        let mut c =
+            CudaSimulation::new(sim, ordinal, opts.precision).map_err(|e| anyhow!("{e}"))?;
         if !resumed {
             c.evaluate_first_forces().map_err(|e| anyhow!("{e}"))?;
         }
@@ -669,14 +675,17 @@ pub fn bench(opts: &BenchOptions) -> Result<serde_json::Value> {
 pub fn bench_on(opts: &BenchOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Value> {
     let scene = load_scene(&opts.scene).map_err(|e| anyhow!("{e}"))?;
     let ranks = comm.size();
-    let backend_name = if ranks > 1 {
-        choose_parallel_backend(opts.backend, ranks)?
+    let (backend_name, ordinal) = if ranks > 1 {
+        choose_parallel_backend(opts.backend, &*comm)?
     } else {
-        choose_backend(opts.backend)?
+        (choose_backend(opts.backend)?, 0)
     };
     let t_setup = Instant::now();
     let mut engine = if backend_name == "cuda" {
-        let c = CudaSimulation::from_scene(scene, 0, opts.precision).map_err(|e| anyhow!("{e}"))?;
+        let host = Simulation::new_parallel_unevaluated(scene, comm.clone())?;
+        let mut c =
+            CudaSimulation::new(host, ordinal, opts.precision).map_err(|e| anyhow!("{e}"))?;
+        c.evaluate_first_forces().map_err(|e| anyhow!("{e}"))?;
         Engine::Cuda(Box::new(c))
     } else {
         Engine::Cpu(Box::new(Simulation::new_parallel(scene, comm.clone())?))
@@ -686,9 +695,11 @@ pub fn bench_on(opts: &BenchOptions, comm: Arc<dyn Comm>) -> Result<serde_json::
         engine.step()?;
     }
     let timers_before = engine.host().timers;
-    if let Engine::Cpu(sim) = &mut engine
-        && let Some(par) = sim.parallel.as_deref_mut()
-    {
+    let host = match &mut engine {
+        Engine::Cpu(sim) => &mut **sim,
+        Engine::Cuda(c) => &mut c.host,
+    };
+    if let Some(par) = host.parallel.as_deref_mut() {
         // The per-rank decomposition timers of the report cover the timed steps only.
         par.timers = Default::default();
     }

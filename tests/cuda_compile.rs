@@ -18,11 +18,14 @@ fn configs() -> Vec<KernelConfig> {
         max_vertices: 20,
         max_faces: 12,
         materials: 2,
+        ghosts: false,
     };
     vec![
         base.clone(),
+        // A rank of a decomposed run (ghost flags in the pair search).
         KernelConfig {
             precision: Precision::Mixed,
+            ghosts: true,
             ..base.clone()
         },
         KernelConfig {
@@ -33,6 +36,7 @@ fn configs() -> Vec<KernelConfig> {
             max_vertices: 42,
             max_faces: 22,
             materials: 1,
+            ghosts: true,
             ..base.clone()
         },
         KernelConfig {

@@ -26,11 +26,18 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("integrate.cu", include_str!("../../../cuda/integrate.cu")),
     ("neighbor.cu", include_str!("../../../cuda/neighbor.cu")),
     ("contact.cu", include_str!("../../../cuda/contact.cu")),
+    ("halo.cu", include_str!("../../../cuda/halo.cu")),
     ("probe.cu", include_str!("../../../cuda/probe.cu")),
 ];
 
 /// The kernel files (translation units) of the step, in stage order.
-pub const KERNEL_FILES: &[&str] = &["scan.cu", "integrate.cu", "neighbor.cu", "contact.cu"];
+pub const KERNEL_FILES: &[&str] = &[
+    "scan.cu",
+    "integrate.cu",
+    "neighbor.cu",
+    "contact.cu",
+    "halo.cu",
+];
 
 /// Arithmetic of the pair geometry on the GPU (issue: precision modes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
@@ -61,6 +68,9 @@ pub struct KernelConfig {
     pub max_faces: usize,
     /// Number of materials (contact-parameter tables).
     pub materials: usize,
+    /// A rank of a decomposed run: some particles are ghosts, and pairs of two ghosts are left
+    /// out of the pair list.
+    pub ghosts: bool,
 }
 
 impl KernelConfig {
@@ -86,6 +96,7 @@ impl KernelConfig {
                 .max()
                 .unwrap_or(1),
             materials: scene.materials.len().max(1),
+            ghosts: false,
         }
     }
 
@@ -105,6 +116,7 @@ impl KernelConfig {
             format!("-DPD_MAX_TEMPLATE_VERTICES={}", self.max_vertices),
             format!("-DPD_MAX_TEMPLATE_FACES={}", self.max_faces),
             format!("-DPD_MATERIALS={}", self.materials),
+            format!("-DPD_GHOSTS={}", flag(self.ghosts)),
         ];
         d.extend(layout::size_defines());
         d

@@ -2,6 +2,7 @@
 //! NVRTC ([`kernels`]); the structs they share with Rust are in [`layout`].
 
 mod contacts;
+mod halo;
 pub mod kernels;
 pub mod layout;
 mod pairs;

@@ -181,6 +181,7 @@ impl CudaSimulation {
                 .arg(&self.p.position)
                 .arg(&self.p.radius)
                 .arg(&self.p.id)
+                .arg(&self.p.ghost)
                 .arg(&cell_start)
                 .arg(&g)
                 .arg(&skin)
@@ -198,6 +199,7 @@ impl CudaSimulation {
                 .arg(&self.p.position)
                 .arg(&self.p.radius)
                 .arg(&self.p.id)
+                .arg(&self.p.ghost)
                 .arg(&cell_start)
                 .arg(&g)
                 .arg(&skin)
@@ -267,6 +269,9 @@ impl CudaSimulation {
         });
         self.reference = st.clone_dtod(&self.p.position)?;
         self.rebuild = false;
+        if self.host.parallel.is_some() {
+            self.setup_halo(&order)?;
+        }
         Ok(())
     }
 
@@ -313,7 +318,7 @@ impl CudaSimulation {
             gather(&mut w.spring_in, width)?;
         }
         let g32 = self.k.get("gather_u32").clone();
-        for buf in [&mut p.tmpl, &mut p.material, &mut p.kind] {
+        for buf in [&mut p.tmpl, &mut p.material, &mut p.kind, &mut p.ghost] {
             let mut dst = zeros::<u32>(&st, n)?;
             // SAFETY: `gather_u32(n, src, dst, order)`.
             unsafe {

@@ -148,6 +148,7 @@ impl GeometryProbe {
             max_vertices,
             max_faces,
             materials: 1,
+            ghosts: false,
         };
         let ptx = compile(PROBE_FILE, &config, (major * 10 + minor) as u32)
             .map_err(CudaError::Compile)?;

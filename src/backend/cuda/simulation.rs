@@ -30,6 +30,8 @@ pub enum CudaError {
     Compile(String),
     #[error(transparent)]
     Simulation(#[from] SimulationError),
+    #[error("{0}")]
+    Halo(String),
 }
 
 /// Launch configuration for `n` threads. Small launches get smaller blocks, so that they still
@@ -145,6 +147,8 @@ pub(super) struct DeviceParticles {
     pub(super) force: CudaSlice<f64>,
     pub(super) torque: CudaSlice<f64>,
     pub(super) inertia: CudaSlice<f64>,
+    /// 1 for a ghost (a neighbour rank's particle), 0 for an owned one.
+    pub(super) ghost: CudaSlice<u32>,
 }
 
 /// The pair list and everything indexed by pair.
@@ -214,6 +218,8 @@ pub struct CudaSimulation {
     pub(super) pending_history: Option<HistorySource>,
     pub(super) host_current: bool,
     pub(super) rebuild: bool,
+    /// A decomposed run's device halo ([`super::halo`]).
+    pub(super) halo: Option<super::halo::DeviceHalo>,
 }
 
 impl CudaSimulation {
@@ -224,7 +230,8 @@ impl CudaSimulation {
         let stream = ctx.default_stream();
         let (major, minor) = ctx.compute_capability()?;
         let arch = (major * 10 + minor) as u32;
-        let config = KernelConfig::for_scene(&host.scene, precision);
+        let mut config = KernelConfig::for_scene(&host.scene, precision);
+        config.ghosts = host.parallel.is_some();
         let mut modules = Vec::new();
         let mut f = HashMap::new();
         let mut contact = None;
@@ -262,6 +269,7 @@ impl CudaSimulation {
                     "reduce_forces",
                 ],
             ),
+            ("halo.cu", &["pack_motion", "unpack_motion"]),
         ];
         for (file, kernels) in names {
             let ptx = compile(file, &config, arch).map_err(CudaError::Compile)?;
@@ -307,7 +315,13 @@ impl CudaSimulation {
         };
         let skin = s.simulation.neighbor.skin;
         let cutoff = 2.0 * s.max_bounding_radius() + skin;
-        let grid = GridParams::new(&bounds, cutoff, 4 * host.particles.len().max(1));
+        // A rank of a decomposed run bins on the whole domain's grid (ghosts keep their true
+        // centroids), sized for the whole run's particles.
+        let particles = match host.parallel.as_deref() {
+            Some(par) => par.comm.sum_u64(&[host.particles.len() as u64])[0] as usize,
+            None => host.particles.len(),
+        };
+        let grid = GridParams::new(&bounds, cutoff, 4 * particles.max(1));
         let empty_p = DeviceParticles::empty(&stream)?;
         let mut sim = CudaSimulation {
             device,
@@ -328,6 +342,7 @@ impl CudaSimulation {
             pending_history: None,
             host_current: true,
             rebuild: true,
+            halo: None,
             stream,
             host,
         };
@@ -380,6 +395,7 @@ impl CudaSimulation {
             + b(&p.force)
             + b(&p.torque)
             + b(&p.inertia)
+            + b(&p.ghost)
             + b(&self.reference);
         if let Some(q) = &self.pairs {
             total += b(&q.offset)
@@ -435,6 +451,7 @@ impl DeviceParticles {
             force: st.alloc_zeros(1)?,
             torque: st.alloc_zeros(1)?,
             inertia: st.alloc_zeros(1)?,
+            ghost: st.alloc_zeros(1)?,
         })
     }
 }
@@ -514,6 +531,8 @@ impl CudaSimulation {
                     .launch(cfg(self.n))?;
             }
         }
+        // A decomposed run refreshes its ghosts first, so the checks below see true positions.
+        self.refresh_halo()?;
         let mut flags = [0u32, 0, 0, u32::MAX];
         self.stream.memcpy_htod(&flags, &mut self.flags)?;
         if self.n > 0 && self.pairs.is_some() {
@@ -543,15 +562,31 @@ impl CudaSimulation {
             }
             .into());
         }
-        if flags[1] > 0 || self.host.inserter_pending() {
-            // Insertion or removal: the host does it on a synced copy, then everything goes
-            // back up (with the history) and the list is rebuilt.
-            self.sync_host()?;
-            self.host.exchange_on_host()?;
-            self.upload_from_host()?;
-        }
-        if flags[0] != 0 {
-            self.rebuild = true;
+        let pending = self.host.inserter_pending();
+        if let Some(par) = self.host.parallel.as_deref_mut() {
+            // All ranks rebuild together: when some rank inserts, removes or has a particle
+            // that moved half the skin. The rebuild is a round trip through the host, where
+            // migration, balancing and the choice of ghosts run as on the CPU backend.
+            let local = flags[0] != 0 || flags[1] > 0 || self.rebuild;
+            let t_wait = Instant::now();
+            let rebuild = par.comm.any(local) || pending;
+            par.timers.wait += t_wait.elapsed().as_secs_f64();
+            if rebuild {
+                self.sync_host()?;
+                self.host.rebuild_exchange_on_host()?;
+                self.upload_from_host()?;
+            }
+        } else {
+            if flags[1] > 0 || self.host.inserter_pending() {
+                // Insertion or removal: the host does it on a synced copy, then everything
+                // goes back up (with the history) and the list is rebuilt.
+                self.sync_host()?;
+                self.host.exchange_on_host()?;
+                self.upload_from_host()?;
+            }
+            if flags[0] != 0 {
+                self.rebuild = true;
+            }
         }
         self.host.timers.exchange += t0.elapsed().as_secs_f64();
         self.forces(dt)?;

@@ -53,6 +53,17 @@ impl CudaSimulation {
             .collect();
         // History and statistics from the last evaluation (springs are in `spring_in` after
         // the swap at its end).
+        // A rank of a decomposed run holds ghosts too: they are left out of the host copy, and
+        // a pair counts in the statistics where its lower-id member (the first) is owned.
+        let ghost: Vec<bool> = if self.host.parallel.is_some() {
+            st.clone_dtoh(&self.p.ghost)?
+                .iter()
+                .take(n)
+                .map(|&g| g != 0)
+                .collect()
+        } else {
+            vec![false; n]
+        };
         let mut entries = Vec::new();
         let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
         if let Some(pairs) = &self.pairs {
@@ -61,10 +72,13 @@ impl CudaSimulation {
             let spring = get(&pairs.spring_in)?;
             let e = get(&pairs.energy)?;
             for k in 0..pairs.n {
-                energy += e[k];
+                let (a, b) = (pr[2 * k] as usize, pr[2 * k + 1] as usize);
+                let counted = !ghost[a];
+                if counted {
+                    energy += e[k];
+                }
                 if contact[k] != 0 {
-                    contacts += 1;
-                    let (a, b) = (pr[2 * k] as usize, pr[2 * k + 1] as usize);
+                    contacts += u64::from(counted);
                     entries.push((
                         ContactKey::particles(p.id[a], p.id[b]),
                         ContactState {
@@ -85,6 +99,9 @@ impl CudaSimulation {
             let e = get(&w.energy)?;
             let f = get(&w.per_wall_force)?;
             for (i, ei) in e.iter().enumerate().take(n) {
+                if ghost[i] {
+                    continue;
+                }
                 energy += ei;
                 for (k, wf) in wall_forces.iter_mut().enumerate() {
                     let s = i * w.n + k;
@@ -104,6 +121,25 @@ impl CudaSimulation {
                     }
                 }
             }
+        }
+        if ghost.iter().any(|&g| g) {
+            let keep: Vec<usize> = (0..n).filter(|&i| !ghost[i]).collect();
+            macro_rules! keep {
+                ($($f:ident),*) => {$( p.$f = keep.iter().map(|&i| p.$f[i]).collect(); )*};
+            }
+            keep!(
+                id,
+                kind,
+                scale,
+                position,
+                velocity,
+                orientation,
+                angular_velocity,
+                force,
+                torque,
+                mass,
+                inertia
+            );
         }
         self.host.history = ContactHistory::from_entries(entries);
         self.host.stats.contacts = contacts;
@@ -176,7 +212,9 @@ impl CudaSimulation {
     /// Particle–particle and particle–wall contacts of the last force evaluation, from the
     /// contact flags alone (the rest of the state stays on the device).
     pub fn contact_counts(&mut self) -> Result<(u64, u64), CudaError> {
-        if self.host_current {
+        if self.host_current || self.host.parallel.is_some() {
+            // A decomposed run's flags include the ghosts: count from the synced copy.
+            self.sync_host()?;
             return Ok((self.host.stats.contacts, self.host.stats.wall_contacts));
         }
         let st = &self.stream;

@@ -130,10 +130,24 @@ impl CudaSimulation {
     pub(super) fn upload_from_host(&mut self) -> Result<(), CudaError> {
         let st = self.stream.clone();
         let h = &self.host;
-        let p = &h.particles;
+        // A rank of a decomposed run uploads its ghosts after its owned particles.
+        let combined;
+        let (p, owned) = match h.parallel.as_deref() {
+            Some(par) => {
+                let mut c = h.particles.clone();
+                c.extend_from(&par.ghosts.particles);
+                combined = c;
+                (&combined, h.particles.len())
+            }
+            None => (&h.particles, h.particles.len()),
+        };
         let s = &h.scene;
         let n = p.len();
         self.n = n;
+        let mut ghost: Vec<u32> = (0..n).map(|i| u32::from(i >= owned)).collect();
+        if ghost.is_empty() {
+            ghost.push(0);
+        }
         let (flat, quats) = (flat3, flat_quats);
         let mut tmpl = Vec::with_capacity(n);
         let mut material = Vec::with_capacity(n);
@@ -182,6 +196,7 @@ impl CudaSimulation {
             force: st.clone_htod(&pad(flat(&p.force)))?,
             torque: st.clone_htod(&pad(flat(&p.torque)))?,
             inertia: st.clone_htod(&pad(flat(&p.inertia)))?,
+            ghost: st.clone_htod(&ghost)?,
         };
         // History, as a CSR over the uploaded order, for the coming list build.
         let index: HashMap<u64, usize> = p.id.iter().enumerate().map(|(i, &g)| (g, i)).collect();
@@ -230,6 +245,7 @@ impl CudaSimulation {
             w.contact = st.alloc_zeros::<u32>(nw)?;
         }
         self.pairs = None;
+        self.halo = None;
         self.rebuild = true;
         self.host_current = true;
         Ok(())

@@ -1,0 +1,176 @@
+//! A decomposed run's rank on the GPU (DESIGN.md §6): the GPU twin of [`crate::domain::halo`].
+//!
+//! The rank's owned particles and its ghosts share the device arrays (a `ghost` flag per slot,
+//! carried through the list build's reordering); pairs of two ghosts are not listed. Each step
+//! the motion of the outer-region particles the neighbours need is packed on the device
+//! (`cuda/halo.cu: pack_motion`), copied to a pinned host buffer, sent with MPI, and the
+//! received motion goes up through a second pinned buffer into the ghost slots
+//! (`unpack_motion`): only the halo crosses the bus. At neighbour-list rebuilds (decided by all
+//! ranks together) the state makes one round trip through the host, where migration, load
+//! balancing and the choice of ghosts run as on the CPU backend ([`Simulation`]'s exchange),
+//! and the ghosts go up after the owned particles.
+//!
+//! [`Simulation`]: crate::pipeline::Simulation
+
+use super::simulation::{CudaError, CudaSimulation, cfg, zeros};
+use crate::domain::pack;
+use cudarc::driver::{CudaSlice, PinnedHostSlice, PushKernelArg};
+use std::time::Instant;
+
+/// Doubles of one motion record (`cuda/halo.cu: PD_MOTION_DOUBLES`).
+const MOTION: usize = 13;
+
+/// The halo's device-side index lists and staging buffers, valid from one rebuild to the next.
+pub(super) struct DeviceHalo {
+    /// Device slots of the owned particles sent: neighbour by neighbour in the plan's order,
+    /// then this rank's own periodic images.
+    send_slots: CudaSlice<u32>,
+    /// Records sent to each neighbour (plan order), then the self-image count.
+    send_counts: Vec<usize>,
+    /// Device slots of the ghosts, in the order their records arrive.
+    ghost_slots: CudaSlice<u32>,
+    n_ghosts: usize,
+    send_device: CudaSlice<f64>,
+    recv_device: CudaSlice<f64>,
+    send_host: PinnedHostSlice<f64>,
+    recv_host: PinnedHostSlice<f64>,
+}
+
+impl CudaSimulation {
+    /// After a list build of a decomposed run: the device slots of the plan's particles and of
+    /// the ghosts, from the build's reordering (`order[k]` = upload index now at slot `k`),
+    /// and staging buffers sized for them.
+    pub(super) fn setup_halo(&mut self, order: &CudaSlice<u32>) -> Result<(), CudaError> {
+        let Some(par) = self.host.parallel.as_deref() else {
+            return Ok(());
+        };
+        let st = self.stream.clone();
+        let order = st.clone_dtoh(order)?;
+        let mut slot = vec![0u32; self.n];
+        for (k, &o) in order.iter().take(self.n).enumerate() {
+            slot[o as usize] = k as u32;
+        }
+        let owned = self.n - par.ghosts.particles.len();
+        let plan = &par.plan;
+        let mut sends: Vec<u32> = Vec::with_capacity(plan.sent() + plan.self_images.len());
+        let mut send_counts = Vec::with_capacity(plan.sends.len() + 1);
+        for list in plan.sends.iter().chain(std::iter::once(&plan.self_images)) {
+            sends.extend(list.iter().map(|(i, _)| slot[*i as usize]));
+            send_counts.push(list.len());
+        }
+        let n_ghosts = self.n - owned;
+        let ghosts: Vec<u32> = (owned..self.n).map(|g| slot[g]).collect();
+        let pad = |mut v: Vec<u32>| {
+            if v.is_empty() {
+                v.push(0);
+            }
+            v
+        };
+        let ctx = st.context().clone();
+        let n_send = sends.len();
+        // SAFETY: pinned buffers of plain f64, written by the copies below before being read.
+        let (send_host, recv_host) = unsafe {
+            (
+                ctx.alloc_pinned::<f64>((MOTION * n_send).max(1))?,
+                ctx.alloc_pinned::<f64>((MOTION * n_ghosts).max(1))?,
+            )
+        };
+        self.halo = Some(DeviceHalo {
+            send_slots: st.clone_htod(&pad(sends))?,
+            send_counts,
+            ghost_slots: st.clone_htod(&pad(ghosts))?,
+            n_ghosts,
+            send_device: zeros::<f64>(&st, MOTION * n_send)?,
+            recv_device: zeros::<f64>(&st, MOTION * n_ghosts)?,
+            send_host,
+            recv_host,
+        });
+        Ok(())
+    }
+
+    /// Stage 1 between rebuilds: the neighbours' ghosts get this rank's outer-region motion
+    /// and this rank's ghosts theirs (pack on the device, pinned copies, MPI, unpack).
+    pub(super) fn refresh_halo(&mut self) -> Result<(), CudaError> {
+        let Some(h) = self.halo.as_mut() else {
+            return Ok(());
+        };
+        let Some(par) = self.host.parallel.as_deref_mut() else {
+            return Ok(());
+        };
+        let t0 = Instant::now();
+        let st = &self.stream;
+        let n_send: usize = h.send_counts.iter().sum();
+        let nsi = n_send as i32;
+        let p = &mut self.p;
+        if n_send > 0 {
+            // SAFETY: `pack_motion(count, slots, position, velocity, orientation, ω, out)`;
+            // the slots are below n and `out` holds 13 doubles per slot.
+            unsafe {
+                st.launch_builder(self.k.get("pack_motion"))
+                    .arg(&nsi)
+                    .arg(&h.send_slots)
+                    .arg(&p.position)
+                    .arg(&p.velocity)
+                    .arg(&p.orientation)
+                    .arg(&p.angular_velocity)
+                    .arg(&mut h.send_device)
+                    .launch(cfg(n_send))?;
+            }
+            st.memcpy_dtoh(&h.send_device, &mut h.send_host)?;
+        }
+        st.synchronize()?;
+        let staged = h.send_host.as_slice()?;
+        let mut at = 0;
+        let mut sends = Vec::with_capacity(par.plan.neighbours.len());
+        for (&r, &c) in par.plan.neighbours.iter().zip(&h.send_counts) {
+            sends.push((r, pack::f64s(&staged[MOTION * at..MOTION * (at + c)])));
+            at += c;
+        }
+        let own_images = &staged[MOTION * at..MOTION * n_send];
+        let received = par.comm.neighbor_exchange(&sends, &par.plan.neighbours);
+        let incoming = h.recv_host.as_mut_slice()?;
+        let mut k = 0;
+        for buf in &received {
+            for v in pack::read_f64s(buf) {
+                if k >= incoming.len() {
+                    break;
+                }
+                incoming[k] = v;
+                k += 1;
+            }
+        }
+        for &v in own_images {
+            if k < incoming.len() {
+                incoming[k] = v;
+            }
+            k += 1;
+        }
+        if k != MOTION * h.n_ghosts {
+            return Err(CudaError::Compile(format!(
+                "halo refresh on rank {}: {} motion values for {} ghosts (the neighbours' plans \
+                 changed between rebuilds)",
+                par.rank(),
+                k,
+                h.n_ghosts
+            )));
+        }
+        if h.n_ghosts > 0 {
+            st.memcpy_htod(&h.recv_host, &mut h.recv_device)?;
+            let ngi = h.n_ghosts as i32;
+            // SAFETY: `unpack_motion(count, slots, in, position, velocity, orientation, ω)`.
+            unsafe {
+                st.launch_builder(self.k.get("unpack_motion"))
+                    .arg(&ngi)
+                    .arg(&h.ghost_slots)
+                    .arg(&h.recv_device)
+                    .arg(&mut p.position)
+                    .arg(&mut p.velocity)
+                    .arg(&mut p.orientation)
+                    .arg(&mut p.angular_velocity)
+                    .launch(cfg(h.n_ghosts))?;
+            }
+        }
+        par.timers.halo += t0.elapsed().as_secs_f64();
+        Ok(())
+    }
+}
