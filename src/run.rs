@@ -217,8 +217,8 @@ fn whole_run(comm: &dyn Comm, sim: &Simulation) -> GlobalStats {
     }
 }
 
-/// The checkpoint of the current state; in a decomposed run the whole run's state gathered on
-/// rank 0 (`None` on the other ranks), in the single-rank layout: particles by global id.
+/// The checkpoint of the current state, particles by global id whatever the backend's order;
+/// in a decomposed run the whole run's state gathered on rank 0 (`None` on the other ranks).
 fn checkpoint_of(comm: &dyn Comm, sim: &Simulation, hash: u64) -> Result<Option<Checkpoint>> {
     let inserter = serde_json::to_vec(&sim.inserter.state())?;
     let (particles, history, removed) = if comm.size() > 1 {
@@ -228,8 +228,9 @@ fn checkpoint_of(comm: &dyn Comm, sim: &Simulation, hash: u64) -> Result<Option<
             None => return Ok(None),
         }
     } else {
+        // By global id, as gathered from many ranks: the GPU keeps its own (cell) order.
         (
-            sim.particles.clone(),
+            crate::domain::collect::sorted_by_id(&sim.particles),
             sim.history.clone(),
             sim.stats.removed,
         )

@@ -86,12 +86,18 @@ fn same_checkpoint(a: &Path, b: &Path, name: &str, what: &str) {
     let (x, y) = (std::fs::read(&pa).unwrap(), std::fs::read(&pb).unwrap());
     if x != y {
         let (ca, cb) = (read_checkpoint(&pa).unwrap(), read_checkpoint(&pb).unwrap());
-        let worst = ca
+        let at: std::collections::HashMap<u64, usize> = cb
             .particles
-            .position
+            .id
             .iter()
-            .zip(&cb.particles.position)
-            .map(|(p, q)| (p - q).norm())
+            .enumerate()
+            .map(|(i, &g)| (g, i))
+            .collect();
+        let worst = (0..ca.particles.len())
+            .filter_map(|i| {
+                let j = *at.get(&ca.particles.id[i])?;
+                Some((ca.particles.position[i] - cb.particles.position[j]).norm())
+            })
             .fold(0.0, f64::max);
         panic!(
             "{what}: {name} differs from the single-rank run ({} vs {} particles, {} vs {} \

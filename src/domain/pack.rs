@@ -81,11 +81,14 @@ impl<'a> Reader<'a> {
     }
 }
 
-/// `x` as bytes.
+/// `x` as bytes (one pass into a buffer of the final size: the GPU halo stages megabytes
+/// through it each step).
 pub fn f64s(x: &[f64]) -> Vec<u8> {
-    let mut w = Writer::default();
-    x.iter().for_each(|&v| w.f64(v));
-    w.buf
+    let mut out = vec![0u8; 8 * x.len()];
+    for (c, v) in out.chunks_exact_mut(8).zip(x) {
+        c.copy_from_slice(&v.to_bits().to_le_bytes());
+    }
+    out
 }
 
 /// The floats of [`f64s`].

@@ -141,11 +141,15 @@ impl CudaSimulation {
                 inertia
             );
         }
-        self.host.history = ContactHistory::from_entries(entries);
-        self.host.stats.contacts = contacts;
-        self.host.stats.wall_contacts = wall_contacts;
-        self.host.stats.elastic_energy = energy;
-        self.host.wall_forces = wall_forces;
+        // Until the first evaluation after an upload (a restart, an insertion) the device has
+        // no contact outputs: the history and statistics are still the uploaded host ones.
+        if self.pairs.is_some() {
+            self.host.history = ContactHistory::from_entries(entries);
+            self.host.stats.contacts = contacts;
+            self.host.stats.wall_contacts = wall_contacts;
+            self.host.stats.elastic_energy = energy;
+            self.host.wall_forces = wall_forces;
+        }
         self.host_current = true;
         Ok(&self.host)
     }
