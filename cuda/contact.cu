@@ -76,11 +76,13 @@ PD_DEVICE void report_error(unsigned int* error, int status, unsigned int where)
 }
 
 // Stages 3–7 for the pairs of the list (Simulation::pair_contacts).
-extern "C" __global__ void pair_contacts(int n_pairs, const int2* pairs, const double* shift, double* axes,
-                                         ParticleView p, const PairMaterial* materials, int n_materials,
-                                         const double* spring_in, double* spring_out, PairOutputs out, double dt,
-                                         unsigned int* error) {
-    int kk = blockIdx.x * blockDim.x + threadIdx.x;
+// Pairs first .. n_pairs - 1 (a decomposed run evaluates the pairs of two owned particles while
+// the halo is in flight, then the rest).
+extern "C" __global__ void pair_contacts(int first, int n_pairs, const int2* pairs, const double* shift,
+                                         double* axes, ParticleView p, const PairMaterial* materials,
+                                         int n_materials, const double* spring_in, double* spring_out,
+                                         PairOutputs out, double dt, unsigned int* error) {
+    int kk = first + (int)(blockIdx.x * blockDim.x + threadIdx.x);
     if (kk >= n_pairs) {
         return;
     }

@@ -21,12 +21,25 @@ PD_DEVICE Quat<double> quat_mul(Quat<double> a, Quat<double> b) {
     return r;
 }
 
+// Whether slot i holds a ghost of a decomposed run (PD_GHOSTS): ghosts are not integrated, their
+// owners' motion arrives through the halo each step.
+PD_DEVICE bool is_ghost(const unsigned int* ghost, int i) {
+#if PD_GHOSTS
+    return ghost[i] != 0u;
+#else
+    (void)ghost;
+    (void)i;
+    return false;
+#endif
+}
+
 // Half kick: v += (F/m + g) dt/2; π += Rᵀτ dt/2 with ω recomputed (integrate::half_kick).
-extern "C" __global__ void half_kick(int n, double* velocity, double* angular_velocity, const double* force,
-                                     const double* torque, const double* mass, const double* inertia,
-                                     const double* orientation, double gx, double gy, double gz, double dt) {
+extern "C" __global__ void half_kick(int n, const unsigned int* ghost, double* velocity, double* angular_velocity,
+                                     const double* force, const double* torque, const double* mass,
+                                     const double* inertia, const double* orientation, double gx, double gy,
+                                     double gz, double dt) {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
-    if (i >= n) {
+    if (i >= n || is_ghost(ghost, i)) {
         return;
     }
     double h = 0.5 * dt;
@@ -45,10 +58,10 @@ extern "C" __global__ void half_kick(int n, double* velocity, double* angular_ve
 
 // Drift: x += v dt and the free rotation by the symmetric splitting 1(dt/2) 2(dt/2) 3(dt)
 // 2(dt/2) 1(dt/2) (integrate::drift, integrate::free_rotation).
-extern "C" __global__ void drift(int n, double* position, const double* velocity, double* orientation,
-                                 double* angular_velocity, const double* inertia, double dt) {
+extern "C" __global__ void drift(int n, const unsigned int* ghost, double* position, const double* velocity,
+                                 double* orientation, double* angular_velocity, const double* inertia, double dt) {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
-    if (i >= n) {
+    if (i >= n || is_ghost(ghost, i)) {
         return;
     }
     store3(position, i, load3(position, i) + load3(velocity, i) * dt);

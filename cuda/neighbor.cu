@@ -90,10 +90,12 @@ extern "C" __global__ void gather_u32(int n, const unsigned int* src, unsigned i
 // shift to add to x_j.
 //
 // In a decomposed run (PD_GHOSTS) `ghost[i]` marks the neighbours' particles held as ghosts;
-// pairs of two ghosts are skipped (their owners evaluate them). Otherwise `ghost` is not read.
+// pairs of two ghosts are skipped (their owners evaluate them), and `part` selects the pairs of
+// two owned particles (1), which need nothing from the halo, or those with a ghost (2), which
+// wait for it; 0 takes both. Otherwise `ghost` and `part` are not read.
 template <class Visit>
 PD_DEVICE void for_each_partner(int i, const double* position, const double* radius, const pd_u64* id,
-                                const unsigned int* ghost, const unsigned int* cell_start,
+                                const unsigned int* ghost, int part, const unsigned int* cell_start,
                                 const GridParams& grid, double skin, Visit visit) {
     V3<double> xi = load3(position, i);
     double ri = radius[i];
@@ -102,6 +104,7 @@ PD_DEVICE void for_each_partner(int i, const double* position, const double* rad
     bool ghost_i = ghost[i] != 0u;
 #else
     (void)ghost;
+    (void)part;
 #endif
     int cell = cell_of(grid, xi);
     int a = cell % grid.dims[0];
@@ -120,7 +123,9 @@ PD_DEVICE void for_each_partner(int i, const double* position, const double* rad
                         continue;
                     }
 #if PD_GHOSTS
-                    if (ghost_i && ghost[j] != 0u) {
+                    bool ghost_j = ghost[j] != 0u;
+                    if ((ghost_i && ghost_j) || (part == 1 && (ghost_i || ghost_j)) ||
+                        (part == 2 && !ghost_i && !ghost_j)) {
                         continue;
                     }
 #endif
@@ -142,7 +147,7 @@ struct CountVisit {
 };
 
 extern "C" __global__ void count_pairs(int n, const double* position, const double* radius, const pd_u64* id,
-                                       const unsigned int* ghost, const unsigned int* cell_start,
+                                       const unsigned int* ghost, int part, const unsigned int* cell_start,
                                        GridParams grid, double skin, unsigned int* counts) {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) {
@@ -150,14 +155,15 @@ extern "C" __global__ void count_pairs(int n, const double* position, const doub
     }
     CountVisit v;
     v.count = 0;
-    for_each_partner(i, position, radius, id, ghost, cell_start, grid, skin, [&](int j, V3<double> s) { v(j, s); });
+    for_each_partner(i, position, radius, id, ghost, part, cell_start, grid, skin,
+                     [&](int j, V3<double> s) { v(j, s); });
     counts[i] = v.count;
 }
 
 // Pairs (i, j) at pair_offset[i] ..; shifts (three doubles per pair) only when some axis is
 // periodic (`periodic` = 1).
 extern "C" __global__ void fill_pairs(int n, const double* position, const double* radius, const pd_u64* id,
-                                      const unsigned int* ghost, const unsigned int* cell_start,
+                                      const unsigned int* ghost, int part, const unsigned int* cell_start,
                                       GridParams grid, double skin, const unsigned int* pair_offset,
                                       int2* pairs, double* shift, int periodic) {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
@@ -165,7 +171,7 @@ extern "C" __global__ void fill_pairs(int n, const double* position, const doubl
         return;
     }
     unsigned int k = pair_offset[i];
-    for_each_partner(i, position, radius, id, ghost, cell_start, grid, skin, [&](int j, V3<double> s) {
+    for_each_partner(i, position, radius, id, ghost, part, cell_start, grid, skin, [&](int j, V3<double> s) {
         pairs[k] = make_int2(i, j);
         if (periodic) {
             shift[3 * (size_t)k] = s.x;

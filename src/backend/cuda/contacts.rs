@@ -1,7 +1,9 @@
 //! Stages 3–8 on the GPU, host side: the pair contacts, the wall contacts with the walls'
 //! poses at the current time, and the deterministic reduction (kernels in `cuda/contact.cu`).
 
-use super::simulation::{CudaError, CudaSimulation, PairOutputs, WallState, cfg, ptr, zeros};
+use super::simulation::{
+    CudaError, CudaSimulation, PairOutputs, ParticleView, WallState, cfg, ptr, zeros,
+};
 use crate::pipeline::SimulationError;
 use crate::scene::WallMotion;
 use cudarc::driver::{CudaSlice, PushKernelArg};
@@ -10,6 +12,50 @@ use std::time::Instant;
 
 impl CudaSimulation {
     /// Stages 2–8 on the device at the current state, advancing the springs by `dt`.
+    /// Stages 3–7 for the pairs `first..last` of the list.
+    fn launch_pair_contacts(
+        &mut self,
+        first: usize,
+        last: usize,
+        view: &ParticleView,
+        n_mat: i32,
+        dt: f64,
+    ) -> Result<(), CudaError> {
+        if last <= first {
+            return Ok(());
+        }
+        let st = self.stream.clone();
+        let pairs = self.pairs.as_mut().expect("built");
+        let outputs = PairOutputs {
+            ptrs: [
+                ptr(&pairs.forces, &st),
+                ptr(&pairs.energy, &st),
+                ptr(&pairs.contact, &st),
+            ],
+        };
+        let (fi, li) = (first as i32, last as i32);
+        // SAFETY: the argument list matches `pair_contacts` of cuda/contact.cu; the pointer
+        // structs point into buffers alive for the whole call.
+        unsafe {
+            st.launch_builder(self.k.get("pair_contacts"))
+                .arg(&fi)
+                .arg(&li)
+                .arg(&pairs.pairs)
+                .arg(&pairs.shift)
+                .arg(&mut pairs.axes)
+                .arg(view)
+                .arg(&self.materials)
+                .arg(&n_mat)
+                .arg(&pairs.spring_in)
+                .arg(&mut pairs.spring_out)
+                .arg(&outputs)
+                .arg(&dt)
+                .arg(&mut self.error)
+                .launch(cfg(last - first))?;
+        }
+        Ok(())
+    }
+
     pub(super) fn forces(&mut self, dt: f64) -> Result<(), CudaError> {
         let t0 = Instant::now();
         if self.rebuild || self.pairs.is_none() {
@@ -23,33 +69,20 @@ impl CudaSimulation {
         let n = self.n;
         let ni = n as i32;
         let n_mat = self.host.scene.materials.len() as i32;
-        let pairs = self.pairs.as_mut().expect("built above");
-        let np = pairs.n;
-        let npi = np as i32;
-        let outputs = PairOutputs {
-            ptrs: [
-                ptr(&pairs.forces, &st),
-                ptr(&pairs.energy, &st),
-                ptr(&pairs.contact, &st),
-            ],
+        // A decomposed run between rebuilds: the ghosts' motion is in flight while the pairs of
+        // two owned particles are evaluated; the pairs with a ghost follow its arrival.
+        let overlap = std::mem::take(&mut self.halo_due);
+        let (np, n_interior) = {
+            let q = self.pairs.as_ref().expect("built above");
+            (q.n, if overlap { q.n_interior } else { q.n })
         };
-        // SAFETY (all launches): argument lists match the kernels of cuda/contact.cu; the
-        // pointer structs point into buffers alive for the whole call.
-        unsafe {
-            st.launch_builder(self.k.get("pair_contacts"))
-                .arg(&npi)
-                .arg(&pairs.pairs)
-                .arg(&pairs.shift)
-                .arg(&mut pairs.axes)
-                .arg(&view)
-                .arg(&self.materials)
-                .arg(&n_mat)
-                .arg(&pairs.spring_in)
-                .arg(&mut pairs.spring_out)
-                .arg(&outputs)
-                .arg(&dt)
-                .arg(&mut self.error)
-                .launch(cfg(np))?;
+        if overlap {
+            self.start_halo()?;
+        }
+        self.launch_pair_contacts(0, n_interior, &view, n_mat, dt)?;
+        if overlap {
+            self.finish_halo()?;
+            self.launch_pair_contacts(n_interior, np, &view, n_mat, dt)?;
         }
         // Kernels run asynchronously: wait for the stage so that its timer measures it (a few
         // microseconds per stage, negligible against the step).

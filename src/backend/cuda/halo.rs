@@ -1,11 +1,13 @@
 //! A decomposed run's rank on the GPU (DESIGN.md §6): the GPU twin of [`crate::domain::halo`].
 //!
 //! The rank's owned particles and its ghosts share the device arrays (a `ghost` flag per slot,
-//! carried through the list build's reordering); pairs of two ghosts are not listed. Each step
-//! the motion of the outer-region particles the neighbours need is packed on the device
-//! (`cuda/halo.cu: pack_motion`), copied to a pinned host buffer, sent with MPI, and the
-//! received motion goes up through a second pinned buffer into the ghost slots
-//! (`unpack_motion`): only the halo crosses the bus. At neighbour-list rebuilds (decided by all
+//! carried through the list build's reordering); pairs of two ghosts are not listed, ghosts are
+//! not integrated. Each step the motion of the outer-region particles the neighbours need is
+//! packed on the device (`cuda/halo.cu: pack_motion`), copied to a pinned host buffer, sent
+//! with MPI, and the received motion goes up through a second pinned buffer into the ghost
+//! slots (`unpack_motion`): only the halo crosses the bus. The pair list holds the pairs of two
+//! owned particles first; they are evaluated while the halo is in flight (the host waits for
+//! the packed copy alone and does the MPI exchange meanwhile), the pairs with a ghost after it. At neighbour-list rebuilds (decided by all
 //! ranks together) the state makes one round trip through the host, where migration, load
 //! balancing and the choice of ghosts run as on the CPU backend ([`Simulation`]'s exchange),
 //! and the ghosts go up after the owned particles.
@@ -13,7 +15,6 @@
 //! [`Simulation`]: crate::pipeline::Simulation
 
 use super::simulation::{CudaError, CudaSimulation, cfg, zeros};
-use crate::domain::pack;
 use cudarc::driver::{CudaSlice, PinnedHostSlice, PushKernelArg};
 use std::time::Instant;
 
@@ -88,9 +89,42 @@ impl CudaSimulation {
         Ok(())
     }
 
-    /// Stage 1 between rebuilds: the neighbours' ghosts get this rank's outer-region motion
-    /// and this rank's ghosts theirs (pack on the device, pinned copies, MPI, unpack).
-    pub(super) fn refresh_halo(&mut self) -> Result<(), CudaError> {
+    /// Stage 1 between rebuilds, first half: the motion of this rank's outer-region particles
+    /// packed on the device and its copy to the pinned buffer queued (the stream goes on with
+    /// the pairs of owned particles meanwhile).
+    pub(super) fn start_halo(&mut self) -> Result<(), CudaError> {
+        let Some(h) = self.halo.as_mut() else {
+            return Ok(());
+        };
+        let n_send: usize = h.send_counts.iter().sum();
+        if n_send == 0 {
+            return Ok(());
+        }
+        let st = &self.stream;
+        let nsi = n_send as i32;
+        let p = &self.p;
+        // SAFETY: `pack_motion(count, slots, position, velocity, orientation, ω, out)`; the
+        // slots are below n and `out` holds 13 doubles per slot.
+        unsafe {
+            st.launch_builder(self.k.get("pack_motion"))
+                .arg(&nsi)
+                .arg(&h.send_slots)
+                .arg(&p.position)
+                .arg(&p.velocity)
+                .arg(&p.orientation)
+                .arg(&p.angular_velocity)
+                .arg(&mut h.send_device)
+                .launch(cfg(n_send))?;
+        }
+        // Asynchronous into pinned memory: the host waits for this copy alone.
+        st.memcpy_dtoh(&h.send_device, &mut h.send_host)?;
+        Ok(())
+    }
+
+    /// Second half: waits for the packed motion, exchanges it with the neighbours by MPI, and
+    /// queues the upload of what arrived and its unpacking into the ghost slots (after the
+    /// work already queued on the stream).
+    pub(super) fn finish_halo(&mut self) -> Result<(), CudaError> {
         let Some(h) = self.halo.as_mut() else {
             return Ok(());
         };
@@ -100,53 +134,27 @@ impl CudaSimulation {
         let t0 = Instant::now();
         let st = &self.stream;
         let n_send: usize = h.send_counts.iter().sum();
-        let nsi = n_send as i32;
-        let p = &mut self.p;
-        if n_send > 0 {
-            // SAFETY: `pack_motion(count, slots, position, velocity, orientation, ω, out)`;
-            // the slots are below n and `out` holds 13 doubles per slot.
-            unsafe {
-                st.launch_builder(self.k.get("pack_motion"))
-                    .arg(&nsi)
-                    .arg(&h.send_slots)
-                    .arg(&p.position)
-                    .arg(&p.velocity)
-                    .arg(&p.orientation)
-                    .arg(&p.angular_velocity)
-                    .arg(&mut h.send_device)
-                    .launch(cfg(n_send))?;
-            }
-            st.memcpy_dtoh(&h.send_device, &mut h.send_host)?;
-        }
-        st.synchronize()?;
+        // Synchronises on the copy's event only, not on the pair kernel queued after it.
         let staged = h.send_host.as_slice()?;
         let mut at = 0;
         let mut sends = Vec::with_capacity(par.plan.neighbours.len());
         for (&r, &c) in par.plan.neighbours.iter().zip(&h.send_counts) {
-            sends.push((r, pack::f64s(&staged[MOTION * at..MOTION * (at + c)])));
+            sends.push((r, f64_bytes(&staged[MOTION * at..MOTION * (at + c)])));
             at += c;
         }
-        let own_images = &staged[MOTION * at..MOTION * n_send];
+        let own_images = f64_bytes(&staged[MOTION * at..MOTION * n_send]);
         let received = par.comm.neighbor_exchange(&sends, &par.plan.neighbours);
         let incoming = h.recv_host.as_mut_slice()?;
-        let mut k = 0;
-        for buf in &received {
-            for v in pack::read_f64s(buf) {
-                if k >= incoming.len() {
-                    break;
-                }
-                incoming[k] = v;
-                k += 1;
+        let mut k = 0; // doubles written
+        for buf in received.iter().chain(std::iter::once(&own_images)) {
+            let m = buf.len() / 8;
+            if k + m <= incoming.len() {
+                bytes_into_f64(buf, &mut incoming[k..k + m]);
             }
-        }
-        for &v in own_images {
-            if k < incoming.len() {
-                incoming[k] = v;
-            }
-            k += 1;
+            k += m;
         }
         if k != MOTION * h.n_ghosts {
-            return Err(CudaError::Compile(format!(
+            return Err(CudaError::Halo(format!(
                 "halo refresh on rank {}: {} motion values for {} ghosts (the neighbours' plans \
                  changed between rebuilds)",
                 par.rank(),
@@ -157,6 +165,7 @@ impl CudaSimulation {
         if h.n_ghosts > 0 {
             st.memcpy_htod(&h.recv_host, &mut h.recv_device)?;
             let ngi = h.n_ghosts as i32;
+            let p = &mut self.p;
             // SAFETY: `unpack_motion(count, slots, in, position, velocity, orientation, ω)`.
             unsafe {
                 st.launch_builder(self.k.get("unpack_motion"))
@@ -172,5 +181,29 @@ impl CudaSimulation {
         }
         par.timers.halo += t0.elapsed().as_secs_f64();
         Ok(())
+    }
+}
+
+/// The doubles' bytes as MPI sends them: little-endian IEEE-754 bits, as
+/// [`crate::domain::pack::f64s`] writes them (a plain copy on little-endian machines).
+fn f64_bytes(x: &[f64]) -> Vec<u8> {
+    if cfg!(target_endian = "little") {
+        // SAFETY: any f64 is 8 initialised bytes; the view lives only for the copy.
+        unsafe { std::slice::from_raw_parts(x.as_ptr().cast::<u8>(), 8 * x.len()) }.to_vec()
+    } else {
+        crate::domain::pack::f64s(x)
+    }
+}
+
+/// Fills `out` from the little-endian bytes of `f64_bytes` (`bytes.len() == 8 · out.len()`).
+fn bytes_into_f64(bytes: &[u8], out: &mut [f64]) {
+    if cfg!(target_endian = "little") {
+        // SAFETY: `out` is 8 · len writable bytes, every bit pattern is a valid f64.
+        unsafe { std::slice::from_raw_parts_mut(out.as_mut_ptr().cast::<u8>(), 8 * out.len()) }
+            .copy_from_slice(bytes);
+    } else {
+        for (o, v) in out.iter_mut().zip(crate::domain::pack::read_f64s(bytes)) {
+            *o = v;
+        }
     }
 }

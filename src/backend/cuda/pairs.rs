@@ -110,6 +110,12 @@ impl CudaSimulation {
         let history = match (self.pending_history.take(), self.pairs.take()) {
             (Some(h), _) => h,
             (None, Some(old)) => {
+                let Some(old_offset) = old.offset else {
+                    return Err(CudaError::Halo(
+                        "a decomposed run's pair list was rebuilt without the host's history"
+                            .into(),
+                    ));
+                };
                 let mut partner = zeros::<u64>(&st, old.n)?;
                 let npi = old.n as i32;
                 // SAFETY: argument types match `history_partners`.
@@ -122,7 +128,7 @@ impl CudaSimulation {
                         .launch(cfg(old.n))?;
                 }
                 HistorySource {
-                    offset: old.offset,
+                    offset: old_offset,
                     partner,
                     // The latest springs: `forces` swapped them into `spring_in`.
                     spring: old.spring_in,
@@ -172,43 +178,37 @@ impl CudaSimulation {
         }
         // Reorder every particle array (and the wall springs) by `order`.
         self.gather_all(&order)?;
-        // Pairs: count, exclusive prefix sum, fill.
-        let mut counts = zeros::<u32>(&st, n)?;
-        let skin = self.skin;
-        unsafe {
-            st.launch_builder(self.k.get("count_pairs"))
-                .arg(&ni)
-                .arg(&self.p.position)
-                .arg(&self.p.radius)
-                .arg(&self.p.id)
-                .arg(&self.p.ghost)
-                .arg(&cell_start)
-                .arg(&g)
-                .arg(&skin)
-                .arg(&mut counts)
-                .launch(cfg(n))?;
-        }
-        let mut offset = zeros::<u32>(&st, n + 1)?;
-        let np = self.scan(&counts, n, &mut offset)? as usize;
-        let mut pairs = zeros::<i32>(&st, 2 * np)?;
-        let mut shift = zeros::<f64>(&st, if self.config.periodic { 3 * np } else { 1 })?;
-        let periodic = i32::from(self.config.periodic);
-        unsafe {
-            st.launch_builder(self.k.get("fill_pairs"))
-                .arg(&ni)
-                .arg(&self.p.position)
-                .arg(&self.p.radius)
-                .arg(&self.p.id)
-                .arg(&self.p.ghost)
-                .arg(&cell_start)
-                .arg(&g)
-                .arg(&skin)
-                .arg(&offset)
-                .arg(&mut pairs)
-                .arg(&mut shift)
-                .arg(&periodic)
-                .launch(cfg(n))?;
-        }
+        // Pairs: count, exclusive prefix sum, fill. A decomposed run lists the pairs of two
+        // owned particles first and those with a ghost after them, so the first part can be
+        // evaluated while the halo is in flight.
+        let (np, n_interior, pairs, shift, offset) = if self.host.parallel.is_some() {
+            let (n1, p1, s1, _) = self.list_pairs(1, &cell_start)?;
+            let (n2, p2, s2, _) = self.list_pairs(2, &cell_start)?;
+            let np = n1 + n2;
+            let mut pairs = zeros::<i32>(&st, 2 * np)?;
+            let width = if self.config.periodic { 3 } else { 0 };
+            let mut shift = zeros::<f64>(&st, (width * np).max(1))?;
+            if n1 > 0 {
+                st.memcpy_dtod(&p1.slice(0..2 * n1), &mut pairs.slice_mut(0..2 * n1))?;
+            }
+            if n2 > 0 {
+                st.memcpy_dtod(&p2.slice(0..2 * n2), &mut pairs.slice_mut(2 * n1..2 * np))?;
+            }
+            if width > 0 {
+                if n1 > 0 {
+                    st.memcpy_dtod(&s1.slice(0..3 * n1), &mut shift.slice_mut(0..3 * n1))?;
+                }
+                if n2 > 0 {
+                    st.memcpy_dtod(&s2.slice(0..3 * n2), &mut shift.slice_mut(3 * n1..3 * np))?;
+                }
+            }
+            // Pairs of one particle are in two ranges now, so the list is no CSR by particle:
+            // this run's history comes up from the host at every rebuild instead.
+            (np, n1, pairs, shift, None)
+        } else {
+            let (np, pairs, shift, offset) = self.list_pairs(0, &cell_start)?;
+            (np, np, pairs, shift, Some(offset))
+        };
         // References per particle, sorted by partner id.
         let npi = np as i32;
         let mut ref_count = zeros::<u32>(&st, n)?;
@@ -255,6 +255,7 @@ impl CudaSimulation {
         }
         self.pairs = Some(DevicePairs {
             n: np,
+            n_interior,
             offset,
             pairs,
             shift,
@@ -273,6 +274,62 @@ impl CudaSimulation {
             self.setup_halo(&order)?;
         }
         Ok(())
+    }
+
+    /// Count, exclusive prefix sum and fill of the pairs of `part` (0 all; in a decomposed run
+    /// 1 those of two owned particles, 2 those with a ghost): their number, the int2 list, the
+    /// periodic shifts and the per-particle offsets.
+    #[allow(clippy::type_complexity)]
+    fn list_pairs(
+        &self,
+        part: i32,
+        cell_start: &CudaSlice<u32>,
+    ) -> Result<(usize, CudaSlice<i32>, CudaSlice<f64>, CudaSlice<u32>), CudaError> {
+        let st = self.stream.clone();
+        let n = self.n;
+        let ni = n as i32;
+        let g = self.grid;
+        let skin = self.skin;
+        let mut counts = zeros::<u32>(&st, n)?;
+        // SAFETY: argument lists match `count_pairs` and `fill_pairs` of cuda/neighbor.cu; the
+        // buffers hold n (particles), cells + 1 (cell_start) and the listed pairs' values.
+        unsafe {
+            st.launch_builder(self.k.get("count_pairs"))
+                .arg(&ni)
+                .arg(&self.p.position)
+                .arg(&self.p.radius)
+                .arg(&self.p.id)
+                .arg(&self.p.ghost)
+                .arg(&part)
+                .arg(cell_start)
+                .arg(&g)
+                .arg(&skin)
+                .arg(&mut counts)
+                .launch(cfg(n))?;
+        }
+        let mut offset = zeros::<u32>(&st, n + 1)?;
+        let np = self.scan(&counts, n, &mut offset)? as usize;
+        let mut pairs = zeros::<i32>(&st, 2 * np)?;
+        let mut shift = zeros::<f64>(&st, if self.config.periodic { 3 * np } else { 1 })?;
+        let periodic = i32::from(self.config.periodic);
+        unsafe {
+            st.launch_builder(self.k.get("fill_pairs"))
+                .arg(&ni)
+                .arg(&self.p.position)
+                .arg(&self.p.radius)
+                .arg(&self.p.id)
+                .arg(&self.p.ghost)
+                .arg(&part)
+                .arg(cell_start)
+                .arg(&g)
+                .arg(&skin)
+                .arg(&offset)
+                .arg(&mut pairs)
+                .arg(&mut shift)
+                .arg(&periodic)
+                .launch(cfg(n))?;
+        }
+        Ok((np, pairs, shift, offset))
     }
 
     pub(super) fn gather_all(&mut self, order: &CudaSlice<u32>) -> Result<(), CudaError> {

@@ -154,7 +154,12 @@ pub(super) struct DeviceParticles {
 /// The pair list and everything indexed by pair.
 pub(super) struct DevicePairs {
     pub(super) n: usize,
-    pub(super) offset: CudaSlice<u32>,
+    /// In a decomposed run, the pairs `0..n_interior` have two owned members and need nothing
+    /// from the halo; the rest have a ghost. Otherwise `n`.
+    pub(super) n_interior: usize,
+    /// Per particle, its pairs as first member (`offset[i]..offset[i + 1]`): the history source
+    /// of the next build; `None` for a decomposed run's two-part list.
+    pub(super) offset: Option<CudaSlice<u32>>,
     pub(super) pairs: CudaSlice<i32>,
     pub(super) shift: CudaSlice<f64>,
     pub(super) axes: CudaSlice<f64>,
@@ -220,6 +225,8 @@ pub struct CudaSimulation {
     pub(super) rebuild: bool,
     /// A decomposed run's device halo ([`super::halo`]).
     pub(super) halo: Option<super::halo::DeviceHalo>,
+    /// The ghosts await this step's halo refresh (set by the exchange, done by the forces).
+    pub(super) halo_due: bool,
 }
 
 impl CudaSimulation {
@@ -343,6 +350,7 @@ impl CudaSimulation {
             host_current: true,
             rebuild: true,
             halo: None,
+            halo_due: false,
             stream,
             host,
         };
@@ -398,7 +406,7 @@ impl CudaSimulation {
             + b(&p.ghost)
             + b(&self.reference);
         if let Some(q) = &self.pairs {
-            total += b(&q.offset)
+            total += q.offset.as_ref().map_or(0, b)
                 + b(&q.pairs)
                 + b(&q.shift)
                 + b(&q.axes)
@@ -473,6 +481,7 @@ impl CudaSimulation {
             self.stream
                 .launch_builder(self.k.get("half_kick"))
                 .arg(&ni)
+                .arg(&p.ghost)
                 .arg(&mut p.velocity)
                 .arg(&mut p.angular_velocity)
                 .arg(&p.force)
@@ -503,6 +512,7 @@ impl CudaSimulation {
                 self.stream
                     .launch_builder(self.k.get("drift"))
                     .arg(&ni)
+                    .arg(&p.ghost)
                     .arg(&mut p.position)
                     .arg(&p.velocity)
                     .arg(&mut p.orientation)
@@ -531,8 +541,6 @@ impl CudaSimulation {
                     .launch(cfg(self.n))?;
             }
         }
-        // A decomposed run refreshes its ghosts first, so the checks below see true positions.
-        self.refresh_halo()?;
         let mut flags = [0u32, 0, 0, u32::MAX];
         self.stream.memcpy_htod(&flags, &mut self.flags)?;
         if self.n > 0 && self.pairs.is_some() {
@@ -574,8 +582,12 @@ impl CudaSimulation {
             if rebuild {
                 self.sync_host()?;
                 self.host.rebuild_exchange_on_host()?;
+                self.upload_walls()?;
                 self.upload_from_host()?;
             }
+            // Ghosts were not integrated: between rebuilds their owners' motion comes through
+            // the halo, overlapped with the pairs of owned particles ([`Self::forces`]).
+            self.halo_due = !rebuild;
         } else {
             if flags[1] > 0 || self.host.inserter_pending() {
                 // Insertion or removal: the host does it on a synced copy, then everything

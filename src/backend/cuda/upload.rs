@@ -69,8 +69,18 @@ impl CudaSimulation {
         let mut info = Vec::new();
         let (mut triangles, mut prisms, mut starts, mut items) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        for w in &s.walls {
-            let mesh = WallMesh::new(&w.triangles, cell);
+        for (k, w) in s.walls.iter().enumerate() {
+            // A rank of a decomposed run keeps the facets that reach its box plus the halo (in
+            // their order: the candidates' summation order is unchanged).
+            let restricted = self.host.parallel.is_some().then(|| &self.host.walls[k]);
+            let whole;
+            let mesh = match restricted {
+                Some(m) => m,
+                None => {
+                    whole = WallMesh::new(&w.triangles, cell);
+                    &whole
+                }
+            };
             let g = mesh.grid_parts();
             let facet_offset = (triangles.len() / 9) as i32;
             for t in &mesh.triangles {
