@@ -15,7 +15,7 @@
 //! [`Simulation`]: crate::pipeline::Simulation
 
 use super::simulation::{CudaError, CudaSimulation, cfg, zeros};
-use cudarc::driver::{CudaSlice, PinnedHostSlice, PushKernelArg};
+use cudarc::driver::{CudaEvent, CudaSlice, PinnedHostSlice, PushKernelArg};
 use std::time::Instant;
 
 /// Doubles of one motion record (`cuda/halo.cu: PD_MOTION_DOUBLES`).
@@ -35,6 +35,11 @@ pub(super) struct DeviceHalo {
     recv_device: CudaSlice<f64>,
     send_host: PinnedHostSlice<f64>,
     recv_host: PinnedHostSlice<f64>,
+    /// Recorded after the packed copy to `send_host`, and after the upload from `recv_host`:
+    /// with one stream cudarc records no events of its own on pinned buffers, so the host
+    /// waits on these before touching them.
+    sent: Option<CudaEvent>,
+    received: Option<CudaEvent>,
 }
 
 impl CudaSimulation {
@@ -85,6 +90,8 @@ impl CudaSimulation {
             recv_device: zeros::<f64>(&st, MOTION * n_ghosts)?,
             send_host,
             recv_host,
+            sent: None,
+            received: None,
         });
         Ok(())
     }
@@ -118,6 +125,7 @@ impl CudaSimulation {
         }
         // Asynchronous into pinned memory: the host waits for this copy alone.
         st.memcpy_dtoh(&h.send_device, &mut h.send_host)?;
+        h.sent = Some(st.record_event(None)?);
         Ok(())
     }
 
@@ -134,7 +142,10 @@ impl CudaSimulation {
         let t0 = Instant::now();
         let st = &self.stream;
         let n_send: usize = h.send_counts.iter().sum();
-        // Synchronises on the copy's event only, not on the pair kernel queued after it.
+        // Waits for the copy alone, not for the pair kernel queued after it.
+        if let Some(e) = h.sent.take() {
+            e.synchronize()?;
+        }
         let staged = h.send_host.as_slice()?;
         let mut at = 0;
         let mut sends = Vec::with_capacity(par.plan.neighbours.len());
@@ -144,6 +155,11 @@ impl CudaSimulation {
         }
         let own_images = f64_bytes(&staged[MOTION * at..MOTION * n_send]);
         let received = par.comm.neighbor_exchange(&sends, &par.plan.neighbours);
+        // The last step's upload from this buffer is done (the step ends synchronised; the
+        // event makes it explicit).
+        if let Some(e) = h.received.take() {
+            e.synchronize()?;
+        }
         let incoming = h.recv_host.as_mut_slice()?;
         let mut k = 0; // doubles written
         for buf in received.iter().chain(std::iter::once(&own_images)) {
@@ -164,6 +180,7 @@ impl CudaSimulation {
         }
         if h.n_ghosts > 0 {
             st.memcpy_htod(&h.recv_host, &mut h.recv_device)?;
+            h.received = Some(st.record_event(None)?);
             let ngi = h.n_ghosts as i32;
             let p = &mut self.p;
             // SAFETY: `unpack_motion(count, slots, in, position, velocity, orientation, ω)`.
