@@ -12,9 +12,10 @@
 #   MPIRUN           the launcher (default: mpirun)
 #   MPIRUN_ARGS      extra launcher arguments (e.g. "--hostfile hosts")
 #   RAYON_NUM_THREADS  threads per rank (default: cores / N, at least 1)
+#   POLYDEM_BACKEND  cpu, cuda or auto (default)
 #
 # On a GPU machine each rank drives the GPU of its node-local rank modulo the visible GPUs
-# (DESIGN.md §6); multi-rank runs step on the CPU backend until GPU ranks are available.
+# (DESIGN.md §6); POLYDEM_BACKEND=cpu|cuda|auto (default auto) picks the backend.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
