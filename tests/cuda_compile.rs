@@ -3,7 +3,7 @@
 //! PyPI's `nvidia-cuda-nvrtc` on the library path). The kernels also `static_assert` the sizes
 //! of the structs they share with Rust, so a layout drift fails here.
 
-use polydem::backend::cuda::kernels::{KERNEL_FILES, compile};
+use polydem::backend::cuda::kernels::{KERNEL_FILES, compile_in};
 use polydem::backend::cuda::probe::PROBE_FILE;
 use polydem::backend::cuda::{KernelConfig, Precision};
 
@@ -79,7 +79,8 @@ fn every_kernel_compiles_with_nvrtc_for_sm_90() {
     for config in configs() {
         for file in KERNEL_FILES.iter().chain([&PROBE_FILE]) {
             let t = std::time::Instant::now();
-            match compile(file, &config, 90) {
+            // Without the PTX cache: this is the check that NVRTC accepts every kernel.
+            match compile_in(file, &config, 90, None) {
                 Ok(_) => println!(
                     "{file} {:?}: {:.2} s",
                     config.precision,
@@ -90,4 +91,51 @@ fn every_kernel_compiles_with_nvrtc_for_sm_90() {
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
+
+/// The PTX cache: a first compile stores the PTX under a key of source, options and NVRTC
+/// version; a second one with the same key returns what is stored (shown by planting a marker
+/// in the stored file); another configuration is another key; a stored file that is no PTX is
+/// compiled afresh and replaced.
+#[test]
+fn compiled_ptx_is_cached_by_source_and_options() {
+    // SAFETY: only tries to open the shared library.
+    if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
+        panic!("libnvrtc not found: run `make test`");
+    }
+    let dir = std::env::temp_dir().join(format!("polydem-ptx-cache-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let config = configs().remove(0);
+    let first = compile_in("scan.cu", &config, 90, Some(&dir))
+        .unwrap()
+        .to_src();
+    let files: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    assert_eq!(std::fs::read_to_string(&files[0]).unwrap(), first);
+    let marked = format!("{first}\n// marker\n");
+    std::fs::write(&files[0], &marked).unwrap();
+    let second = compile_in("scan.cu", &config, 90, Some(&dir))
+        .unwrap()
+        .to_src();
+    assert_eq!(second, marked, "the second compile reads the cache");
+    let other = KernelConfig {
+        precision: Precision::Mixed,
+        ..config.clone()
+    };
+    compile_in("scan.cu", &other, 90, Some(&dir)).unwrap();
+    assert_eq!(
+        std::fs::read_dir(&dir).unwrap().count(),
+        2,
+        "one file per key"
+    );
+    std::fs::write(&files[0], "not ptx").unwrap();
+    let again = compile_in("scan.cu", &config, 90, Some(&dir))
+        .unwrap()
+        .to_src();
+    assert_eq!(again, first, "a damaged entry is compiled afresh");
+    assert_eq!(std::fs::read_to_string(&files[0]).unwrap(), first);
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -290,7 +290,9 @@ fn six_thousand_steps_of_a_sphere_pour_match_the_cpu() {
 
 /// `polydem run` end to end on both backends: the quickstart (2000 dodecahedra into the hopper
 /// STL and onto the floor) for 6000 steps (t = 0.092 s, as the cone fills) ends in checkpoints with bitwise equal particle
-/// states (matched by id) and contact histories.
+/// states (matched by id) and contact histories. A second GPU run with a wall-candidate buffer
+/// of 4 facets (`POLYDEM_MAX_WALL_CANDIDATES`) sends the particles on the hopper's slivers down
+/// the fallback walk of the facet grid, and must end bitwise the same too.
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu() {
@@ -298,9 +300,13 @@ fn the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu() {
     let dir = temp_dir("gpu-quickstart");
     let scene = repo_root().join("launch/quickstart/quickstart.toml");
     let mut last = Vec::new();
-    for backend in ["cpu", "cuda"] {
-        let out = dir.join(backend);
-        let status = std::process::Command::new(polydem_bin())
+    for (backend, cap) in [("cpu", None), ("cuda", None), ("cuda", Some("4"))] {
+        let out = dir.join(format!("{backend}{}", cap.unwrap_or("")));
+        let mut cmd = std::process::Command::new(polydem_bin());
+        if let Some(c) = cap {
+            cmd.env("POLYDEM_MAX_WALL_CANDIDATES", c);
+        }
+        let status = cmd
             .args([
                 "run",
                 scene.to_str().unwrap(),
@@ -320,30 +326,32 @@ fn the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu() {
         );
         last.push(read_checkpoint(&out.join("checkpoints/latest.ckpt")).unwrap());
     }
-    let (c, g) = (&last[0], &last[1]);
+    let c = &last[0];
     assert_eq!(c.step, 6000);
-    assert_eq!((c.step, c.time.to_bits()), (g.step, g.time.to_bits()));
     assert!(c.history.len() > 100, "{} contacts", c.history.len());
-    assert!(c.history == g.history, "contact histories differ");
-    let index: HashMap<u64, usize> = g
-        .particles
-        .id
-        .iter()
-        .enumerate()
-        .map(|(i, &x)| (x, i))
-        .collect();
-    let (a, b) = (&c.particles, &g.particles);
-    assert_eq!(a.len(), b.len());
-    for i in 0..a.len() {
-        let j = index[&a.id[i]];
-        assert!(
-            a.position[i] == b.position[j]
-                && a.velocity[i] == b.velocity[j]
-                && a.orientation[i] == b.orientation[j]
-                && a.angular_velocity[i] == b.angular_velocity[j]
-                && a.force[i] == b.force[j],
-            "particle {} differs",
-            a.id[i]
-        );
+    for (g, what) in [(&last[1], "GPU"), (&last[2], "GPU, 4 wall candidates")] {
+        assert_eq!((c.step, c.time.to_bits()), (g.step, g.time.to_bits()));
+        assert!(c.history == g.history, "{what}: contact histories differ");
+        let index: HashMap<u64, usize> = g
+            .particles
+            .id
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| (x, i))
+            .collect();
+        let (a, b) = (&c.particles, &g.particles);
+        assert_eq!(a.len(), b.len());
+        for i in 0..a.len() {
+            let j = index[&a.id[i]];
+            assert!(
+                a.position[i] == b.position[j]
+                    && a.velocity[i] == b.velocity[j]
+                    && a.orientation[i] == b.orientation[j]
+                    && a.angular_velocity[i] == b.angular_velocity[j]
+                    && a.force[i] == b.force[j],
+                "{what}: particle {} differs",
+                a.id[i]
+            );
+        }
     }
 }

@@ -15,9 +15,10 @@ mod common;
 use common::{polydem_bin, repo_root, temp_dir};
 use polydem::io::read_checkpoint;
 use serde_json::Value;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::sync::OnceLock;
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// `polydem run SCENE` on `ranks` ranks (1: without mpirun) into `out`, with extra arguments.
 fn run(ranks: usize, scene: &str, out: &Path, extra: &[&str]) -> Output {
@@ -60,15 +61,19 @@ fn run_ok(ranks: usize, scene: &str, out: &Path, extra: &[&str]) -> Value {
     serde_json::from_slice(&o.stdout).expect("summary JSON on stdout")
 }
 
-/// The single-rank runs, made once for all tests.
+/// Output folders of single-rank runs by scene, each made once.
+type References = Mutex<HashMap<&'static str, Arc<OnceLock<PathBuf>>>>;
+
+/// The single-rank run of `scene`, made once for all tests.
 fn reference(scene: &'static str) -> PathBuf {
-    static POUR: OnceLock<PathBuf> = OnceLock::new();
-    static PERIODIC: OnceLock<PathBuf> = OnceLock::new();
-    let cell = if scene.contains("pour") {
-        &POUR
-    } else {
-        &PERIODIC
-    };
+    static RUNS: OnceLock<References> = OnceLock::new();
+    let cell = RUNS
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap()
+        .entry(scene)
+        .or_default()
+        .clone();
     cell.get_or_init(|| {
         let dir = temp_dir(&format!("mpi-ref-{}", scene.replace('/', "_")));
         run_ok(1, scene, &dir, &[]);
@@ -213,6 +218,22 @@ fn periodic_box_on_a_4_rank_grid_is_bitwise_the_single_rank_run() {
         .max()
         .unwrap();
     assert!(peak > 20, "at most {peak} contacts");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Grains leaving through the open bottom of a domain periodic along x, fed from above: on 3
+/// ranks the same particles are removed and inserted, bitwise as on one rank.
+#[test]
+fn outflow_on_3_ranks_removes_and_inserts_as_one_rank() {
+    let one = reference("launch/mpi/outflow.toml");
+    let dir = temp_dir("mpi-outflow-3");
+    let s = run_ok(3, "launch/mpi/outflow.toml", &dir, &[]);
+    for step in ["step_0000001000.ckpt", "step_0000002000.ckpt"] {
+        same_checkpoint(&one, &dir, step, "outflow, 3 ranks");
+    }
+    assert_eq!(s["particles_removed"], 150, "removed in all");
+    assert_eq!(s["particles"], 100);
+    no_particle_lost_or_duplicated(&dir, 100);
     let _ = std::fs::remove_dir_all(&dir);
 }
 

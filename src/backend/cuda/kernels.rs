@@ -118,6 +118,16 @@ impl KernelConfig {
             format!("-DPD_MATERIALS={}", self.materials),
             format!("-DPD_GHOSTS={}", flag(self.ghosts)),
         ];
+        // A particle's wall-candidate buffer (default 512 facet ids; past it the facet grid is
+        // walked in id order instead): POLYDEM_MAX_WALL_CANDIDATES sets it, so that tests can
+        // drive every particle down the fallback walk.
+        if let Some(n) = std::env::var("POLYDEM_MAX_WALL_CANDIDATES")
+            .ok()
+            .and_then(|v| v.parse::<u32>().ok())
+            .filter(|&n| n >= 1)
+        {
+            d.push(format!("-DPD_MAX_WALL_CANDIDATES={n}"));
+        }
         d.extend(layout::size_defines());
         d
     }
@@ -157,11 +167,87 @@ pub fn expand(file: &str) -> Result<String, String> {
 
 /// Compiles kernel file `file` for `sm_<arch>` (e.g. 90) with the scene's defines. Floating-point
 /// contraction is off (`--fmad=false`) so that double results follow the CPU's rounding.
+///
+/// The PTX is cached ([`ptx_cache_dir`]) under a hash of the expanded source, the options and
+/// the NVRTC version, so a run (and every rank of a decomposed run) after the first skips the
+/// seconds NVRTC takes; a cache that cannot be read or written is only skipped.
 pub fn compile(file: &str, config: &KernelConfig, arch: u32) -> Result<Ptx, String> {
+    compile_in(file, config, arch, ptx_cache_dir().as_deref())
+}
+
+/// [`compile`] with the PTX cache in `cache` (`None`: always NVRTC).
+pub fn compile_in(
+    file: &str,
+    config: &KernelConfig,
+    arch: u32,
+    cache: Option<&std::path::Path>,
+) -> Result<Ptx, String> {
     let source = expand(file)?;
     let mut options = config.defines();
     options.push(format!("--gpu-architecture=sm_{arch}"));
     options.push("--std=c++17".into());
+    let cached = cache.map(|dir| {
+        let mut key = source.clone().into_bytes();
+        for o in &options {
+            key.extend_from_slice(o.as_bytes());
+            key.push(0);
+        }
+        key.extend_from_slice(nvrtc_version().as_bytes());
+        let name = file.trim_end_matches(".cu");
+        dir.join(format!(
+            "{name}-{:016x}.ptx",
+            crate::io::checkpoint::fnv1a64(&key)
+        ))
+    });
+    if let Some(path) = &cached
+        && let Ok(text) = std::fs::read_to_string(path)
+        && text.contains(".entry")
+    {
+        return Ok(Ptx::from_src(text));
+    }
+    let ptx = nvrtc_compile(file, source, options)?;
+    if let Some(path) = &cached {
+        let stored = path
+            .parent()
+            .map(std::fs::create_dir_all)
+            .transpose()
+            .is_ok()
+            && crate::io::write_atomic(path, ptx.to_src().as_bytes()).is_ok();
+        if !stored {
+            tracing::debug!("PTX cache {}: not writable, skipped", path.display());
+        }
+    }
+    Ok(ptx)
+}
+
+/// Where compiled PTX is kept: `POLYDEM_PTX_CACHE` (`0` or empty: no cache), else
+/// `$XDG_CACHE_HOME/polydem/ptx`, else `~/.cache/polydem/ptx`.
+pub fn ptx_cache_dir() -> Option<std::path::PathBuf> {
+    use std::path::PathBuf;
+    match std::env::var_os("POLYDEM_PTX_CACHE") {
+        Some(v) if v.is_empty() || v == "0" => None,
+        Some(v) => Some(PathBuf::from(v)),
+        None => std::env::var_os("XDG_CACHE_HOME")
+            .map(PathBuf::from)
+            .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+            .map(|c| c.join("polydem").join("ptx")),
+    }
+}
+
+/// NVRTC's version, part of the cache key (PTX of a newer NVRTC is refused by an older driver).
+fn nvrtc_version() -> String {
+    let (mut major, mut minor) = (0, 0);
+    // SAFETY: the first call only tries to open the library; nvrtcVersion, called only when it
+    // is present, writes two ints.
+    unsafe {
+        if cudarc::nvrtc::sys::is_culib_present() {
+            cudarc::nvrtc::sys::nvrtcVersion(&mut major, &mut minor);
+        }
+    }
+    format!("nvrtc {major}.{minor}")
+}
+
+fn nvrtc_compile(file: &str, source: String, options: Vec<String>) -> Result<Ptx, String> {
     let opts = CompileOptions {
         fmad: Some(false),
         options,
