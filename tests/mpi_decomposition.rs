@@ -271,7 +271,56 @@ fn frames_have_one_piece_per_rank() {
         ids.iter().all(|&n| n > 0),
         "a rank wrote no particle: {ids:?}"
     );
+    // An independent reader (meshio, tests/oracles/read_vtu.py) reads every frame of the
+    // collection through its .pvtu: three pieces, as many cells as the single-rank frame, and
+    // each piece's `rank` field is the rank that wrote it.
+    let frames3 = oracle("collection", &dir.join("frames.pvd"));
+    let frames1 = oracle("collection", &one.join("frames.pvd"));
+    let (d3, d1) = (
+        frames3["datasets"].as_array().unwrap(),
+        frames1["datasets"].as_array().unwrap(),
+    );
+    assert_eq!(d3.len(), 2, "frames at steps 0 and 500");
+    for (a, b) in d3.iter().zip(d1) {
+        assert_eq!(a["pieces"].as_array().unwrap().len(), 3);
+        assert_eq!(a["cells"], b["cells"], "cells of {} read back", a["file"]);
+    }
+    for r in 0..3u64 {
+        let piece = oracle("mesh", &frames.join(format!("step_0000000500_r{r:04}.vtu")));
+        let ranks = piece["cell_data"]["rank"].as_array().unwrap();
+        assert!(
+            !ranks.is_empty() && ranks.iter().all(|v| v.as_u64() == Some(r)),
+            "rank field of piece {r}: {ranks:?}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `POLYDEM_PYTHON`, else `<root>/.venv/bin/python` (`make test` creates it) runs the meshio
+/// oracle in `mode` on `file` and returns its JSON.
+fn oracle(mode: &str, file: &Path) -> Value {
+    let python = std::env::var_os("POLYDEM_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo_root().join(".venv/bin/python"));
+    let script = repo_root().join("tests/oracles/read_vtu.py");
+    let out = Command::new(&python)
+        .arg(&script)
+        .arg(mode)
+        .arg(file)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!(
+                "cannot run {} ({e}): run `make test`, which sets up .venv with meshio",
+                python.display()
+            )
+        });
+    assert!(
+        out.status.success(),
+        "read_vtu.py {mode} {}: {}",
+        file.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("oracle JSON")
 }
 
 /// What cannot run is refused on every rank with a message that says why: a grid whose
