@@ -77,8 +77,10 @@ PD_DEVICE void report_error(unsigned int* error, int status, unsigned int where)
 
 // Stages 3–7 for the pairs of the list (Simulation::pair_contacts).
 // Pairs first .. n_pairs - 1 (a decomposed run evaluates the pairs of two owned particles while
-// the halo is in flight, then the rest).
-extern "C" __global__ void pair_contacts(int first, int n_pairs, const int2* pairs, const double* shift,
+// the halo is in flight, then the rest). The periodic image of B is taken from the current
+// centroids by the minimum-image rule (`grid`), as the list build does, not from the build's
+// shift: a particle wrapped across a periodic face since the build keeps its contacts.
+extern "C" __global__ void pair_contacts(int first, int n_pairs, const int2* pairs, GridParams grid,
                                          double* axes, ParticleView p, const PairMaterial* materials,
                                          int n_materials, const double* spring_in, double* spring_out,
                                          PairOutputs out, double dt, unsigned int* error) {
@@ -91,7 +93,9 @@ extern "C" __global__ void pair_contacts(int first, int n_pairs, const int2* pai
     V3<double> xa = load3(p.position, a);
     V3<double> xb = load3(p.position, b);
 #if PD_PERIODIC
-    xb = xb + load3(shift, k);
+    xb = xb + (displacement(grid, xa, xb) - (xb - xa));
+#else
+    (void)grid;
 #endif
     V3<double> d = xb - xa;
     double reach = p.radius[a] + p.radius[b];

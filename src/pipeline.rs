@@ -754,14 +754,23 @@ impl Simulation {
         let s = &self.scene;
         let step = self.step;
         let spheres = s.spheres_only();
+        let periodic = self.bounds.periodic.iter().any(|&k| k);
+        let bounds = self.bounds;
         self.pairs
             .pairs
             .par_iter()
-            .zip(self.pairs.shifts.par_iter())
             .zip(self.separating_axes.par_iter())
-            .map(|((pair, shift), axis)| {
+            .map(|(pair, axis)| {
                 let (a, b) = (pair[0] as usize, pair[1] as usize);
-                let xb = p.position[b] + shift;
+                // B's periodic image from the current centroids by the list build's minimum-image
+                // arithmetic (not the build's shift: a particle wrapped across a periodic face
+                // since the build keeps its contacts); no shift without periodic axes.
+                let xb = if periodic {
+                    let (xa, xb) = (p.position[a], p.position[b]);
+                    xb + (bounds.displacement(&xa, &xb) - (xb - xa))
+                } else {
+                    p.position[b]
+                };
                 let d = xb - p.position[a];
                 let reach = self.radius[a] + self.radius[b];
                 // Stage 3: bounding spheres.

@@ -34,6 +34,7 @@ impl CudaSimulation {
             ],
         };
         let (fi, li) = (first as i32, last as i32);
+        let grid = self.grid;
         // SAFETY: the argument list matches `pair_contacts` of cuda/contact.cu; the pointer
         // structs point into buffers alive for the whole call.
         unsafe {
@@ -41,7 +42,7 @@ impl CudaSimulation {
                 .arg(&fi)
                 .arg(&li)
                 .arg(&pairs.pairs)
-                .arg(&pairs.shift)
+                .arg(&grid)
                 .arg(&mut pairs.axes)
                 .arg(view)
                 .arg(&self.materials)
