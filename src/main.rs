@@ -131,6 +131,24 @@ fn main() {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default)),
         )
         .init();
+    if comm.size() > 1 {
+        // A panic on one rank must end the run on all: unwinding would finalize MPI here while
+        // the others wait in a collective.
+        // A weak handle: the hook outlives main, and must not keep MPI from being finalized.
+        let hook_comm = Arc::downgrade(&comm);
+        let default_hook = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            default_hook(info);
+            if let Some(c) = hook_comm.upgrade() {
+                eprintln!(
+                    "error (rank {} of {}): panic; ending every rank",
+                    c.rank(),
+                    c.size()
+                );
+                c.abort(101);
+            }
+        }));
+    }
     if let Err(e) = run(cli, comm.clone()) {
         if comm.size() > 1 {
             eprintln!("error (rank {} of {}): {e:#}", comm.rank(), comm.size());

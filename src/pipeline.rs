@@ -241,6 +241,9 @@ impl Simulation {
     ) -> Result<Self, SimulationError> {
         let mut sim = Simulation::new_empty(scene)?;
         sim.particles = particles;
+        sim.step = step;
+        // A state that cannot be stepped (or owned by any rank) is refused, not carried.
+        sim.check_restored()?;
         sim.history = history;
         sim.inserter = inserter;
         sim.time = time;
@@ -278,6 +281,8 @@ impl Simulation {
         let mut sim = Simulation::new_in(s, Some(Box::new(par)))?;
         sim.scene = scene;
         sim.particles = particles;
+        sim.step = step;
+        sim.check_restored()?;
         sim.history = history;
         sim.inserter = inserter;
         sim.time = time;
@@ -934,6 +939,19 @@ impl Simulation {
                 })
             })
             .collect()
+    }
+
+    /// [`Self::check_finite`] for a restored state, whose cause is the checkpoint.
+    fn check_restored(&self) -> Result<(), SimulationError> {
+        self.check_finite().map_err(|e| match e {
+            SimulationError::NonFinite { step, id, .. } => SimulationError::Domain {
+                step,
+                message: format!(
+                    "the checkpoint holds particle {id} with a non-finite position or velocity"
+                ),
+            },
+            other => other,
+        })
     }
 
     fn check_finite(&self) -> Result<(), SimulationError> {

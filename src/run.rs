@@ -337,7 +337,15 @@ fn choose_parallel_backend(
     choice: BackendChoice,
     comm: &dyn Comm,
 ) -> Result<(&'static str, usize)> {
-    let name = choose_backend(choice)?;
+    let local = choose_backend(choice)?;
+    // Every rank must step on the same backend (their collectives differ): with `auto`, one
+    // rank without a usable GPU puts all on the CPU (an explicit `cuda` has already failed on
+    // that rank, which ends the run on all).
+    let cpu_somewhere = comm.any(local == "cpu");
+    let name = if cpu_somewhere { "cpu" } else { local };
+    if cpu_somewhere && local == "cuda" {
+        tracing::warn!("another rank has no usable GPU: all ranks run on the CPU");
+    }
     if name == "cpu" {
         return Ok(("cpu", 0));
     }

@@ -171,6 +171,41 @@ fn pour_on_2_3_4_ranks_is_bitwise_the_single_rank_run() {
     }
 }
 
+/// The collectives split what they move into rounds of at most 2³¹ − 1 bytes (MPI's counts are
+/// 32-bit: a checkpoint of 1e7 particles gathered on rank 0 needs several). With rounds of 777
+/// bytes (`POLYDEM_MPI_ROUND_BYTES`) every gather, migration and insertion of the pour takes
+/// many rounds, and the run is still bitwise the single-rank one.
+#[test]
+fn collectives_in_small_rounds_give_the_same_run() {
+    let one = reference("launch/mpi/pour.toml");
+    let dir = temp_dir("mpi-rounds-3");
+    let o = Command::new("mpirun")
+        .args([
+            "--oversubscribe",
+            "-n",
+            "3",
+            "-x",
+            "POLYDEM_MPI_ROUND_BYTES",
+        ])
+        .arg(polydem_bin())
+        .arg("run")
+        .arg(repo_root().join("launch/mpi/pour.toml"))
+        .args(["--backend", "cpu", "--out"])
+        .arg(&dir)
+        .env("POLYDEM_MPI_ROUND_BYTES", "777")
+        .env("RAYON_NUM_THREADS", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for step in ["step_0000001000.ckpt", "step_0000002000.ckpt"] {
+        same_checkpoint(&one, &dir, step, "3 ranks, 777-byte rounds");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A checkpoint written by 4 ranks at step 1000, restarted on 2 ranks, ends at step 2000
 /// byte-identical to the single-rank run (and the 4-rank checkpoint itself is the single-rank
 /// one, so it also restarts on 1 rank).

@@ -155,6 +155,34 @@ mod mpi_comm {
             (c, d, total)
         }
 
+        /// Bytes one rank passes to or takes from one other rank in one round of a collective:
+        /// MPI counts and displacements are 32-bit, so a round moves at most 2³¹ − 1 bytes in
+        /// all (a checkpoint of 1e7 particles gathered on rank 0 is several rounds).
+        fn round_limit(ranks: usize) -> u64 {
+            // POLYDEM_MPI_ROUND_BYTES lowers it, so that tests can drive small runs through
+            // many rounds.
+            static SET: std::sync::OnceLock<Option<u64>> = std::sync::OnceLock::new();
+            let set = *SET.get_or_init(|| {
+                std::env::var("POLYDEM_MPI_ROUND_BYTES")
+                    .ok()
+                    .and_then(|v| v.parse::<u64>().ok())
+                    .filter(|&b| b > 0)
+            });
+            let most = (i32::MAX as u64 / ranks.max(1) as u64).clamp(1, 1 << 30);
+            set.map_or(most, |b| b.min(most))
+        }
+
+        /// Rounds needed for `largest` bytes (at least one, so empty collectives still meet).
+        fn rounds(largest: u64, limit: u64) -> u64 {
+            largest.div_ceil(limit).max(1)
+        }
+
+        /// (start, length) of round `round` of a buffer of `len` bytes.
+        fn part(len: u64, round: u64, limit: u64) -> (u64, u64) {
+            let from = (round * limit).min(len);
+            (from, (len - from).min(limit))
+        }
+
         /// `data` in a heap buffer of capacity ≥ 1: the address of an empty Rust slice is 0x1,
         /// which Open MPI takes for `MPI_IN_PLACE` and then rejects the call.
         fn heap(data: &[u8]) -> Vec<u8> {
@@ -189,14 +217,28 @@ mod mpi_comm {
             let mut counts = vec![0u64; n];
             self.world
                 .all_gather_into(&(local.len() as u64), &mut counts[..]);
-            let (c, d, total) = Self::counts_displs(&counts);
-            let mut buf = vec![0u8; total.max(1)];
-            let local = Self::heap(local);
-            {
-                let mut part = PartitionMut::new(&mut buf[..], &c[..], &d[..]);
-                self.world.all_gather_varcount_into(&local[..], &mut part);
+            let limit = Self::round_limit(n);
+            let rounds = Self::rounds(counts.iter().copied().max().unwrap_or(0), limit);
+            let mut out: Vec<Vec<u8>> = counts
+                .iter()
+                .map(|&c| Vec::with_capacity(c as usize))
+                .collect();
+            for round in 0..rounds {
+                let part = |len: u64| Self::part(len, round, limit);
+                let c: Vec<u64> = counts.iter().map(|&l| part(l).1).collect();
+                let (c, d, total) = Self::counts_displs(&c);
+                let (from, len) = part(local.len() as u64);
+                let mine = Self::heap(&local[from as usize..(from + len) as usize]);
+                let mut buf = vec![0u8; total.max(1)];
+                {
+                    let mut recv = PartitionMut::new(&mut buf[..], &c[..], &d[..]);
+                    self.world.all_gather_varcount_into(&mine[..], &mut recv);
+                }
+                for (o, piece) in out.iter_mut().zip(Self::split(buf, &c)) {
+                    o.extend_from_slice(&piece);
+                }
             }
-            Self::split(buf, &c)
+            out
         }
         fn all_to_all(&self, sends: &[Vec<u8>]) -> Vec<Vec<u8>> {
             let n = self.size();
@@ -205,16 +247,41 @@ mod mpi_comm {
             let mut recv_counts = vec![0u64; n];
             self.world
                 .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
-            let (sc, sd, _) = Self::counts_displs(&send_counts);
-            let (rc, rd, total) = Self::counts_displs(&recv_counts);
-            let flat: Vec<u8> = Self::heap(&sends.concat());
-            let mut buf = vec![0u8; total.max(1)];
-            {
-                let send = mpi::datatype::Partition::new(&flat[..], &sc[..], &sd[..]);
-                let mut recv = PartitionMut::new(&mut buf[..], &rc[..], &rd[..]);
-                self.world.all_to_all_varcount_into(&send, &mut recv);
+            let limit = Self::round_limit(n);
+            // Rounds agree on every rank: the largest buffer any rank sends anywhere.
+            let mut largest = vec![0u64; n];
+            self.world.all_gather_into(
+                &send_counts.iter().copied().max().unwrap_or(0),
+                &mut largest[..],
+            );
+            let rounds = Self::rounds(largest.into_iter().max().unwrap_or(0), limit);
+            let mut out: Vec<Vec<u8>> = recv_counts
+                .iter()
+                .map(|&c| Vec::with_capacity(c as usize))
+                .collect();
+            for round in 0..rounds {
+                let part = |len: u64| Self::part(len, round, limit);
+                let sc: Vec<u64> = send_counts.iter().map(|&l| part(l).1).collect();
+                let rc: Vec<u64> = recv_counts.iter().map(|&l| part(l).1).collect();
+                let (sc, sd, _) = Self::counts_displs(&sc);
+                let (rc, rd, total) = Self::counts_displs(&rc);
+                let mut flat = Vec::with_capacity(sd.last().map_or(0, |&x| x as usize) + 1);
+                for s in sends {
+                    let (from, len) = part(s.len() as u64);
+                    flat.extend_from_slice(&s[from as usize..(from + len) as usize]);
+                }
+                let flat = Self::heap(&flat);
+                let mut buf = vec![0u8; total.max(1)];
+                {
+                    let send = mpi::datatype::Partition::new(&flat[..], &sc[..], &sd[..]);
+                    let mut recv = PartitionMut::new(&mut buf[..], &rc[..], &rd[..]);
+                    self.world.all_to_all_varcount_into(&send, &mut recv);
+                }
+                for (o, piece) in out.iter_mut().zip(Self::split(buf, &rc)) {
+                    o.extend_from_slice(&piece);
+                }
             }
-            Self::split(buf, &rc)
+            out
         }
         fn neighbor_exchange(&self, sends: &[(usize, Vec<u8>)], from: &[usize]) -> Vec<Vec<u8>> {
             let mut out = Vec::with_capacity(from.len());

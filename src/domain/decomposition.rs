@@ -388,7 +388,14 @@ impl Subdomains {
             // No weight: cut by volume.
             b.lo[axis] + share * extent[axis]
         };
-        let cut = cut.clamp(b.lo[axis] + min_width, b.hi[axis] - min_width);
+        // Leave each side room for its ranks along this axis where the box has it (a cut at
+        // 2h from a face would starve a side of several ranks), else the minimum 2h.
+        let (room_lo, room_hi) = (min_width * lower as f64, min_width * (count - lower) as f64);
+        let cut = if room_lo + room_hi <= extent[axis] {
+            cut.clamp(b.lo[axis] + room_lo, b.hi[axis] - room_hi)
+        } else {
+            cut.clamp(b.lo[axis] + min_width, b.hi[axis] - min_width)
+        };
         let (mut lo_box, mut hi_box) = (b, b);
         lo_box.hi[axis] = cut;
         hi_box.lo[axis] = cut;

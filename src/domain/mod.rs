@@ -147,13 +147,20 @@ impl Parallel {
             BalanceWeight::Cost => 0.0,
         };
         let weights = vec![per_particle; owned.len()];
-        let new = Subdomains::bisection(
+        let new = match Subdomains::bisection(
             &*self.comm,
             self.subdomains.domain,
             self.subdomains.halo,
             &owned.position,
             &weights,
-        )?;
+        ) {
+            Ok(n) => n,
+            Err(e) => {
+                // Every rank fails alike (same reduced histograms): keep the boxes in use.
+                tracing::warn!("rebalancing skipped, the current boxes are kept: {e}");
+                return Ok(false);
+            }
+        };
         let changed = new != self.subdomains;
         if changed {
             tracing::debug!(

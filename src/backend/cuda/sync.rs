@@ -178,7 +178,9 @@ impl CudaSimulation {
             && before.3 == p.mass
             && before.4 == p.inertia
             && before.5 == self.host.history;
-        if !motion_only || self.n == 0 {
+        // A decomposed run's device arrays interleave ghosts with the owned particles: it
+        // always uploads whole (and rebuilds, with fresh ghosts, at the next step).
+        if !motion_only || self.n == 0 || self.host.parallel.is_some() {
             return self.upload_from_host();
         }
         let st = &self.stream;
