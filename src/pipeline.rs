@@ -219,11 +219,7 @@ impl Simulation {
     /// evaluated yet: for a backend that evaluates the first forces itself
     /// ([`crate::backend::cuda::CudaSimulation::from_scene`]).
     pub fn new_unevaluated(scene: Scene) -> Result<Self, SimulationError> {
-        let mut s = scene.clone();
-        s.insertions.clear();
-        let mut sim = Simulation::new(s)?;
-        sim.scene = scene;
-        sim.inserter = Inserter::new(&sim.scene);
+        let mut sim = Simulation::new_empty(scene, None)?;
         sim.exchange()?;
         Ok(sim)
     }
@@ -239,22 +235,8 @@ impl Simulation {
         step: u64,
         next_id: u64,
     ) -> Result<Self, SimulationError> {
-        let mut sim = Simulation::new_empty(scene)?;
-        sim.particles = particles;
-        sim.step = step;
-        // A state that cannot be stepped (or owned by any rank) is refused, not carried.
-        sim.check_restored()?;
-        sim.history = history;
-        sim.inserter = inserter;
-        sim.time = time;
-        sim.step = step;
-        sim.next_id = next_id;
-        sim.dirty = true;
-        // The checkpoint holds the forces and torques of the last evaluation, which the next
-        // half kick uses: they are kept as stored (re-evaluating them would advance the
-        // tangential springs a second time), so the restarted run continues bitwise.
-        sim.refresh_radii();
-        Ok(sim)
+        let sim = Simulation::new_empty(scene, None)?;
+        sim.restored(particles, history, inserter, time, step, next_id)
     }
 
     /// [`Simulation::restore`] for this rank of a decomposed run: rank 0 passes the
@@ -275,22 +257,35 @@ impl Simulation {
         if comm.size() == 1 {
             return Self::restore(scene, particles, history, inserter, time, step, next_id);
         }
-        let mut s = scene.clone();
-        s.insertions.clear();
-        let par = Parallel::new(comm, &s)?;
-        let mut sim = Simulation::new_in(s, Some(Box::new(par)))?;
-        sim.scene = scene;
-        sim.particles = particles;
-        sim.step = step;
-        sim.check_restored()?;
-        sim.history = history;
-        sim.inserter = inserter;
-        sim.time = time;
-        sim.step = step;
-        sim.next_id = next_id;
-        sim.dirty = true;
-        sim.refresh_radii();
-        Ok(sim)
+        let par = Parallel::new(comm, &scene)?;
+        let sim = Simulation::new_empty(scene, Some(Box::new(par)))?;
+        sim.restored(particles, history, inserter, time, step, next_id)
+    }
+
+    /// `self` (without particles) holding a checkpoint's state. The checkpoint holds the forces
+    /// and torques of the last evaluation, which the next half kick uses: they are kept as
+    /// stored (re-evaluating them would advance the tangential springs a second time), so the
+    /// restarted run continues bitwise.
+    fn restored(
+        mut self,
+        particles: Particles,
+        history: ContactHistory,
+        inserter: Inserter,
+        time: f64,
+        step: u64,
+        next_id: u64,
+    ) -> Result<Self, SimulationError> {
+        self.particles = particles;
+        self.step = step;
+        // A state that cannot be stepped (or owned by any rank) is refused, not carried.
+        self.check_restored()?;
+        self.history = history;
+        self.inserter = inserter;
+        self.time = time;
+        self.next_id = next_id;
+        self.dirty = true;
+        self.refresh_radii();
+        Ok(self)
     }
 
     /// Re-evaluates forces after the particle state was edited directly (tests, set-up
@@ -307,10 +302,11 @@ impl Simulation {
         Ok(())
     }
 
-    fn new_empty(scene: Scene) -> Result<Self, SimulationError> {
+    /// A simulation of `scene` with no particle placed yet (its insertions still to come).
+    fn new_empty(scene: Scene, parallel: Option<Box<Parallel>>) -> Result<Self, SimulationError> {
         let mut s = scene.clone();
         s.insertions.clear();
-        let mut sim = Simulation::new(s)?;
+        let mut sim = Simulation::new_in(s, parallel)?;
         sim.scene = scene;
         sim.inserter = Inserter::new(&sim.scene);
         Ok(sim)
@@ -361,11 +357,8 @@ impl Simulation {
         if comm.size() == 1 {
             return Self::new_unevaluated(scene);
         }
-        let mut s = scene.clone();
-        s.insertions.clear();
-        let mut sim = Simulation::new_parallel(s, comm)?;
-        sim.scene = scene;
-        sim.inserter = Inserter::new(&sim.scene);
+        let par = Parallel::new(comm, &scene)?;
+        let mut sim = Simulation::new_empty(scene, Some(Box::new(par)))?;
         sim.dirty = true;
         sim.exchange()?;
         Ok(sim)
@@ -1048,23 +1041,6 @@ pub(crate) fn remove_particles(p: &mut Particles, remove: &[usize]) {
     for &i in remove {
         keep[i] = false;
     }
-    macro_rules! retain {
-        ($($field:ident),*) => {$(
-            let mut k = 0;
-            p.$field.retain(|_| { let r = keep[k]; k += 1; r });
-        )*};
-    }
-    retain!(
-        id,
-        kind,
-        scale,
-        position,
-        velocity,
-        orientation,
-        angular_velocity,
-        force,
-        torque,
-        mass,
-        inertia
-    );
+    let kept: Vec<usize> = (0..p.len()).filter(|&i| keep[i]).collect();
+    *p = p.select(&kept);
 }

@@ -106,6 +106,26 @@ impl Particles {
             .push(template.principal_inertia * (density * scale.powi(5)));
     }
 
+    /// The particles at local indices `which`, in that order.
+    pub fn select(&self, which: &[usize]) -> Particles {
+        macro_rules! pick {
+            ($($f:ident),*) => { Particles { $($f: which.iter().map(|&i| self.$f[i]).collect(),)* } };
+        }
+        pick!(
+            id,
+            kind,
+            scale,
+            position,
+            velocity,
+            orientation,
+            angular_velocity,
+            force,
+            torque,
+            mass,
+            inertia
+        )
+    }
+
     /// Appends every particle of `other`.
     pub fn extend_from(&mut self, other: &Particles) {
         self.id.extend_from_slice(&other.id);

@@ -76,20 +76,5 @@ pub fn gather_state(
 pub fn sorted_by_id(p: &Particles) -> Particles {
     let mut order: Vec<usize> = (0..p.len()).collect();
     order.sort_unstable_by_key(|&i| p.id[i]);
-    macro_rules! gather {
-        ($($f:ident),*) => { Particles { $($f: order.iter().map(|&i| p.$f[i]).collect(),)* } };
-    }
-    gather!(
-        id,
-        kind,
-        scale,
-        position,
-        velocity,
-        orientation,
-        angular_velocity,
-        force,
-        torque,
-        mass,
-        inertia
-    )
+    p.select(&order)
 }

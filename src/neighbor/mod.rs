@@ -74,14 +74,7 @@ impl PairList {
     /// Whether some particle moved more than half the skin since the last build, or the
     /// particle set changed.
     pub fn needs_rebuild(&self, positions: &[Vector3<f64>], bounds: &Bounds) -> bool {
-        if positions.len() != self.reference.len() || self.builds == 0 {
-            return true;
-        }
-        let limit = 0.25 * self.skin * self.skin;
-        positions
-            .par_iter()
-            .zip(self.reference.par_iter())
-            .any(|(x, r)| bounds.displacement(r, x).norm_squared() > limit)
+        positions.len() != self.reference.len() || self.moved_beyond_half_skin(positions, bounds)
     }
 
     /// Whether some of the first `positions.len()` particles moved more than half the skin

@@ -124,22 +124,7 @@ impl CudaSimulation {
         }
         if ghost.iter().any(|&g| g) {
             let keep: Vec<usize> = (0..n).filter(|&i| !ghost[i]).collect();
-            macro_rules! keep {
-                ($($f:ident),*) => {$( p.$f = keep.iter().map(|&i| p.$f[i]).collect(); )*};
-            }
-            keep!(
-                id,
-                kind,
-                scale,
-                position,
-                velocity,
-                orientation,
-                angular_velocity,
-                force,
-                torque,
-                mass,
-                inertia
-            );
+            *p = p.select(&keep);
         }
         // Until the first evaluation after an upload (a restart, an insertion) the device has
         // no contact outputs: the history and statistics are still the uploaded host ones.
