@@ -59,8 +59,6 @@ pub struct PairRef {
 pub struct PairList {
     /// Pairs of local indices `(a, b)` with `id[a] < id[b]`.
     pub pairs: Vec<[u32; 2]>,
-    /// Periodic image shift to add to the position of `b` (zero without periodic axes).
-    pub shifts: Vec<Vector3<f64>>,
     /// Per particle, its pairs sorted by partner global id: `refs[offsets[i]..offsets[i+1]]`.
     pub offsets: Vec<u32>,
     pub refs: Vec<PairRef>,
@@ -115,9 +113,10 @@ impl PairList {
 
     /// [`PairList::build`] for a rank's owned particles (the first `owned`) and its ghosts (the
     /// rest): particles are binned at `bins` on a grid over `region` (periodic only where the
-    /// rank spans the domain), but the pair test and the periodic shift use the minimum-image
-    /// displacement of the true `positions` in the whole `bounds`, bitwise as on one rank.
-    /// Pairs of two ghosts are left out: their owners evaluate them.
+    /// rank spans the domain), but the pair test uses the minimum-image displacement of the true
+    /// `positions` in the whole `bounds`, as on one rank (the evaluation takes each pair's
+    /// periodic image the same way, from the centroids of its step). Pairs of two ghosts are
+    /// left out: their owners evaluate them.
     #[allow(clippy::too_many_arguments)]
     pub fn build_in(
         &mut self,
@@ -135,7 +134,6 @@ impl PairList {
         self.builds += 1;
         self.reference = positions.to_vec();
         self.pairs.clear();
-        self.shifts.clear();
         if n == 0 {
             self.offsets = vec![0];
             self.refs.clear();
@@ -161,7 +159,7 @@ impl PairList {
         }
         // Candidates of particle i: partners j with a higher id (each pair once) in the 27
         // neighbouring cells, within the bounding-sphere reach plus skin.
-        let partners = |i: usize, out: &mut dyn FnMut(usize, Vector3<f64>)| {
+        let partners = |i: usize, out: &mut dyn FnMut(usize)| {
             let xi = positions[i];
             for c in grid.neighbours(cell[i]) {
                 for &j in &sorted[start[c] as usize..start[c + 1] as usize] {
@@ -172,7 +170,7 @@ impl PairList {
                     let d = bounds.displacement(&xi, &positions[j]);
                     let reach = radii[i] + radii[j] + skin;
                     if d.norm_squared() < reach * reach {
-                        out(j, d - (positions[j] - xi));
+                        out(j);
                     }
                 }
             }
@@ -182,7 +180,7 @@ impl PairList {
             .into_par_iter()
             .map(|i| {
                 let mut k = 0;
-                partners(i, &mut |_, _| k += 1);
+                partners(i, &mut |_| k += 1);
                 k
             })
             .collect();
@@ -192,29 +190,23 @@ impl PairList {
         }
         let total = offset[n];
         let mut pairs = vec![[0u32; 2]; total];
-        let mut shifts = vec![Vector3::zeros(); total];
-        type Chunk<'a> = (&'a mut [[u32; 2]], &'a mut [Vector3<f64>]);
-        let mut chunks: Vec<Chunk> = Vec::with_capacity(n);
+        let mut chunks: Vec<&mut [[u32; 2]]> = Vec::with_capacity(n);
         {
-            let (mut p_rest, mut s_rest) = (&mut pairs[..], &mut shifts[..]);
+            let mut rest = &mut pairs[..];
             for &c in &counts {
-                let (p, pr) = p_rest.split_at_mut(c as usize);
-                let (s, sr) = s_rest.split_at_mut(c as usize);
-                chunks.push((p, s));
-                p_rest = pr;
-                s_rest = sr;
+                let (p, r) = rest.split_at_mut(c as usize);
+                chunks.push(p);
+                rest = r;
             }
         }
-        chunks.into_par_iter().enumerate().for_each(|(i, (p, s))| {
+        chunks.into_par_iter().enumerate().for_each(|(i, p)| {
             let mut k = 0;
-            partners(i, &mut |j, shift| {
+            partners(i, &mut |j| {
                 p[k] = [i as u32, j as u32];
-                s[k] = shift;
                 k += 1;
             });
         });
         self.pairs = pairs;
-        self.shifts = shifts;
         self.index_by_particle(n, ids);
     }
 
