@@ -113,13 +113,10 @@ def row(mode, ranks, report, base_rate, base_ranks):
         return max((r["decomposition_seconds"][key] for r in per_rank), default=0.0)
 
     counts = [r["particles"] for r in per_rank] or [report["particles"]]
-    if mode == "strong":
-        speedup = rate / base_rate
-        eff = speedup * base_ranks / ranks
-    else:
-        # Weak: the same work per rank; ideal rate grows with the rank count.
-        speedup = rate / base_rate
-        eff = speedup * base_ranks / ranks
+    # Particle-steps per second against the first run's: ideally in proportion to the ranks,
+    # in strong scaling (same particles) and weak scaling (same particles per rank) alike.
+    speedup = rate / base_rate
+    eff = speedup * base_ranks / ranks
     return {
         "mode": mode, "ranks": ranks, "particles": report["particles"],
         "steps": report["steps"], "wall_seconds": report["wall_seconds"],
