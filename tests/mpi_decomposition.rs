@@ -20,10 +20,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::{Arc, Mutex, OnceLock};
 
-/// `polydem run SCENE` on `ranks` ranks (1: without mpirun) into `out`, with extra arguments.
-fn run(ranks: usize, scene: &str, out: &Path, extra: &[&str]) -> Output {
+/// `polydem run SCENE --backend BACKEND --out OUT` on `ranks` ranks (1: without mpirun), as
+/// root too, with warnings only in the log.
+fn command(ranks: usize, scene: &str, out: &Path, backend: &str) -> Command {
     let bin = polydem_bin();
-    let scene = repo_root().join(scene);
     let mut cmd = if ranks == 1 {
         Command::new(&bin)
     } else {
@@ -33,21 +33,32 @@ fn run(ranks: usize, scene: &str, out: &Path, extra: &[&str]) -> Output {
         c
     };
     cmd.arg("run")
-        .arg(&scene)
-        .args(["--backend", "cpu", "--out"])
+        .arg(repo_root().join(scene))
+        .args(["--backend", backend, "--out"])
         .arg(out)
-        .args(extra)
-        .env("RAYON_NUM_THREADS", "1")
         .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
         .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
         .env("RUST_LOG", "warn");
+    cmd
+}
+
+/// Runs `cmd`, with a clear message when it cannot start.
+fn output(mut cmd: Command) -> Output {
     cmd.output().unwrap_or_else(|e| {
         panic!(
-            "cannot start {} ({e}); the MPI tests need Open MPI's mpirun: run `make test`, which \
-             installs openmpi-bin",
-            if ranks == 1 { "polydem" } else { "mpirun" }
+            "cannot start {:?} ({e}); the MPI tests need Open MPI's mpirun: run `make test`, \
+             which installs openmpi-bin",
+            cmd.get_program()
         )
     })
+}
+
+/// `polydem run SCENE` on the CPU on `ranks` ranks into `out`, one rayon thread a rank, with
+/// extra arguments.
+fn run(ranks: usize, scene: &str, out: &Path, extra: &[&str]) -> Output {
+    let mut cmd = command(ranks, scene, out, "cpu");
+    cmd.args(extra).env("RAYON_NUM_THREADS", "1");
+    output(cmd)
 }
 
 /// As [`run`], and asserts that it succeeded; returns rank 0's summary.
@@ -179,26 +190,10 @@ fn pour_on_2_3_4_ranks_is_bitwise_the_single_rank_run() {
 fn collectives_in_small_rounds_give_the_same_run() {
     let one = reference("launch/mpi/pour.toml");
     let dir = temp_dir("mpi-rounds-3");
-    let o = Command::new("mpirun")
-        .args([
-            "--oversubscribe",
-            "-n",
-            "3",
-            "-x",
-            "POLYDEM_MPI_ROUND_BYTES",
-        ])
-        .arg(polydem_bin())
-        .arg("run")
-        .arg(repo_root().join("launch/mpi/pour.toml"))
-        .args(["--backend", "cpu", "--out"])
-        .arg(&dir)
-        .env("POLYDEM_MPI_ROUND_BYTES", "777")
-        .env("RAYON_NUM_THREADS", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .env("RUST_LOG", "warn")
-        .output()
-        .unwrap();
+    let mut cmd = command(3, "launch/mpi/pour.toml", &dir, "cpu");
+    cmd.env("POLYDEM_MPI_ROUND_BYTES", "777")
+        .env("RAYON_NUM_THREADS", "1");
+    let o = output(cmd);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     for step in ["step_0000001000.ckpt", "step_0000002000.ckpt"] {
         same_checkpoint(&one, &dir, step, "3 ranks, 777-byte rounds");
@@ -373,17 +368,7 @@ fn bad_parallel_requests_are_refused_clearly() {
     if polydem::backend::cuda_info().unavailable.is_none() {
         return; // a GPU machine runs the GPU ranks instead (gpu_ranks_* below)
     }
-    let o = Command::new("mpirun")
-        .args(["--oversubscribe", "-n", "2"])
-        .arg(polydem_bin())
-        .arg("run")
-        .arg(repo_root().join("launch/mpi/pour.toml"))
-        .args(["--backend", "cuda", "--out"])
-        .arg(&dir)
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .output()
-        .unwrap();
+    let o = output(command(2, "launch/mpi/pour.toml", &dir, "cuda"));
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("--backend cuda:"), "{err}");
@@ -392,28 +377,9 @@ fn bad_parallel_requests_are_refused_clearly() {
 
 /// `polydem run` on the GPU: `ranks` ranks (all on GPU 0 of a one-GPU machine) in `precision`.
 fn run_gpu(ranks: usize, scene: &str, out: &Path, precision: &str, extra: &[&str]) -> Value {
-    let mut args = vec!["--gpu-precision", precision];
-    args.extend_from_slice(extra);
-    let bin = polydem_bin();
-    let mut cmd = if ranks == 1 {
-        Command::new(&bin)
-    } else {
-        let mut c = Command::new("mpirun");
-        c.args(["--oversubscribe", "-n", &ranks.to_string()])
-            .arg(&bin);
-        c
-    };
-    let o = cmd
-        .arg("run")
-        .arg(repo_root().join(scene))
-        .args(["--backend", "cuda", "--out"])
-        .arg(out)
-        .args(&args)
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .env("RUST_LOG", "warn")
-        .output()
-        .unwrap();
+    let mut cmd = command(ranks, scene, out, "cuda");
+    cmd.args(["--gpu-precision", precision]).args(extra);
+    let o = output(cmd);
     assert!(
         o.status.success(),
         "{ranks} GPU rank(s) of {scene} failed:\n{}",

@@ -146,6 +146,34 @@ fn read_ghost(r: &mut Reader, scene: &Scene, g: &mut Ghosts) {
 pub const GHOST_BYTES_FULL: usize = 8 + 4 + 4 + 8 + 13 * 8;
 pub const GHOST_BYTES_MOTION: usize = 13 * 8;
 
+/// Exchanges the halo with the neighbours: each gets the records `write` makes of the plan's
+/// particles for it (`bytes` each); returns what every neighbour sent, in the plan's order,
+/// followed by this rank's own images.
+fn exchange(
+    comm: &dyn super::comm::Comm,
+    plan: &HaloPlan,
+    bytes: usize,
+    write: impl Fn(&mut Writer, usize, &[i8; 3]),
+) -> Vec<Vec<u8>> {
+    let records = |list: &[(u32, [i8; 3])]| {
+        let mut w = Writer::default();
+        w.buf.reserve(list.len() * bytes);
+        for (i, o) in list {
+            write(&mut w, *i as usize, o);
+        }
+        w.buf
+    };
+    let sends: Vec<(usize, Vec<u8>)> = plan
+        .neighbours
+        .iter()
+        .zip(&plan.sends)
+        .map(|(&r, list)| (r, records(list)))
+        .collect();
+    let mut received = comm.neighbor_exchange(&sends, &plan.neighbours);
+    received.push(records(&plan.self_images));
+    received
+}
+
 /// Sends every neighbour its ghosts (full records) and returns the ghosts received.
 pub fn build_ghosts(
     comm: &dyn super::comm::Comm,
@@ -153,34 +181,15 @@ pub fn build_ghosts(
     owned: &Particles,
     scene: &Scene,
 ) -> Ghosts {
-    let sends: Vec<(usize, Vec<u8>)> = plan
-        .neighbours
-        .iter()
-        .zip(&plan.sends)
-        .map(|(&r, list)| {
-            let mut w = Writer::default();
-            w.buf.reserve(list.len() * GHOST_BYTES_FULL);
-            for (i, o) in list {
-                write_ghost(&mut w, owned, *i as usize, o);
-            }
-            (r, w.buf)
-        })
-        .collect();
-    let received = comm.neighbor_exchange(&sends, &plan.neighbours);
+    let received = exchange(comm, plan, GHOST_BYTES_FULL, |w, i, o| {
+        write_ghost(w, owned, i, o)
+    });
     let mut g = Ghosts::default();
     for buf in &received {
         let mut r = Reader::new(buf);
         while !r.done() {
             read_ghost(&mut r, scene, &mut g);
         }
-    }
-    let mut w = Writer::default();
-    for (i, o) in &plan.self_images {
-        write_ghost(&mut w, owned, *i as usize, o);
-    }
-    let mut r = Reader::new(&w.buf);
-    while !r.done() {
-        read_ghost(&mut r, scene, &mut g);
     }
     g
 }
@@ -193,27 +202,12 @@ pub fn refresh_ghosts(
     owned: &Particles,
     ghosts: &mut Ghosts,
 ) {
-    let sends: Vec<(usize, Vec<u8>)> = plan
-        .neighbours
-        .iter()
-        .zip(&plan.sends)
-        .map(|(&r, list)| {
-            let mut w = Writer::default();
-            w.buf.reserve(list.len() * GHOST_BYTES_MOTION);
-            for (i, _) in list {
-                write_motion(&mut w, owned, *i as usize);
-            }
-            (r, w.buf)
-        })
-        .collect();
-    let received = comm.neighbor_exchange(&sends, &plan.neighbours);
-    let mut w = Writer::default();
-    for (i, _) in &plan.self_images {
-        write_motion(&mut w, owned, *i as usize);
-    }
+    let received = exchange(comm, plan, GHOST_BYTES_MOTION, |w, i, _| {
+        write_motion(w, owned, i)
+    });
     let p = &mut ghosts.particles;
     let mut k = 0;
-    for buf in received.iter().chain(std::iter::once(&w.buf)) {
+    for buf in &received {
         let mut r = Reader::new(buf);
         while !r.done() {
             p.position[k] = r.v3();
