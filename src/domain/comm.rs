@@ -53,18 +53,6 @@ pub trait Comm: Send + Sync {
         out
     }
 
-    /// Element-wise maxima over ranks.
-    fn max_f64(&self, x: &[f64]) -> Vec<f64> {
-        let parts = self.all_gather(&super::pack::f64s(x));
-        let mut out = vec![f64::NEG_INFINITY; x.len()];
-        for p in parts {
-            for (o, v) in out.iter_mut().zip(super::pack::read_f64s(&p)) {
-                *o = o.max(v);
-            }
-        }
-        out
-    }
-
     /// Whether `b` holds on some rank.
     fn any(&self, b: bool) -> bool {
         self.sum_u64(&[u64::from(b)])[0] > 0
@@ -89,11 +77,9 @@ impl Comm for SerialComm {
     fn all_to_all(&self, sends: &[Vec<u8>]) -> Vec<Vec<u8>> {
         vec![sends.first().cloned().unwrap_or_default()]
     }
-    fn neighbor_exchange(&self, sends: &[(usize, Vec<u8>)], from: &[usize]) -> Vec<Vec<u8>> {
-        // Only rank 0 exists: a message to itself is its own answer.
-        from.iter()
-            .map(|_| sends.first().map(|s| s.1.clone()).unwrap_or_default())
-            .collect()
+    fn neighbor_exchange(&self, _sends: &[(usize, Vec<u8>)], from: &[usize]) -> Vec<Vec<u8>> {
+        // A single rank has no neighbours (its own periodic images never go through here).
+        vec![Vec::new(); from.len()]
     }
     fn broadcast(&self, _data: &mut Vec<u8>, _root: usize) {}
     fn abort(&self, code: i32) -> ! {
@@ -137,11 +123,6 @@ mod mpi_comm {
                 world: universe.world(),
                 _universe: universe,
             })
-        }
-
-        /// The MPI library's version string.
-        pub fn library_version() -> String {
-            mpi::environment::library_version().unwrap_or_else(|_| "unknown".into())
         }
 
         fn counts_displs(counts: &[u64]) -> (Vec<Count>, Vec<Count>, usize) {
