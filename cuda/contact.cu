@@ -27,6 +27,10 @@ __constant__ double pd_template_normals[PD_TEMPLATES * PD_MAX_TEMPLATE_FACES * 3
 __constant__ double pd_template_offsets[PD_TEMPLATES * PD_MAX_TEMPLATE_FACES];
 __constant__ int pd_template_counts[PD_TEMPLATES * 2]; // vertices, faces
 __constant__ double pd_template_radius[PD_TEMPLATES];  // circumscribed radius
+// Face polygons (TemplateView::face_start, face_points) in global memory: threads of a warp
+// read different faces, which constant memory would serialise.
+__device__ unsigned short pd_template_face_start[PD_TEMPLATES * (PD_MAX_TEMPLATE_FACES + 1)];
+__device__ double pd_template_face_points[PD_TEMPLATES * PD_MAX_TEMPLATE_FACE_INDICES * 3];
 
 PD_DEVICE TemplateView template_view(unsigned int t) {
     TemplateView v;
@@ -35,6 +39,8 @@ PD_DEVICE TemplateView template_view(unsigned int t) {
     v.normals = pd_template_normals + (size_t)t * PD_MAX_TEMPLATE_FACES * 3;
     v.offsets = pd_template_offsets + (size_t)t * PD_MAX_TEMPLATE_FACES;
     v.n_faces = pd_template_counts[2 * t + 1];
+    v.face_start = pd_template_face_start + (size_t)t * (PD_MAX_TEMPLATE_FACES + 1);
+    v.face_points = pd_template_face_points + (size_t)t * PD_MAX_TEMPLATE_FACE_INDICES * 3;
     v.circumscribed_radius = pd_template_radius[t];
     return v;
 }
@@ -75,44 +81,54 @@ PD_DEVICE void report_error(unsigned int* error, int status, unsigned int where)
     }
 }
 
-// Stages 3–7 for the pairs of the list (Simulation::pair_contacts).
-// Pairs first .. n_pairs - 1 (a decomposed run evaluates the pairs of two owned particles while
-// the halo is in flight, then the rest). The periodic image of B is taken from the current
-// centroids by the minimum-image rule (`grid`), as the list build does, not from the build's
-// shift: a particle wrapped across a periodic face since the build keeps its contacts.
-extern "C" __global__ void pair_contacts(int first, int n_pairs, const int2* pairs, GridParams grid,
-                                         double* axes, ParticleView p, const PairMaterial* materials,
-                                         int n_materials, const double* spring_in, double* spring_out,
-                                         PairOutputs out, double dt, unsigned int* error) {
-    int kk = first + (int)(blockIdx.x * blockDim.x + threadIdx.x);
-    if (kk >= n_pairs) {
-        return;
-    }
-    size_t k = (size_t)kk;
-    int a = pairs[k].x, b = pairs[k].y;
+// The arguments every pair evaluation reads and writes.
+struct PairArgs {
+    const int2* pairs;
+    GridParams grid;
+    double* axes;
+    ParticleView p;
+    const PairMaterial* materials;
+    int n_materials;
+    const double* spring_in;
+    double* spring_out;
+    PairOutputs out;
+    double dt;
+    unsigned int* error;
+};
+static_assert(sizeof(PairArgs) == PD_SIZEOF_PAIR_ARGS, "PairArgs differs from Rust's simulation::PairArgs");
+
+// Stages 3–7 for pair k of the list (Simulation::pair_contacts). The periodic image of B is
+// taken from the current centroids by the minimum-image rule (`grid`), as the list build does,
+// not from the build's shift: a particle wrapped across a periodic face since the build keeps
+// its contacts. With kGjk false a polyhedral pair whose intersection the Chebyshev centre does
+// not prove is left for the deferred pass (returns true, its outputs cleared); with kGjk true
+// every pair is evaluated in full.
+template <bool kGjk> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) {
+    const ParticleView& p = q.p;
+    const PairOutputs& out = q.out;
+    PD_CLK_START
+    int a = q.pairs[k].x, b = q.pairs[k].y;
     V3<double> xa = load3(p.position, a);
     V3<double> xb = load3(p.position, b);
 #if PD_PERIODIC
-    xb = xb + (displacement(grid, xa, xb) - (xb - xa));
-#else
-    (void)grid;
+    xb = xb + (displacement(q.grid, xa, xb) - (xb - xa));
 #endif
     V3<double> d = xb - xa;
     double reach = p.radius[a] + p.radius[b];
     clear_pair(out, k);
-    store3(spring_out, k, zero3<double>());
+    store3(q.spring_out, k, zero3<double>());
     // Stage 3: bounding spheres.
     if (norm2(d) >= reach * reach) {
 #if !PD_SPHERES
-        store3(axes, k, zero3<double>());
+        store3(q.axes, k, zero3<double>());
 #endif
-        return;
+        return false;
     }
 #if PD_SPHERES
     // Stages 4–5 for spheres: the lens in closed form (Simulation::pair_contacts).
     Overlap<double> ov = sphere_lens(p.radius[a], p.radius[b], d);
     if (!(ov.volume > 0.0)) {
-        return;
+        return false;
     }
     ov.centroid = ov.centroid + xa;
 #else
@@ -128,29 +144,47 @@ extern "C" __global__ void pair_contacts(int first, int n_pairs, const int2* pai
     B.rot = qb;
     // Stage 4 shortcut: last step's separating axis, with a margin far above GJK's touching
     // tolerance, so the verdict is GJK's.
-    V3<double> axis = load3(axes, k);
+    V3<double> axis = load3(q.axes, k);
     if (!(axis == zero3<double>()) && axis_separates(A, B, axis, 1e-9 * reach)) {
-        return;
+        return false;
     }
-    // Stages 4–5: GJK, then the overlap.
+    // Stages 4–5: the overlap, with GJK where the Chebyshev centre proves nothing.
     PairWorkspace<GeomReal> ws;
     PairGeometry g;
-    int status = overlap_pair(ws, A, B, &g);
+    PD_CLK(0)
+    PD_CLK_COUNT(11)
+    int status = overlap_pair_t<GeomReal, kGjk>(ws, A, B, &g);
+#if defined(PD_PHASE_CLOCKS)
+    pd_t = clock64();
+#endif
+    if (status == STATUS_NEEDS_GJK) {
+        return true;
+    }
     if (status != STATUS_OK) {
-        report_error(error, status, (unsigned int)k);
-        store3(axes, k, zero3<double>());
-        return;
+        report_error(q.error, status, (unsigned int)k);
+        store3(q.axes, k, zero3<double>());
+        return false;
     }
     if (g.overlap.volume <= 0.0) {
-        store3(axes, k, g.separating_axis);
-        return;
+        store3(q.axes, k, g.separating_axis);
+        return false;
     }
-    store3(axes, k, zero3<double>());
+    store3(q.axes, k, zero3<double>());
     Overlap<double> ov = g.overlap;
 #endif
-    // Stage 7: the contact law.
+    // Stage 7: the contact law. The poses are read again rather than kept in registers through
+    // the geometry, which would size every thread's registers by them.
+#if !PD_SPHERES
+    xa = load3(p.position, a);
+    xb = load3(p.position, b);
+#if PD_PERIODIC
+    xb = xb + (displacement(q.grid, xa, xb) - (xb - xa));
+#endif
+    qa = load_quat(p.orientation, a);
+    qb = load_quat(p.orientation, b);
+#endif
     unsigned int ma = p.material[a], mb = p.material[b];
-    const PairMaterial& pm = materials[ma * (unsigned int)n_materials + mb];
+    const PairMaterial& pm = q.materials[ma * (unsigned int)q.n_materials + mb];
     ContactParameters params;
     params.normal_stiffness = p.cn[a] + p.cn[b];
     params.tangential_stiffness = p.ct[a] + p.ct[b];
@@ -180,15 +214,62 @@ extern "C" __global__ void pair_contacts(int first, int n_pairs, const int2* pai
 #endif
     V3<double> spring = zero3<double>();
 #if PD_FRICTION
-    spring = load3(spring_in, k);
+    spring = load3(q.spring_in, k);
 #endif
-    ContactForces f = contact_forces(params, pm.damping, ov, kin, &spring, dt);
+    ContactForces f = contact_forces(params, pm.damping, ov, kin, &spring, q.dt);
     store3(out.forces, 3 * k, f.force_b);
     store3(out.forces, 3 * k + 1, f.torque_a);
     store3(out.forces, 3 * k + 2, f.torque_b);
     out.energy[k] = f.elastic_energy;
     out.contact[k] = 1u;
-    store3(spring_out, k, spring);
+    store3(q.spring_out, k, spring);
+    PD_CLK(8)
+    return false;
+}
+
+#ifdef PD_PAIR_MAX_REGISTERS
+#define PD_PAIR_BOUNDS __maxnreg__(PD_PAIR_MAX_REGISTERS)
+#else
+#define PD_PAIR_BOUNDS
+#endif
+
+// Stages 3–7 for pairs first .. n_pairs − 1 (Simulation::pair_contacts). A decomposed run
+// evaluates the pairs of two owned particles while the halo is in flight, then the rest. The
+// pairs that need GJK are appended to `deferred` (count in deferred_count[0]) for
+// pair_contacts_deferred: GJK is needed by a few per cent of the pairs of a dense packing, and
+// compiled in here it would size every thread's registers.
+extern "C" __global__ void PD_PAIR_BOUNDS pair_contacts(int first, int n_pairs, PairArgs args, unsigned int* deferred,
+                                                       unsigned int* deferred_count) {
+    int kk = first + (int)(blockIdx.x * blockDim.x + threadIdx.x);
+    if (kk >= n_pairs) {
+        return;
+    }
+#if PD_SPHERES
+    (void)deferred;
+    (void)deferred_count;
+    evaluate_pair<true>(args, (size_t)kk);
+#else
+    if (evaluate_pair<false>(args, (size_t)kk)) {
+        deferred[atomicAdd(deferred_count, 1u)] = (unsigned int)kk;
+    }
+#endif
+}
+
+// The deferred pairs of pair_contacts, evaluated in full (GJK included); a grid-stride loop over
+// the count the pair pass left on the device, so the host launches it without reading it. Each
+// pair writes only its own slots, so the order of the list does not matter.
+extern "C" __global__ void pair_contacts_deferred(PairArgs args, const unsigned int* deferred,
+                                                  const unsigned int* deferred_count) {
+#if PD_SPHERES
+    (void)args;
+    (void)deferred;
+    (void)deferred_count;
+#else
+    const unsigned int n = deferred_count[0];
+    for (unsigned int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
+        evaluate_pair<true>(args, (size_t)deferred[i]);
+    }
+#endif
 }
 
 #if PD_WALLS

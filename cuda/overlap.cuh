@@ -15,6 +15,25 @@
 #include "polytope.cuh"
 #include "quickhull.cuh"
 
+// Profiling build (PD_PHASE_CLOCKS, from POLYDEM_PHASE_CLOCKS): thread-cycles of each phase of a
+// pair evaluation summed into pd_clk (slot meanings in src/backend/cuda/contacts.rs); the host
+// harness and ordinary builds compile the markers away.
+#if defined(PD_PHASE_CLOCKS) && defined(__CUDACC__)
+__device__ unsigned long long pd_clk[16];
+#define PD_CLK(i)                                                                                                     \
+    {                                                                                                                  \
+        long long n_ = clock64();                                                                                      \
+        atomicAdd(&pd_clk[i], (unsigned long long)(n_ - pd_t));                                                        \
+        pd_t = n_;                                                                                                     \
+    }
+#define PD_CLK_START long long pd_t = clock64();
+#define PD_CLK_COUNT(i) atomicAdd(&pd_clk[i], 1ull);
+#else
+#define PD_CLK(i)
+#define PD_CLK_START
+#define PD_CLK_COUNT(i)
+#endif
+
 namespace pd {
 
 // Geometric result of an overlap evaluation (Rust `Overlap<T>`).
@@ -84,6 +103,7 @@ PD_HD int overlap_about(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, cons
     *out = overlap_zero<T>();
     const int m = na + nb;
     if (m > PD_MAX_HULL_POINTS) return STATUS_TOO_MANY_PLANES;
+    PD_CLK_START
     ws.x0 = x0;
     T scale = T(0);
     T radius = Limits<T>::max();
@@ -115,6 +135,7 @@ PD_HD int overlap_about(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, cons
         if (result == STATUS_OK) break;
     }
     if (result != STATUS_OK) return result;
+    PD_CLK(13)
 
     // Share of each plane's face in S: 1 for B's planes, 0 for A's; coincident planes of A and B
     // (dual points within the hull tolerance) count half to each.
@@ -165,6 +186,7 @@ PD_HD int overlap_about(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, cons
             ws.first_moment[u] += (foot + p + q) * (tri_area * third);
         }
     }
+    PD_CLK(14)
     // The traversal orientation is a global convention of the hull; make the areas positive.
     T volume = T(0);
     for (int i = 0; i < m; ++i) volume += ws.delta[i] * ws.area[i];
@@ -275,38 +297,71 @@ PD_HD bool axis_separates(const BodyRef& A, const BodyRef& B, V3<double> axis, d
 
 // overlap::overlap_pair: narrow phase and overlap of A against B computed in arithmetic T in a
 // frame centred near the contact (DESIGN.md §3): frame origin on the centre line where the
-// bounding spheres would touch, GJK (seed Alg. I), planes culled to those that can cut the other
-// body, Chebyshev centre started at the origin, frame moved onto it in double, overlap about it
-// (seed Alg. II–VI), result back in world coordinates. Returns a status code; on error *out is
-// zeroed.
-template <class T> PD_HD int overlap_pair(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out) {
+// bounding spheres would touch, planes culled to those that reach the other's ball and the faces
+// that miss it set aside, Chebyshev centre started at the origin (the verdict when it proves an
+// interior; GJK, seed Alg. I, otherwise), frame moved onto it in double, overlap about it (seed
+// Alg. II–VI), result back in world coordinates. Returns a status code; on error *out is
+// zeroed. With kGjk false, a pair whose intersection the centre does not prove returns
+// STATUS_NEEDS_GJK instead of running GJK (the pair kernel defers those to a second pass, so
+// that its registers are not sized by GJK); with kGjk true this is Rust's overlap_pair.
+template <class T, bool kGjk>
+PD_HD int overlap_pair_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out) {
     out->intersects = 0;
     out->separating_axis = zero3<double>();
     out->overlap = overlap_zero<double>();
     V3<double> xa = A.pos, xb = B.pos;
     double ra = A.tpl.circumscribed_radius * A.scale, rb = B.tpl.circumscribed_radius * B.scale;
     V3<double> origin = xa + (xb - xa) * (ra / (ra + rb));
-    place(ws.a, A.tpl, A.scale, A.pos, A.rot, origin);
-    place(ws.b, B.tpl, B.scale, B.pos, B.rot, origin);
-    V3<T> dir = ws.b.centre - ws.a.centre;
-    V3<T> axis;
-    bool separated = gjk_separating_axis(ws.a.vertices, ws.a.n_vertices, ws.b.vertices, ws.b.n_vertices, dir, &axis);
-    if (separated) {
-        out->separating_axis = widen(axis);
-        return STATUS_OK;
-    }
-    retain_planes_cutting(ws.a, ws.b.vertices, ws.b.n_vertices);
-    retain_planes_cutting(ws.b, ws.a.vertices, ws.a.n_vertices);
+    PD_CLK_START
+    place_planes(ws.a, A.tpl, A.scale, A.pos, A.rot, origin);
+    place_planes(ws.b, B.tpl, B.scale, B.pos, B.rot, origin);
+    PD_CLK(1)
+    // Exact culling, then the faces that miss the other body set aside; the LP runs on the rest.
+    const T tol = T(64.0) * Limits<T>::epsilon() * T(ra + rb);
+    retain_planes_reaching(ws.a, ws.b.centre, T(rb), tol);
+    retain_planes_reaching(ws.b, ws.a.centre, T(ra), tol);
+    PD_CLK(2)
+    set_aside_faces_apart(ws.a, A.tpl, A.scale, A.pos, A.rot, ws.b, B.tpl, B.scale, B.pos, B.rot, origin, tol);
+    PD_CLK(3)
     ChebyshevCentre<T> centre = chebyshev_centre(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>());
+    PD_CLK(4)
+    // An inscribed ball inside the set-aside planes too proves an intersection with an interior
+    // (the narrow-phase verdict without GJK); otherwise GJK decides, and an intersection the
+    // check could not prove is evaluated on every plane that reaches the other body's ball.
+    bool proven = centre.radius > tol;
+    for (int i = 0; i < ws.a.n_aside && proven; ++i) proven = plane_distance(ws.a.aside[i], centre.point) < -tol;
+    for (int i = 0; i < ws.b.n_aside && proven; ++i) proven = plane_distance(ws.b.aside[i], centre.point) < -tol;
+    if (!proven) {
+        if (!kGjk) return STATUS_NEEDS_GJK;
+        PD_CLK_COUNT(12)
+        place_vertices(ws.a, A.tpl, A.scale, A.pos, A.rot, origin);
+        place_vertices(ws.b, B.tpl, B.scale, B.pos, B.rot, origin);
+        V3<T> dir = ws.b.centre - ws.a.centre;
+        V3<T> axis;
+        if (gjk_separating_axis(ws.a.vertices, ws.a.n_vertices, ws.b.vertices, ws.b.n_vertices, dir, &axis)) {
+            out->separating_axis = widen(axis);
+            return STATUS_OK;
+        }
+        restore_aside(ws.a);
+        restore_aside(ws.b);
+        centre = chebyshev_centre(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>());
+    }
+    PD_CLK(5)
     origin = origin + widen(centre.point);
     reposition_planes(ws.a, A.tpl, A.scale, A.pos, A.rot, origin);
     reposition_planes(ws.b, B.tpl, B.scale, B.pos, B.rot, origin);
+    PD_CLK(6)
     Overlap<T> o;
     int st = overlap_about(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>(), &o);
+    PD_CLK(7)
     if (st != STATUS_OK) return st;
     out->intersects = 1;
     out->overlap = to_world(o, origin);
     return STATUS_OK;
+}
+
+template <class T> PD_HD int overlap_pair(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out) {
+    return overlap_pair_t<T, true>(ws, A, B, out);
 }
 
 } // namespace pd

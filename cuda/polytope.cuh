@@ -16,6 +16,9 @@
 #ifndef PD_MAX_TEMPLATE_VERTICES
 #define PD_MAX_TEMPLATE_VERTICES 256
 #endif
+// Corners of all face polygons of one template: twice the edge count, at most 6V − 12 for a
+// polyhedron of V vertices (Euler).
+#define PD_MAX_TEMPLATE_FACE_INDICES (6 * PD_MAX_TEMPLATE_VERTICES - 12)
 
 namespace pd {
 
@@ -35,6 +38,9 @@ enum GeometryStatus {
     STATUS_HULL_TOPOLOGY = 5,
     // facet_prism: degenerate triangle (Rust returns None).
     STATUS_DEGENERATE_FACET = 6,
+    // overlap_pair_t without GJK: the centre did not prove an intersection, the pair needs the
+    // full evaluation (never returned by overlap_pair).
+    STATUS_NEEDS_GJK = 7,
 };
 
 // A convex template in its body frame, as plain arrays: kernels point it at constant or global
@@ -45,6 +51,11 @@ struct TemplateView {
     int n_vertices;
     const double* normals; // xyz interleaved, outward unit face normals, body frame
     const double* offsets; // face plane offsets: normal · x <= offset inside
+    // Face polygons: face i's vertices are points face_start[i] .. face_start[i + 1] − 1 of
+    // face_points (xyz interleaved, body frame: copies of the template vertices, so that a
+    // thread reads a face's corners without an index, in global memory for divergent reads).
+    const unsigned short* face_start;
+    const double* face_points;
     int n_faces;
     double circumscribed_radius;
 };
@@ -73,12 +84,36 @@ template <class T> struct PosedPolytope {
     V3<T> vertices[PD_MAX_TEMPLATE_VERTICES];
     int n_vertices;
     Plane<T> planes[PD_MAX_TEMPLATE_FACES];
-    // Template face of each plane slot (planes can be culled, see retain_planes_cutting).
+    // Template face of each plane slot (planes can be culled, see retain_planes_reaching).
     unsigned short face[PD_MAX_TEMPLATE_FACES];
     int n_planes;
+    // Planes set aside by set_aside_faces_apart, with their template faces.
+    Plane<T> aside[PD_MAX_TEMPLATE_FACES];
+    unsigned short aside_face[PD_MAX_TEMPLATE_FACES];
+    int n_aside;
     // The body's centroid (reference point of its pose) in the pair frame.
     V3<T> centre;
 };
+
+// A body's placement in a pair frame: x = R (s v) + (pos − origin), in double.
+struct Placement {
+    Mat3<double> rot;
+    V3<double> shift;
+    double scale;
+};
+
+PD_HD Placement placement(double scale, V3<double> pos, Quat<double> rot_q, V3<double> origin) {
+    Placement p;
+    p.rot = to_rotation_matrix(rot_q);
+    p.shift = pos - origin;
+    p.scale = scale;
+    return p;
+}
+
+// A template point placed and rounded to T, exactly as PosedPolytope::place places a vertex.
+template <class T> PD_HD V3<T> placed_point(const Placement& pl, V3<double> v) {
+    return cast3<T>(mul(pl.rot, v * pl.scale) + pl.shift);
+}
 
 // PosedPolytope::reposition_planes: recomputes the planes in use (after culling, only those
 // kept) for the frame origin `origin`; the vertices are left as they were. The rotation and the
@@ -97,6 +132,26 @@ PD_HD void reposition_planes(PosedPolytope<T>& p, const TemplateView& t, double 
     }
 }
 
+// The face planes half of PosedPolytope::place (every plane in use, none set aside); the
+// vertices are placed separately (place_vertices) when a support function needs them.
+template <class T>
+PD_HD void place_planes(PosedPolytope<T>& p, const TemplateView& t, double scale, V3<double> pos, Quat<double> rot_q,
+                        V3<double> origin) {
+    p.n_planes = min_(t.n_faces, PD_MAX_TEMPLATE_FACES);
+    p.n_aside = 0;
+    for (int i = 0; i < p.n_planes; ++i) p.face[i] = (unsigned short)i;
+    reposition_planes(p, t, scale, pos, rot_q, origin);
+}
+
+// The vertex half of PosedPolytope::place.
+template <class T>
+PD_HD void place_vertices(PosedPolytope<T>& p, const TemplateView& t, double scale, V3<double> pos, Quat<double> rot_q,
+                          V3<double> origin) {
+    Placement pl = placement(scale, pos, rot_q, origin);
+    p.n_vertices = min_(t.n_vertices, PD_MAX_TEMPLATE_VERTICES);
+    for (int i = 0; i < p.n_vertices; ++i) p.vertices[i] = placed_point<T>(pl, template_vertex(t, i));
+}
+
 // PosedPolytope::place: places template `t`, scaled by `scale`, at (pos, rot) (body frame →
 // world), in a frame whose origin is the world point `origin`: x = R (s v) + (pos − origin),
 // the subtraction done in double before rounding to T (DESIGN.md §3, relative coordinates).
@@ -104,15 +159,8 @@ PD_HD void reposition_planes(PosedPolytope<T>& p, const TemplateView& t, double 
 template <class T>
 PD_HD void place(PosedPolytope<T>& p, const TemplateView& t, double scale, V3<double> pos, Quat<double> rot_q,
                  V3<double> origin) {
-    Mat3<double> rot = to_rotation_matrix(rot_q);
-    V3<double> shift = pos - origin;
-    p.n_vertices = min_(t.n_vertices, PD_MAX_TEMPLATE_VERTICES);
-    for (int i = 0; i < p.n_vertices; ++i) {
-        p.vertices[i] = cast3<T>(mul(rot, template_vertex(t, i) * scale) + shift);
-    }
-    p.n_planes = min_(t.n_faces, PD_MAX_TEMPLATE_FACES);
-    for (int i = 0; i < p.n_planes; ++i) p.face[i] = (unsigned short)i;
-    reposition_planes(p, t, scale, pos, rot_q, origin);
+    place_vertices(p, t, scale, pos, rot_q, origin);
+    place_planes(p, t, scale, pos, rot_q, origin);
 }
 
 // PosedPolytope::radius: largest distance from the centre to a vertex.
@@ -122,28 +170,105 @@ template <class T> PD_HD T polytope_radius(const PosedPolytope<T>& p) {
     return r;
 }
 
-// PosedPolytope::retain_planes_cutting: drops the planes that cannot bound the intersection with
-// a body whose vertices are `other` (a half-space containing all of the other body contains the
-// whole intersection); planes within round-off (64 ε radius) of touching it are kept.
-template <class T> PD_HD void retain_planes_cutting(PosedPolytope<T>& p, const V3<T>* other, int n_other) {
-    T tol = T(64.0) * Limits<T>::epsilon() * polytope_radius(p);
+// PosedPolytope::retain_planes_reaching: drops the planes whose half-space contains the whole ball
+// (centre, radius) around the other body (it then contains the whole intersection); planes within
+// `tol` of touching the ball are kept.
+template <class T> PD_HD void retain_planes_reaching(PosedPolytope<T>& p, V3<T> centre, T radius, T tol) {
     int kept = 0;
     for (int i = 0; i < p.n_planes; ++i) {
         Plane<T> pl = p.planes[i];
-        bool cuts = false;
-        for (int j = 0; j < n_other; ++j) {
-            if (plane_distance(pl, other[j]) > -tol) {
-                cuts = true;
-                break;
-            }
-        }
-        if (cuts) {
+        if (plane_distance(pl, centre) + radius > -tol) {
             p.planes[kept] = pl;
             p.face[kept] = p.face[i];
             ++kept;
         }
     }
     p.n_planes = kept;
+    p.n_aside = 0;
+}
+
+// PosedPolytope::restore_aside: puts the planes set aside by set_aside_faces_apart back in use,
+// after those kept.
+template <class T> PD_HD void restore_aside(PosedPolytope<T>& p) {
+    for (int j = 0; j < p.n_aside; ++j) {
+        p.planes[p.n_planes] = p.aside[j];
+        p.face[p.n_planes] = p.aside_face[j];
+        p.n_planes += 1;
+    }
+    p.n_aside = 0;
+}
+
+// PosedPolytope::set_aside_beyond: moves the planes whose face polygon lies beyond one of
+// q[0..nq] ∪ r[0..nr] by more than `tol` to the set-aside list, keeping both lists in order. The
+// face corners are placed from the template (`pl`: the body's placement) exactly as
+// PosedPolytope::place places the vertices that Rust reads here.
+template <class T>
+PD_HD void set_aside_beyond(PosedPolytope<T>& p, const TemplateView& t, const Placement& pl, const Plane<T>* q, int nq,
+                            const Plane<T>* r, int nr, T tol) {
+    // Faces of up to this many corners are tested from registers (the test is a pure
+    // predicate, so the order of its distance evaluations does not change the result).
+    const int in_registers = 8;
+    int kept = 0;
+    p.n_aside = 0;
+    for (int i = 0; i < p.n_planes; ++i) {
+        const int f = p.face[i];
+        const int first = t.face_start[f], last = t.face_start[f + 1];
+        const int nv = last - first;
+        const double* corner = t.face_points + 3 * first;
+        bool apart = false;
+        if (nv <= in_registers) {
+            V3<T> fv[in_registers];
+#pragma unroll
+            for (int k = 0; k < in_registers; ++k) {
+                if (k < nv) fv[k] = placed_point<T>(pl, v3(corner[3 * k], corner[3 * k + 1], corner[3 * k + 2]));
+            }
+            for (int j = 0; j < nq + nr && !apart; ++j) {
+                const Plane<T> h = j < nq ? q[j] : r[j - nq];
+                // Most planes already fail on the first corner: test the rest only then.
+                if (!(plane_distance(h, fv[0]) > tol)) continue;
+                bool beyond = true;
+#pragma unroll
+                for (int k = 1; k < in_registers; ++k) {
+                    if (k < nv && beyond) beyond = plane_distance(h, fv[k]) > tol;
+                }
+                apart = beyond;
+            }
+        } else {
+            for (int j = 0; j < nq + nr && !apart; ++j) {
+                const Plane<T>& h = j < nq ? q[j] : r[j - nq];
+                bool beyond = true;
+                for (int k = 0; k < nv && beyond; ++k) {
+                    V3<T> c = placed_point<T>(pl, v3(corner[3 * k], corner[3 * k + 1], corner[3 * k + 2]));
+                    beyond = plane_distance(h, c) > tol;
+                }
+                apart = beyond;
+            }
+        }
+        if (apart) {
+            p.aside[p.n_aside] = p.planes[i];
+            p.aside_face[p.n_aside] = p.face[i];
+            p.n_aside += 1;
+        } else {
+            p.planes[kept] = p.planes[i];
+            p.face[kept] = p.face[i];
+            kept += 1;
+        }
+    }
+    p.n_planes = kept;
+}
+
+// polytope::set_aside_faces_apart: sets aside every plane of a whose face lies strictly beyond
+// one plane of b, and likewise for b (tested against a's planes as they were on entry). Such a
+// plane supports no facet of A ∩ B; the caller keeps the result only once an interior point
+// proves that A ∩ B has an interior (see overlap_pair). Each body: template, scale, position,
+// orientation; `origin`: the pair frame's origin.
+template <class T>
+PD_HD void set_aside_faces_apart(PosedPolytope<T>& a, const TemplateView& ta, double sa, V3<double> xa, Quat<double> qa,
+                                 PosedPolytope<T>& b, const TemplateView& tb, double sb, V3<double> xb, Quat<double> qb,
+                                 V3<double> origin, T tol) {
+    // One placement at a time: each is 13 doubles of registers.
+    set_aside_beyond(a, ta, placement(sa, xa, qa, origin), b.planes, b.n_planes, (const Plane<T>*)0, 0, tol);
+    set_aside_beyond(b, tb, placement(sb, xb, qb, origin), a.planes, a.n_planes, a.aside, a.n_aside, tol);
 }
 
 // PosedPolytope::set: a polytope given directly by its vertices and planes (already in the pair
@@ -154,6 +279,7 @@ PD_HD void set_polytope(PosedPolytope<T>& p, const V3<T>* vertices, int n_vertic
     p.n_vertices = min_(n_vertices, PD_MAX_TEMPLATE_VERTICES);
     for (int i = 0; i < p.n_vertices; ++i) p.vertices[i] = vertices[i];
     p.n_planes = min_(n_planes, PD_MAX_TEMPLATE_FACES);
+    p.n_aside = 0;
     for (int i = 0; i < p.n_planes; ++i) {
         p.planes[i] = planes[i];
         p.face[i] = (unsigned short)i;

@@ -15,15 +15,18 @@ using namespace pd;
 
 // Template table: template t's vertices at vertices[3 (t mv + i)], its face normals at
 // normals[3 (t mf + i)] with offsets[t mf + i]; counts[2t], counts[2t + 1] the vertex and face
-// counts; radius[t] the circumscribed radius.
+// counts; radius[t] the circumscribed radius; face polygons as in TemplateView.
 struct ProbeTemplates {
     const double* vertices;
     const double* normals;
     const double* offsets;
     const int* counts;
     const double* radius;
+    const unsigned short* face_start;    // max_faces + 1 per template
+    const double* face_points;           // 3 max_face_indices per template
     int max_vertices;
     int max_faces;
+    int max_face_indices;
 };
 
 PD_DEVICE TemplateView probe_template(const ProbeTemplates& t, int i) {
@@ -33,6 +36,8 @@ PD_DEVICE TemplateView probe_template(const ProbeTemplates& t, int i) {
     v.normals = t.normals + (size_t)i * t.max_faces * 3;
     v.offsets = t.offsets + (size_t)i * t.max_faces;
     v.n_faces = t.counts[2 * i + 1];
+    v.face_start = t.face_start + (size_t)i * (t.max_faces + 1);
+    v.face_points = t.face_points + (size_t)i * t.max_face_indices * 3;
     v.circumscribed_radius = t.radius[i];
     return v;
 }

@@ -18,45 +18,53 @@
 
 namespace pd {
 
+// Point and triangle indices: a byte when the capacities allow (a smaller per-thread
+// workspace), else 16 bits as in Rust.
+#if PD_MAX_HULL_FACES < 255 && PD_MAX_HULL_POINTS < 255
+typedef unsigned char HullIndex;
+#else
+typedef unsigned short HullIndex;
+#endif
 // Rust quickhull::NONE (u16::MAX): no triangle.
-#define PD_HULL_NONE ((unsigned short)0xFFFF)
+#define PD_HULL_NONE ((HullIndex)~(HullIndex)0)
 
 // One hull triangle (Rust `HullTriangle<T>`).
 template <class T> struct HullTriangle {
-    // Vertex (point) indices, counter-clockwise seen from outside.
-    unsigned short v[3];
-    // Neighbouring triangle across edge v[k] → v[(k+1) % 3].
-    unsigned short adj[3];
     // Outward unit normal.
     V3<T> normal;
     // Plane offset: normal · y = offset on the triangle.
     T offset;
-    // The vertex of smallest magnitude, from which distances are measured.
-    unsigned short anchor;
-    int far;
     T far_dist;
+    // Vertex (point) indices, counter-clockwise seen from outside.
+    HullIndex v[3];
+    // Neighbouring triangle across edge v[k] → v[(k+1) % 3].
+    HullIndex adj[3];
+    // The vertex of smallest magnitude, from which distances are measured.
+    HullIndex anchor;
+    short far;
     bool alive;
-    pd_u32 mark;
+    // Visited by the current expansion's search. Rust keeps an epoch number instead; both are
+    // equivalent because every visited triangle is deleted (and unmarked) by the same expansion.
+    bool mark;
 };
 
 // Workspace and result of the incremental Quickhull (Rust `DualHull<T>`). build() initialises
-// everything it reads except `epoch`, whose value does not matter (live triangles carry mark 0
-// between expansions); zero-initialising the workspace once, as Rust's `Default` does, keeps
-// memory checkers quiet.
+// everything it reads (live triangles are unmarked between expansions); zero-initialising the
+// workspace once, as Rust's `Default` does, keeps memory checkers quiet.
 template <class T> struct DualHull {
-    V3<T> pts[PD_MAX_HULL_POINTS];
+    // The input points, not copied (Rust copies them; they are not modified during a build).
+    const V3<T>* pts;
     int n_pts;
     HullTriangle<T> tri[PD_MAX_HULL_FACES];
     int n_tri;
-    unsigned short free_[PD_MAX_HULL_FACES];
+    HullIndex free_[PD_MAX_HULL_FACES];
     int n_free;
     // Per point: the triangle it is outside of (>= 0), -1 inside, -2 a hull vertex.
     int conflict[PD_MAX_HULL_POINTS];
-    unsigned short stack[PD_MAX_HULL_FACES];
-    unsigned short horizon[PD_MAX_HULL_FACES][3];
-    unsigned short created[PD_MAX_HULL_FACES];
-    unsigned short orphans[PD_MAX_HULL_POINTS];
-    pd_u32 epoch;
+    HullIndex stack[PD_MAX_HULL_FACES];
+    HullIndex horizon[PD_MAX_HULL_FACES][3];
+    HullIndex created[PD_MAX_HULL_FACES];
+    HullIndex orphans[PD_MAX_HULL_POINTS];
     T eps;
 
     // DualHull::is_vertex: whether point i is a vertex of the hull.
@@ -85,15 +93,15 @@ template <class T> struct DualHull {
     }
 
     // DualHull::make: creates triangle (a, b, c) with its plane; adjacency is set by the caller.
-    PD_HD int make(unsigned short a, unsigned short b, unsigned short c, int* slot) {
+    PD_HD int make(HullIndex a, HullIndex b, HullIndex c, int* slot) {
         int s;
         int st = alloc(&s);
         if (st != STATUS_OK) return st;
         // Cross the two edges leaving the smallest vertex.
-        unsigned short ids[3] = {a, b, c};
+        HullIndex ids[3] = {a, b, c};
         T mags[3] = {norm2(pts[a]), norm2(pts[b]), norm2(pts[c])};
         int k = (mags[0] <= mags[1] && mags[0] <= mags[2]) ? 0 : (mags[1] <= mags[2] ? 1 : 2);
-        unsigned short anchor = ids[k];
+        HullIndex anchor = ids[k];
         V3<T> p0 = pts[anchor];
         V3<T> p1 = pts[ids[(k + 1) % 3]];
         V3<T> p2 = pts[ids[(k + 2) % 3]];
@@ -113,7 +121,7 @@ template <class T> struct DualHull {
         t.far = -1;
         t.far_dist = T(0);
         t.alive = true;
-        t.mark = 0;
+        t.mark = false;
         *slot = s;
         return STATUS_OK;
     }
@@ -121,7 +129,7 @@ template <class T> struct DualHull {
     // DualHull::farthest_outside over the candidate slots cand[0..n_cand] (or, with cand null,
     // every slot 0..n_cand): the triangle p is farthest outside of beyond the tolerance (seed
     // Alg. IV). Returns the slot or -1, with the distance in *dist.
-    PD_HD int farthest_outside(int p, const unsigned short* cand, int n_cand, T* dist) const {
+    PD_HD int farthest_outside(int p, const HullIndex* cand, int n_cand, T* dist) const {
         int best = -1;
         T bd = T(0);
         for (int c = 0; c < n_cand; ++c) {
@@ -144,7 +152,7 @@ template <class T> struct DualHull {
             conflict[p] = s;
             HullTriangle<T>& t = tri[s];
             if (t.far < 0 || d > t.far_dist) {
-                t.far = p;
+                t.far = (short)p;
                 t.far_dist = d;
             }
         } else {
@@ -208,27 +216,20 @@ template <class T> struct DualHull {
             i1 = i2;
             i2 = tmp;
         }
-        unsigned short ids[4] = {(unsigned short)i0, (unsigned short)i1, (unsigned short)i2, (unsigned short)i3};
+        HullIndex ids[4] = {(HullIndex)i0, (HullIndex)i1, (HullIndex)i2, (HullIndex)i3};
         const int layout[4][3] = {{0, 1, 2}, {0, 3, 1}, {1, 3, 2}, {2, 3, 0}};
-        unsigned short slots[4];
+        HullIndex slots[4];
         for (int f = 0; f < 4; ++f) {
             int s;
             int st = make(ids[layout[f][0]], ids[layout[f][1]], ids[layout[f][2]], &s);
             if (st != STATUS_OK) return st;
-            slots[f] = (unsigned short)s;
+            slots[f] = (HullIndex)s;
         }
-        // Adjacency: the twin of edge a→b is the edge b→a of another triangle.
-        for (int si = 0; si < 4; ++si) {
-            int s = slots[si];
-            for (int k = 0; k < 3; ++k) {
-                unsigned short ea = tri[s].v[k], eb = tri[s].v[(k + 1) % 3];
-                for (int oi = 0; oi < 4; ++oi) {
-                    int o = slots[oi];
-                    for (int j = 0; j < 3; ++j) {
-                        if (tri[o].v[j] == eb && tri[o].v[(j + 1) % 3] == ea) tri[s].adj[k] = (unsigned short)o;
-                    }
-                }
-            }
+        // Adjacency: the twin of edge a→b is the edge b→a of another triangle; for the four
+        // distinct points of this layout that is always the same triangle.
+        const int twin[4][3] = {{1, 2, 3}, {3, 2, 0}, {1, 3, 0}, {2, 1, 0}};
+        for (int f = 0; f < 4; ++f) {
+            for (int k = 0; k < 3; ++k) tri[slots[f]].adj[k] = slots[twin[f][k]];
         }
         for (int q = 0; q < 4; ++q) conflict[ids[q]] = -2;
         for (int p = 0; p < n; ++p) {
@@ -245,30 +246,27 @@ template <class T> struct DualHull {
     PD_HD int expand(int base) {
         const int apex = tri[base].far;
         conflict[apex] = -2;
-        epoch = epoch + 1u;
-        if (epoch < 1u) epoch = 1u; // Rust: wrapping_add(1).max(1)
-        const pd_u32 ep = epoch;
 
         // Visible triangles by depth-first search from `base`; horizon edges lie between a
         // visible and a non-visible triangle.
         int n_stack = 1;
-        stack[0] = (unsigned short)base;
-        tri[base].mark = ep;
+        stack[0] = (HullIndex)base;
+        tri[base].mark = true;
         int n_horizon = 0;
         while (n_stack > 0) {
             n_stack -= 1;
             int s = stack[n_stack];
             for (int k = 0; k < 3; ++k) {
                 int g = tri[s].adj[k];
-                if (tri[g].mark == ep) continue;
+                if (tri[g].mark) continue;
                 if (distance(g, apex) > eps) {
-                    tri[g].mark = ep;
-                    stack[n_stack] = (unsigned short)g;
+                    tri[g].mark = true;
+                    stack[n_stack] = (HullIndex)g;
                     n_stack += 1;
                 } else {
                     horizon[n_horizon][0] = tri[s].v[k];
                     horizon[n_horizon][1] = tri[s].v[(k + 1) % 3];
-                    horizon[n_horizon][2] = (unsigned short)g;
+                    horizon[n_horizon][2] = (HullIndex)g;
                     n_horizon += 1;
                 }
             }
@@ -279,34 +277,34 @@ template <class T> struct DualHull {
         int n_orphans = 0;
         for (int p = 0; p < n_pts; ++p) {
             int c = conflict[p];
-            if (c >= 0 && tri[c].mark == ep) orphans[n_orphans++] = (unsigned short)p;
+            if (c >= 0 && tri[c].mark) orphans[n_orphans++] = (HullIndex)p;
         }
         // Delete the visible triangles.
         for (int s = 0; s < n_tri; ++s) {
-            if (tri[s].alive && tri[s].mark == ep) {
+            if (tri[s].alive && tri[s].mark) {
                 tri[s].alive = false;
-                tri[s].mark = 0;
-                free_[n_free++] = (unsigned short)s;
+                tri[s].mark = false;
+                free_[n_free++] = (HullIndex)s;
             }
         }
         // New triangles (a, b, apex) on each horizon edge a→b, keeping the orientation.
         for (int h = 0; h < n_horizon; ++h) {
-            unsigned short ha = horizon[h][0], hb = horizon[h][1], g = horizon[h][2];
+            HullIndex ha = horizon[h][0], hb = horizon[h][1], g = horizon[h][2];
             int s;
-            int st = make(ha, hb, (unsigned short)apex, &s);
+            int st = make(ha, hb, (HullIndex)apex, &s);
             if (st != STATUS_OK) return st;
-            created[h] = (unsigned short)s;
+            created[h] = (HullIndex)s;
             tri[s].adj[0] = g;
             HullTriangle<T>& gt = tri[g];
             for (int j = 0; j < 3; ++j) {
-                if (gt.v[j] == hb && gt.v[(j + 1) % 3] == ha) gt.adj[j] = (unsigned short)s;
+                if (gt.v[j] == hb && gt.v[(j + 1) % 3] == ha) gt.adj[j] = (HullIndex)s;
             }
         }
         // Link the new triangles around the apex; a horizon that is not a simple cycle is a
         // round-off failure.
         for (int h = 0; h < n_horizon; ++h) {
-            unsigned short ha = horizon[h][0], hb = horizon[h][1];
-            unsigned short next = PD_HULL_NONE, prev = PD_HULL_NONE;
+            HullIndex ha = horizon[h][0], hb = horizon[h][1];
+            HullIndex next = PD_HULL_NONE, prev = PD_HULL_NONE;
             for (int j = 0; j < n_horizon; ++j) {
                 if (horizon[j][0] == hb) {
                     if (next != PD_HULL_NONE) return STATUS_HULL_TOPOLOGY;
@@ -328,7 +326,7 @@ template <class T> struct DualHull {
             int p = orphans[o];
             T d;
             int s = farthest_outside(p, created, n_horizon, &d);
-            if (s < 0) s = farthest_outside(p, (const unsigned short*)0, n_tri, &d);
+            if (s < 0) s = farthest_outside(p, (const HullIndex*)0, n_tri, &d);
             set_conflict(p, s, d);
         }
         return STATUS_OK;
@@ -340,7 +338,7 @@ template <class T> struct DualHull {
         if (n > PD_MAX_HULL_POINTS) return STATUS_HULL_TOO_MANY_POINTS;
         if (n < 4) return STATUS_HULL_DEGENERATE;
         n_pts = n;
-        for (int i = 0; i < n; ++i) pts[i] = points[i];
+        pts = points;
         n_tri = 0;
         n_free = 0;
         T max_coord = T(0);

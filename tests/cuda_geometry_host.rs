@@ -261,6 +261,10 @@ fn case_file(shapes: &[Shape], pairs: &[PairCase], facets: &[FacetCase]) -> Stri
         for f in &t.faces {
             hex3(&mut out, &f.normal);
             hex(&mut out, f.offset);
+            write!(out, " {}", f.vertices.len()).unwrap();
+            for v in &f.vertices {
+                write!(out, " {v}").unwrap();
+            }
         }
         out.push('\n');
         hex(&mut out, t.circumscribed_radius);

@@ -9,7 +9,8 @@
 // Input (whitespace-separated tokens; every floating-point number is the 16-hex-digit bit
 // pattern of an IEEE double, so that values cross the process boundary exactly):
 //   templates N
-//     N × { nv, nv × (x y z), nf, nf × (nx ny nz offset), circumscribed_radius }
+//     N × { nv, nv × (x y z), nf, nf × (nx ny nz offset k v_1 … v_k), circumscribed_radius }
+//     (k decimal vertex indices: the face polygon)
 //   pairs N
 //     N × { ta sa pa(3) qa(w x y z)  tb sb pb(3) qb(w x y z)  axis(3) margin }
 //   facets N
@@ -36,6 +37,8 @@ namespace {
 
 struct Template {
     std::vector<double> vertices, normals, offsets;
+    std::vector<unsigned short> face_start;
+    std::vector<double> face_points;
     double radius = 0.0;
     pd::TemplateView view() const {
         pd::TemplateView v;
@@ -44,6 +47,8 @@ struct Template {
         v.normals = normals.data();
         v.offsets = offsets.data();
         v.n_faces = int(offsets.size());
+        v.face_start = face_start.data();
+        v.face_points = face_points.data();
         v.circumscribed_radius = radius;
         return v;
     }
@@ -212,7 +217,15 @@ int main(int argc, char** argv) {
         for (long i = 0; i < nf; ++i) {
             for (int k = 0; k < 3; ++k) t.normals.push_back(read_f64());
             t.offsets.push_back(read_f64());
+            long fv = read_int();
+            t.face_start.push_back((unsigned short)(t.face_points.size() / 3));
+            for (long k = 0; k < fv; ++k) {
+                long v = read_int();
+                if (v < 0 || v >= nv) fail("face vertex index");
+                for (int c = 0; c < 3; ++c) t.face_points.push_back(t.vertices[3 * v + c]);
+            }
         }
+        t.face_start.push_back((unsigned short)(t.face_points.size() / 3));
         t.radius = read_f64();
     }
     auto body = [&](long ti, double s, pd::V3<double> p, pd::Quat<double> q) {

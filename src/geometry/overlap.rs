@@ -28,7 +28,7 @@
 use super::Real;
 use super::gjk::gjk_separating_axis;
 use super::interior::chebyshev_centre;
-use super::polytope::{Plane, PosedPolytope, widen};
+use super::polytope::{Plane, PosedPolytope, set_aside_faces_apart, widen};
 use super::quickhull::{DualHull, HullError, MAX_HULL_FACES, MAX_HULL_POINTS};
 use crate::shape::ConvexTemplate;
 use nalgebra::{Isometry3, Vector3};
@@ -158,7 +158,7 @@ pub fn overlap_volume<T: Real>(
 }
 
 /// [`overlap_volume`] about a given interior point `x0` (normally the Chebyshev centre).
-fn overlap_about<T: Real>(
+pub fn overlap_about<T: Real>(
     ws: &mut OverlapWorkspace<T>,
     a: &[Plane<T>],
     b: &[Plane<T>],
@@ -370,6 +370,14 @@ pub fn axis_separates(
 
 /// Narrow phase and overlap of template `ta` scaled by `sa` at `pose_a` against `tb` at
 /// `pose_b`, computed in arithmetic `T` in a frame centred near the contact (DESIGN.md §3).
+///
+/// The planes are culled to those that reach the other body's bounding ball, and the faces that miss it are set
+/// aside ([`set_aside_faces_apart`]). The Chebyshev centre of what is left is the verdict when
+/// its ball proves an interior (it lies inside the set-aside planes too): the bodies intersect
+/// and the overlap is evaluated on the planes left, about 5–6 for a dense packing where every
+/// cut plane gives 12–16. Otherwise GJK (seed Alg. I) decides and gives the separating axis,
+/// and an intersection that the centre could not prove (touching or flat) is evaluated on every
+/// plane that reaches the other body's ball.
 pub fn overlap_pair<T: Real>(
     ws: &mut PairWorkspace<T>,
     (ta, sa, pose_a): (&ConvexTemplate, f64, &Isometry3<f64>),
@@ -383,20 +391,43 @@ pub fn overlap_pair<T: Real>(
     let origin = xa + (xb - xa) * (ra / (ra + rb));
     ws.a.place(ta, sa, pose_a, &origin);
     ws.b.place(tb, sb, pose_b, &origin);
-    let dir = ws.b.centre - ws.a.centre;
-    let separating_axis = gjk_separating_axis(ws.a.vertices(), ws.b.vertices(), dir);
+    // Exact culling first (a plane whose half-space holds the other body's bounding ball bounds
+    // nothing), then the faces that miss the other body set aside: what is left is about the
+    // planes that bound the overlap, and the LP below runs on those.
+    let tol = T::of(64.0) * T::EPSILON * T::of(ra + rb);
+    ws.a.retain_planes_reaching(&ws.b.centre, T::of(rb), tol);
+    ws.b.retain_planes_reaching(&ws.a.centre, T::of(ra), tol);
+    set_aside_faces_apart(&mut ws.a, ta, &mut ws.b, tb, tol);
+    // Start the LP at the frame origin, which is near the contact: its steps are then on the
+    // scale of the overlap, and so is their round-off (which matters in f32 when one body is
+    // much smaller than the distance between the centres).
+    let mut centre = chebyshev_centre(ws.a.planes(), ws.b.planes(), Vector3::zeros());
+    // An inscribed ball inside the set-aside planes too proves that A ∩ B has an interior: the
+    // bodies intersect (the narrow-phase verdict, without GJK) and the set-aside planes are
+    // redundant. Otherwise GJK decides, and an intersection that the check could not prove
+    // (touching or flat) is evaluated on every plane that cuts the other body.
+    let inside = |p: &Plane<T>| p.distance(&centre.point) < -tol;
+    let proven = centre.radius > tol
+        && ws.a.aside_planes().iter().all(inside)
+        && ws.b.aside_planes().iter().all(inside);
+    let separating_axis = if proven {
+        None
+    } else {
+        let dir = ws.b.centre - ws.a.centre;
+        let axis = gjk_separating_axis(ws.a.vertices(), ws.b.vertices(), dir);
+        if axis.is_none() {
+            ws.a.restore_aside();
+            ws.b.restore_aside();
+            centre = chebyshev_centre(ws.a.planes(), ws.b.planes(), Vector3::zeros());
+        }
+        axis
+    };
     let intersects = separating_axis.is_none();
     let overlap = if intersects {
-        // Interior point in T, then the frame moved onto it (in f64) before the dual transform:
-        // the planes that bound the overlap then have offsets of the overlap's size, so their
+        // The frame moved onto the interior point (in f64) before the dual transform: the
+        // planes that bound the overlap then have offsets of the overlap's size, so their
         // distances δ keep full relative precision in f32 even for a shallow contact of bodies
         // large compared with it.
-        ws.a.retain_planes_cutting(ws.b.vertices());
-        ws.b.retain_planes_cutting(ws.a.vertices());
-        // Start the LP at the frame origin, which is near the contact: its steps are then on the
-        // scale of the overlap, and so is their round-off (which matters in f32 when one body is
-        // much smaller than the distance between the centres).
-        let centre = chebyshev_centre(ws.a.planes(), ws.b.planes(), Vector3::zeros());
         let origin = origin + widen(&centre.point);
         ws.a.reposition_planes(ta, sa, pose_a, &origin);
         ws.b.reposition_planes(tb, sb, pose_b, &origin);

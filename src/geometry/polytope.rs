@@ -30,9 +30,13 @@ pub struct PosedPolytope<T: Real> {
     n_vertices: usize,
     planes: [Plane<T>; MAX_TEMPLATE_FACES],
     /// Template face of each plane slot (planes can be culled, see
-    /// [`PosedPolytope::retain_planes_cutting`]).
+    /// [`PosedPolytope::retain_planes_reaching`]).
     face: [u16; MAX_TEMPLATE_FACES],
     n_planes: usize,
+    /// Planes set aside by [`set_aside_faces_apart`], with their template faces.
+    aside: [Plane<T>; MAX_TEMPLATE_FACES],
+    aside_face: [u16; MAX_TEMPLATE_FACES],
+    n_aside: usize,
     /// The body's centroid (reference point of its pose) in the pair frame.
     pub centre: Vector3<T>,
 }
@@ -45,6 +49,9 @@ impl<T: Real> Default for PosedPolytope<T> {
             planes: [Plane::default(); MAX_TEMPLATE_FACES],
             face: [0; MAX_TEMPLATE_FACES],
             n_planes: 0,
+            aside: [Plane::default(); MAX_TEMPLATE_FACES],
+            aside_face: [0; MAX_TEMPLATE_FACES],
+            n_aside: 0,
             centre: Vector3::zeros(),
         }
     }
@@ -70,6 +77,7 @@ impl<T: Real> PosedPolytope<T> {
             *dst = cast(&(rot * (v.coords * scale) + shift));
         }
         self.n_planes = template.faces.len().min(MAX_TEMPLATE_FACES);
+        self.n_aside = 0;
         for (i, slot) in self.face[..self.n_planes].iter_mut().enumerate() {
             *slot = i as u16;
         }
@@ -105,29 +113,44 @@ impl<T: Real> PosedPolytope<T> {
         self.vertices[..self.n_vertices].copy_from_slice(&vertices[..self.n_vertices]);
         self.n_planes = planes.len().min(MAX_TEMPLATE_FACES);
         self.planes[..self.n_planes].copy_from_slice(&planes[..self.n_planes]);
+        self.n_aside = 0;
         for (i, slot) in self.face[..self.n_planes].iter_mut().enumerate() {
             *slot = i as u16;
         }
         self.centre = centre;
     }
 
-    /// Drops the planes that cannot bound the intersection with a body whose vertices are
-    /// `other`: a half-space that contains all of the other body contains the whole
-    /// intersection. This is exact, and for a shallow contact it leaves only the few faces near
-    /// it, which is what the dual hull's cost grows with. Planes within round-off of touching the
-    /// other body are kept.
-    pub fn retain_planes_cutting(&mut self, other: &[Vector3<T>]) {
-        let tol = T::of(64.0) * T::EPSILON * self.radius();
+    /// Drops the planes that cannot bound the intersection with a body inside the ball
+    /// (`centre`, `radius`): a half-space that contains the ball contains the whole
+    /// intersection. This is exact; planes within `tol` of touching the ball are kept. One
+    /// distance per plane: the face test of [`set_aside_faces_apart`] does the fine culling.
+    pub fn retain_planes_reaching(&mut self, centre: &Vector3<T>, radius: T, tol: T) {
         let mut kept = 0;
         for i in 0..self.n_planes {
             let p = self.planes[i];
-            if other.iter().any(|v| p.distance(v) > -tol) {
+            if p.distance(centre) + radius > -tol {
                 self.planes[kept] = p;
                 self.face[kept] = self.face[i];
                 kept += 1;
             }
         }
         self.n_planes = kept;
+        self.n_aside = 0;
+    }
+
+    /// The planes set aside by [`set_aside_faces_apart`] (not in [`PosedPolytope::planes`]).
+    pub fn aside_planes(&self) -> &[Plane<T>] {
+        &self.aside[..self.n_aside]
+    }
+
+    /// Puts the planes set aside by [`set_aside_faces_apart`] back in use, after those kept.
+    pub fn restore_aside(&mut self) {
+        for j in 0..self.n_aside {
+            self.planes[self.n_planes] = self.aside[j];
+            self.face[self.n_planes] = self.aside_face[j];
+            self.n_planes += 1;
+        }
+        self.n_aside = 0;
     }
 
     /// The placed vertices.
@@ -146,6 +169,63 @@ impl<T: Real> PosedPolytope<T> {
             .iter()
             .map(|v| (v - self.centre).norm())
             .fold(T::zero(), |a, b| a.max(b))
+    }
+}
+
+/// Sets aside every plane of `a` whose face polygon lies strictly beyond one plane of `b` (by
+/// more than round-off), and likewise for `b`: such a face does not meet the other body, so its
+/// plane supports no facet of `A ∩ B`. When `A ∩ B` has an interior its facet-defining planes
+/// alone define it, and the set-aside planes are redundant; for a dense packing of dodecahedra
+/// this leaves 5–6 of the 12–16 planes that [`PosedPolytope::retain_planes_reaching`] keeps,
+/// and the interior-point LP and the dual hull cost in proportion. When `A ∩ B` is empty or flat
+/// the remaining planes can bound a larger region, so the caller keeps the result only after
+/// checking an interior point against [`PosedPolytope::aside_planes`], and otherwise restores
+/// them ([`PosedPolytope::restore_aside`]).
+///
+/// `ta` and `tb` are the templates `a` and `b` were placed from (their face polygons index the
+/// placed vertices); `tol` is the round-off margin (a face within it of a plane is kept). Both
+/// bodies are tested against all of the other's planes in use on entry.
+pub fn set_aside_faces_apart<T: Real>(
+    a: &mut PosedPolytope<T>,
+    ta: &ConvexTemplate,
+    b: &mut PosedPolytope<T>,
+    tb: &ConvexTemplate,
+    tol: T,
+) {
+    a.set_aside_beyond(ta, b.planes(), &[], tol);
+    b.set_aside_beyond(tb, &a.planes[..a.n_planes], &a.aside[..a.n_aside], tol);
+}
+
+impl<T: Real> PosedPolytope<T> {
+    /// Moves the planes whose face lies beyond one of `p ∪ q` by more than `tol` to the
+    /// set-aside list, keeping both lists in order.
+    fn set_aside_beyond(
+        &mut self,
+        template: &ConvexTemplate,
+        p: &[Plane<T>],
+        q: &[Plane<T>],
+        tol: T,
+    ) {
+        let mut kept = 0;
+        self.n_aside = 0;
+        for i in 0..self.n_planes {
+            let face = &template.faces[self.face[i] as usize];
+            let beyond = |pl: &Plane<T>| {
+                face.vertices
+                    .iter()
+                    .all(|&v| pl.distance(&self.vertices[v as usize]) > tol)
+            };
+            if p.iter().chain(q).any(beyond) {
+                self.aside[self.n_aside] = self.planes[i];
+                self.aside_face[self.n_aside] = self.face[i];
+                self.n_aside += 1;
+            } else {
+                self.planes[kept] = self.planes[i];
+                self.face[kept] = self.face[i];
+                kept += 1;
+            }
+        }
+        self.n_planes = kept;
     }
 }
 

@@ -282,17 +282,12 @@ impl<T: Real> DualHull<T> {
         for (f, l) in layout.iter().enumerate() {
             slots[f] = self.make(ids[l[0]], ids[l[1]], ids[l[2]])?;
         }
-        // Adjacency: the twin of edge a→b is the edge b→a of another triangle.
-        for &s in &slots {
+        // Adjacency: the twin of edge a→b is the edge b→a of another triangle; for the four
+        // distinct points of this layout that is always the same triangle.
+        const TWIN: [[usize; 3]; 4] = [[1, 2, 3], [3, 2, 0], [1, 3, 0], [2, 1, 0]];
+        for (f, &s) in slots.iter().enumerate() {
             for k in 0..3 {
-                let (a, b) = (self.tri[s].v[k], self.tri[s].v[(k + 1) % 3]);
-                for &o in &slots {
-                    for j in 0..3 {
-                        if self.tri[o].v[j] == b && self.tri[o].v[(j + 1) % 3] == a {
-                            self.tri[s].adj[k] = o as u16;
-                        }
-                    }
-                }
+                self.tri[s].adj[k] = slots[TWIN[f][k]] as u16;
             }
         }
         for id in ids {

@@ -2,7 +2,7 @@
 //! poses at the current time, and the deterministic reduction (kernels in `cuda/contact.cu`).
 
 use super::simulation::{
-    CudaError, CudaSimulation, PairOutputs, ParticleView, WallState, cfg, ptr, zeros,
+    CudaError, CudaSimulation, PairArgs, PairOutputs, ParticleView, WallState, cfg, ptr, zeros,
 };
 use crate::pipeline::SimulationError;
 use crate::scene::WallMotion;
@@ -11,48 +11,115 @@ use nalgebra::Vector3;
 use std::time::Instant;
 
 impl CudaSimulation {
-    /// Stages 2–8 on the device at the current state, advancing the springs by `dt`.
-    /// Stages 3–7 for the pairs `first..last` of the list.
+    /// Prints the pair kernels' per-phase clock totals so far (a profiling build,
+    /// `POLYDEM_PHASE_CLOCKS`): thread-cycles summed over all pairs, from `clock64()` at the
+    /// phase boundaries of `cuda/overlap.cuh` and `cuda/contact.cu`.
+    fn report_phase_clocks(&self) -> Result<(), CudaError> {
+        const PHASES: [&str; 16] = [
+            "broad phase and cached axis",
+            "planes placed",
+            "planes reaching the other ball",
+            "faces set aside",
+            "Chebyshev centre",
+            "proof of intersection",
+            "planes moved to the centre",
+            "overlap (dual hull and faces)",
+            "contact law",
+            "",
+            "",
+            "pairs evaluated (count)",
+            "pairs needing GJK (count)",
+            "  of which the hull build",
+            "  of which vertices and face areas",
+            "",
+        ];
+        let view = self.k.contact.get_global("pd_clk", &self.stream)?;
+        // SAFETY: `pd_clk` is `unsigned long long[16]` in cuda/overlap.cuh (PD_PHASE_CLOCKS).
+        let typed = unsafe { view.transmute::<u64>(PHASES.len()) }
+            .ok_or_else(|| CudaError::Compile("pd_clk is smaller than expected".into()))?;
+        let clocks = self.stream.clone_dtoh(&typed)?;
+        let lines: Vec<String> = PHASES
+            .iter()
+            .zip(&clocks)
+            .filter(|(name, _)| !name.is_empty())
+            .map(|(name, c)| format!("{name}: {c}"))
+            .collect();
+        eprintln!("pair phase clocks: {}", lines.join("; "));
+        Ok(())
+    }
+
+    /// The arguments of the pair kernels for this step.
+    fn pair_args(&self, view: &ParticleView, n_mat: i32, dt: f64) -> PairArgs {
+        let st = &self.stream;
+        let pairs = self.pairs.as_ref().expect("built");
+        PairArgs {
+            pairs: ptr(&pairs.pairs, st),
+            grid: self.grid,
+            axes: ptr(&pairs.axes, st),
+            p: *view,
+            materials: ptr(&self.materials, st),
+            n_materials: n_mat,
+            spring_in: ptr(&pairs.spring_in, st),
+            spring_out: ptr(&pairs.spring_out, st),
+            out: PairOutputs {
+                ptrs: [
+                    ptr(&pairs.forces, st),
+                    ptr(&pairs.energy, st),
+                    ptr(&pairs.contact, st),
+                ],
+            },
+            dt,
+            error: ptr(&self.error, st),
+        }
+    }
+
+    /// Stages 3–7 for the pairs `first..last` of the list; the pairs that need GJK are queued
+    /// for [`Self::launch_deferred_pairs`].
     fn launch_pair_contacts(
         &mut self,
         first: usize,
         last: usize,
-        view: &ParticleView,
-        n_mat: i32,
-        dt: f64,
+        args: &PairArgs,
     ) -> Result<(), CudaError> {
         if last <= first {
             return Ok(());
         }
         let st = self.stream.clone();
         let pairs = self.pairs.as_mut().expect("built");
-        let outputs = PairOutputs {
-            ptrs: [
-                ptr(&pairs.forces, &st),
-                ptr(&pairs.energy, &st),
-                ptr(&pairs.contact, &st),
-            ],
-        };
         let (fi, li) = (first as i32, last as i32);
-        let grid = self.grid;
-        // SAFETY: the argument list matches `pair_contacts` of cuda/contact.cu; the pointer
-        // structs point into buffers alive for the whole call.
+        // SAFETY: the argument list matches `pair_contacts` of cuda/contact.cu; `args` points
+        // into buffers alive for the whole call, `deferred` holds one slot per pair.
         unsafe {
             st.launch_builder(self.k.get("pair_contacts"))
                 .arg(&fi)
                 .arg(&li)
-                .arg(&pairs.pairs)
-                .arg(&grid)
-                .arg(&mut pairs.axes)
-                .arg(view)
-                .arg(&self.materials)
-                .arg(&n_mat)
-                .arg(&pairs.spring_in)
-                .arg(&mut pairs.spring_out)
-                .arg(&outputs)
-                .arg(&dt)
-                .arg(&mut self.error)
+                .arg(args)
+                .arg(&mut pairs.deferred)
+                .arg(&mut pairs.deferred_count)
                 .launch(cfg(last - first))?;
+        }
+        Ok(())
+    }
+
+    /// The pairs queued by the pair pass, evaluated in full (GJK included). The count stays on
+    /// the device: the kernel loops over it, so the grid only needs to be large enough to keep
+    /// the GPU busy when many pairs are deferred.
+    fn launch_deferred_pairs(&mut self, args: &PairArgs) -> Result<(), CudaError> {
+        let st = self.stream.clone();
+        let pairs = self.pairs.as_ref().expect("built");
+        if pairs.n == 0 || self.host.scene.spheres_only() {
+            return Ok(());
+        }
+        // A sixteenth of the pairs per sweep: a dense packing defers a few per cent.
+        let threads = pairs.n.div_ceil(16).max(1);
+        // SAFETY: the argument list matches `pair_contacts_deferred` of cuda/contact.cu; the
+        // list and its count were written by `pair_contacts` this step.
+        unsafe {
+            st.launch_builder(self.k.get("pair_contacts_deferred"))
+                .arg(args)
+                .arg(&pairs.deferred)
+                .arg(&pairs.deferred_count)
+                .launch(cfg(threads))?;
         }
         Ok(())
     }
@@ -77,18 +144,27 @@ impl CudaSimulation {
             let q = self.pairs.as_ref().expect("built above");
             (q.n, if overlap { q.n_interior } else { q.n })
         };
+        let args = self.pair_args(&view, n_mat, dt);
+        {
+            let pairs = self.pairs.as_mut().expect("built above");
+            st.memset_zeros(&mut pairs.deferred_count)?;
+        }
         if overlap {
             self.start_halo()?;
         }
-        self.launch_pair_contacts(0, n_interior, &view, n_mat, dt)?;
+        self.launch_pair_contacts(0, n_interior, &args)?;
         if overlap {
             self.finish_halo()?;
-            self.launch_pair_contacts(n_interior, np, &view, n_mat, dt)?;
+            self.launch_pair_contacts(n_interior, np, &args)?;
         }
+        self.launch_deferred_pairs(&args)?;
         // Kernels run asynchronously: wait for the stage so that its timer measures it (a few
         // microseconds per stage, negligible against the step).
         st.synchronize()?;
         self.host.timers.pairs += t0.elapsed().as_secs_f64();
+        if super::kernels::phase_clocks() {
+            self.report_phase_clocks()?;
+        }
         let t0 = Instant::now();
         // Taken out while the stage runs, so that the scan helper can borrow `self`.
         let mut walls = self.walls.take();

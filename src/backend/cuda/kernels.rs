@@ -128,9 +128,28 @@ impl KernelConfig {
         {
             d.push(format!("-DPD_MAX_WALL_CANDIDATES={n}"));
         }
+        // Register cap of the pair kernel (a tuning knob: fewer registers, more resident warps
+        // to hide the geometry workspace's memory latency, at the price of spills).
+        if let Some(n) = std::env::var("POLYDEM_PAIR_MAX_REGISTERS")
+            .ok()
+            .and_then(|v| v.parse::<u32>().ok())
+            .filter(|n| (24..=255).contains(n))
+        {
+            d.push(format!("-DPD_PAIR_MAX_REGISTERS={n}"));
+        }
+        if phase_clocks() {
+            d.push("-DPD_PHASE_CLOCKS=1".into());
+        }
         d.extend(layout::size_defines());
         d
     }
+}
+
+/// Whether the pair kernels are built to time their phases (`POLYDEM_PHASE_CLOCKS` set, a
+/// profiling build: `clock64()` sums per phase, printed after every pair stage).
+pub fn phase_clocks() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| std::env::var_os("POLYDEM_PHASE_CLOCKS").is_some())
 }
 
 /// `file` with its `#include "…"` lines replaced by the named sources (each once, as

@@ -63,19 +63,34 @@ pub fn size_defines() -> Vec<String> {
             "-DPD_SIZEOF_PAIR_MATERIAL={}",
             std::mem::size_of::<PairMaterial>()
         ),
+        format!(
+            "-DPD_SIZEOF_PAIR_ARGS={}",
+            std::mem::size_of::<super::simulation::PairArgs>()
+        ),
     ]
 }
 
 /// Templates packed as the kernels read them (`cuda/contact.cu` constants, `cuda/probe.cu`
 /// `ProbeTemplates`): template t's vertices at `3 (t mv + i)`, its face normals at
 /// `3 (t mf + i)` with offsets at `t mf + i`, the vertex and face counts at `2t`, `2t + 1`, and
-/// the circumscribed radius at `t`; `nt` slots (at least the templates given).
+/// the circumscribed radius at `t`; `nt` slots (at least the templates given). The face polygons
+/// (`cuda/polytope.cuh: TemplateView`): face i's corners are points
+/// `t mi + face_start[t (mf + 1) + i] ..` up to the next start of `face_points` (xyz, copies of
+/// the vertices), with `mi = `[`max_face_indices`]`(mv)`.
 pub struct TemplateTables {
     pub vertices: Vec<f64>,
     pub normals: Vec<f64>,
     pub offsets: Vec<f64>,
     pub counts: Vec<i32>,
     pub radius: Vec<f64>,
+    pub face_start: Vec<u16>,
+    pub face_points: Vec<f64>,
+}
+
+/// Room for the face polygons' vertex indices of a template of at most `max_vertices` vertices
+/// (`PD_MAX_TEMPLATE_FACE_INDICES`): twice the edge count, at most `6V − 12` (Euler).
+pub fn max_face_indices(max_vertices: usize) -> usize {
+    (6 * max_vertices).saturating_sub(12).max(1)
 }
 
 impl TemplateTables {
@@ -86,12 +101,15 @@ impl TemplateTables {
         mv: usize,
         mf: usize,
     ) -> Self {
+        let mi = max_face_indices(mv);
         let mut t = TemplateTables {
             vertices: vec![0.0; nt * mv * 3],
             normals: vec![0.0; nt * mf * 3],
             offsets: vec![0.0; nt * mf],
             counts: vec![0; nt * 2],
             radius: vec![0.0; nt],
+            face_start: vec![0; nt * (mf + 1)],
+            face_points: vec![0.0; nt * mi * 3],
         };
         for (k, tpl) in templates.into_iter().enumerate() {
             for (i, v) in tpl.vertices.iter().enumerate() {
@@ -103,6 +121,18 @@ impl TemplateTables {
                     .copy_from_slice(f.normal.as_slice());
                 t.offsets[k * mf + i] = f.offset;
             }
+            // Face polygons; a template within the vertex capacity has at most `mi` indices.
+            let mut n = 0;
+            for (i, f) in tpl.faces.iter().enumerate() {
+                t.face_start[k * (mf + 1) + i] = n as u16;
+                for &v in &f.vertices {
+                    let at = (k * mi + n) * 3;
+                    t.face_points[at..at + 3]
+                        .copy_from_slice(tpl.vertices[v as usize].coords.as_slice());
+                    n += 1;
+                }
+            }
+            t.face_start[k * (mf + 1) + tpl.faces.len()] = n as u16;
             t.counts[2 * k] = tpl.vertices.len() as i32;
             t.counts[2 * k + 1] = tpl.faces.len() as i32;
             t.radius[k] = tpl.circumscribed_radius;

@@ -267,6 +267,8 @@ impl CudaSimulation {
             contact: zeros::<u32>(&st, np)?,
             ref_offset,
             refs,
+            deferred: zeros::<u32>(&st, np)?,
+            deferred_count: zeros::<u32>(&st, 1)?,
         });
         self.reference = st.clone_dtod(&self.p.position)?;
         self.rebuild = false;

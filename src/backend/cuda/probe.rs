@@ -5,7 +5,7 @@
 //! `geometry::overlap::overlap_pair` and `geometry::clip::prism_overlap`.
 
 use super::kernels::{KernelConfig, Precision, compile};
-use super::layout::TemplateTables;
+use super::layout::{TemplateTables, max_face_indices};
 use super::simulation::{CudaError, cfg, ptr};
 use crate::geometry::Overlap;
 use crate::shape::ConvexTemplate;
@@ -61,16 +61,17 @@ pub struct ProbeFacetResult {
     pub overlap: Overlap<f64>,
 }
 
-/// The template table as `cuda/probe.cu: ProbeTemplates` reads it: five device pointers and the
-/// two strides.
+/// The template table as `cuda/probe.cu: ProbeTemplates` reads it: seven device pointers and
+/// the three strides.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 struct ProbeTemplates {
-    ptrs: [u64; 5],
+    ptrs: [u64; 7],
     max_vertices: i32,
     max_faces: i32,
+    max_face_indices: i32,
 }
-// SAFETY: five device pointers and two ints, laid out as the C struct.
+// SAFETY: seven device pointers and three ints, laid out as the C struct.
 unsafe impl DeviceRepr for ProbeTemplates {}
 
 /// The probe kernels, compiled once for templates of up to `max_vertices` vertices and
@@ -199,6 +200,8 @@ impl GeometryProbe {
         let d_offsets = st.clone_htod(&t.offsets)?;
         let d_counts = st.clone_htod(&t.counts)?;
         let d_radius = st.clone_htod(&t.radius)?;
+        let d_face_start = st.clone_htod(&t.face_start)?;
+        let d_face_points = st.clone_htod(&t.face_points)?;
         let table = ProbeTemplates {
             ptrs: [
                 ptr(&d_vertices, st),
@@ -206,9 +209,12 @@ impl GeometryProbe {
                 ptr(&d_offsets, st),
                 ptr(&d_counts, st),
                 ptr(&d_radius, st),
+                ptr(&d_face_start, st),
+                ptr(&d_face_points, st),
             ],
             max_vertices: mv as i32,
             max_faces: mf as i32,
+            max_face_indices: max_face_indices(mv) as i32,
         };
         let mut padded = input.to_vec();
         if padded.is_empty() {

@@ -110,6 +110,27 @@ pub(super) struct PairOutputs {
 // SAFETY: three device pointers.
 unsafe impl DeviceRepr for PairOutputs {}
 
+/// Everything a pair evaluation reads and writes (`cuda/contact.cu: PairArgs`): device pointers
+/// into the pair list's and the particles' buffers, valid while those are alive.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub(super) struct PairArgs {
+    pub(super) pairs: u64,
+    pub(super) grid: GridParams,
+    pub(super) axes: u64,
+    pub(super) p: ParticleView,
+    pub(super) materials: u64,
+    pub(super) n_materials: i32,
+    pub(super) spring_in: u64,
+    pub(super) spring_out: u64,
+    pub(super) out: PairOutputs,
+    pub(super) dt: f64,
+    pub(super) error: u64,
+}
+// SAFETY: device pointers, a GridParams, an int and a double, laid out as the C struct (the
+// size is checked by static_assert in cuda/contact.cu).
+unsafe impl DeviceRepr for PairArgs {}
+
 pub(super) fn ptr<T>(s: &CudaSlice<T>, stream: &CudaStream) -> u64 {
     use cudarc::driver::DevicePtr;
     let (p, _sync) = s.device_ptr(stream);
@@ -170,6 +191,9 @@ pub(super) struct DevicePairs {
     pub(super) contact: CudaSlice<u32>,
     pub(super) ref_offset: CudaSlice<u32>,
     pub(super) refs: CudaSlice<u32>,
+    /// The pairs the pair pass leaves to the full evaluation (GJK), and their count.
+    pub(super) deferred: CudaSlice<u32>,
+    pub(super) deferred_count: CudaSlice<u32>,
 }
 
 /// Wall meshes and per-particle wall outputs.
@@ -270,6 +294,7 @@ impl CudaSimulation {
                 "contact.cu",
                 &[
                     "pair_contacts",
+                    "pair_contacts_deferred",
                     "wall_candidates",
                     "wall_facet_overlaps",
                     "wall_contacts",
