@@ -158,7 +158,7 @@ pub fn overlap_volume<T: Real>(
 }
 
 /// [`overlap_volume`] about a given interior point `x0` (normally the Chebyshev centre).
-pub fn overlap_about<T: Real>(
+fn overlap_about<T: Real>(
     ws: &mut OverlapWorkspace<T>,
     a: &[Plane<T>],
     b: &[Plane<T>],
