@@ -160,24 +160,19 @@ extern "C" __global__ void count_pairs(int n, const double* position, const doub
     counts[i] = v.count;
 }
 
-// Pairs (i, j) at pair_offset[i] ..; shifts (three doubles per pair) only when some axis is
-// periodic (`periodic` = 1).
+// Pairs (i, j) at pair_offset[i] .. (no periodic shift is stored: the pair kernels take each
+// pair's image from the step's centroids).
 extern "C" __global__ void fill_pairs(int n, const double* position, const double* radius, const pd_u64* id,
                                       const unsigned int* ghost, int part, const unsigned int* cell_start,
                                       GridParams grid, double skin, const unsigned int* pair_offset,
-                                      int2* pairs, double* shift, int periodic) {
+                                      int2* pairs) {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) {
         return;
     }
     unsigned int k = pair_offset[i];
-    for_each_partner(i, position, radius, id, ghost, part, cell_start, grid, skin, [&](int j, V3<double> s) {
+    for_each_partner(i, position, radius, id, ghost, part, cell_start, grid, skin, [&](int j, V3<double>) {
         pairs[k] = make_int2(i, j);
-        if (periodic) {
-            shift[3 * (size_t)k] = s.x;
-            shift[3 * (size_t)k + 1] = s.y;
-            shift[3 * (size_t)k + 2] = s.z;
-        }
         ++k;
     });
 }

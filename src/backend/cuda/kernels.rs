@@ -56,7 +56,7 @@ pub struct KernelConfig {
     pub walls: bool,
     /// Some material pair has friction (tangential history compiled in).
     pub friction: bool,
-    /// Some axis is periodic (pair image shifts stored).
+    /// Some axis is periodic (minimum-image displacements in the pair kernels).
     pub periodic: bool,
     /// Every particle is a sphere: stages 4–5 and the wall overlaps are the sphere formulas
     /// (`cuda/sphere.cuh`, always in f64), and no polyhedral workspace is compiled.

@@ -181,33 +181,23 @@ impl CudaSimulation {
         // Pairs: count, exclusive prefix sum, fill. A decomposed run lists the pairs of two
         // owned particles first and those with a ghost after them, so the first part can be
         // evaluated while the halo is in flight.
-        let (np, n_interior, pairs, shift, offset) = if self.host.parallel.is_some() {
-            let (n1, p1, s1, _) = self.list_pairs(1, &cell_start)?;
-            let (n2, p2, s2, _) = self.list_pairs(2, &cell_start)?;
+        let (np, n_interior, pairs, offset) = if self.host.parallel.is_some() {
+            let (n1, p1, _) = self.list_pairs(1, &cell_start)?;
+            let (n2, p2, _) = self.list_pairs(2, &cell_start)?;
             let np = n1 + n2;
             let mut pairs = zeros::<i32>(&st, 2 * np)?;
-            let width = if self.config.periodic { 3 } else { 0 };
-            let mut shift = zeros::<f64>(&st, (width * np).max(1))?;
             if n1 > 0 {
                 st.memcpy_dtod(&p1.slice(0..2 * n1), &mut pairs.slice_mut(0..2 * n1))?;
             }
             if n2 > 0 {
                 st.memcpy_dtod(&p2.slice(0..2 * n2), &mut pairs.slice_mut(2 * n1..2 * np))?;
             }
-            if width > 0 {
-                if n1 > 0 {
-                    st.memcpy_dtod(&s1.slice(0..3 * n1), &mut shift.slice_mut(0..3 * n1))?;
-                }
-                if n2 > 0 {
-                    st.memcpy_dtod(&s2.slice(0..3 * n2), &mut shift.slice_mut(3 * n1..3 * np))?;
-                }
-            }
             // Pairs of one particle are in two ranges now, so the list is no CSR by particle:
             // this run's history comes up from the host at every rebuild instead.
-            (np, n1, pairs, shift, None)
+            (np, n1, pairs, None)
         } else {
-            let (np, pairs, shift, offset) = self.list_pairs(0, &cell_start)?;
-            (np, np, pairs, shift, Some(offset))
+            let (np, pairs, offset) = self.list_pairs(0, &cell_start)?;
+            (np, np, pairs, Some(offset))
         };
         // References per particle, sorted by partner id.
         let npi = np as i32;
@@ -258,7 +248,6 @@ impl CudaSimulation {
             n_interior,
             offset,
             pairs,
-            shift,
             axes: zeros::<f64>(&st, 3 * np)?,
             spring_in,
             spring_out: zeros::<f64>(&st, 3 * np)?,
@@ -279,14 +268,13 @@ impl CudaSimulation {
     }
 
     /// Count, exclusive prefix sum and fill of the pairs of `part` (0 all; in a decomposed run
-    /// 1 those of two owned particles, 2 those with a ghost): their number, the int2 list, the
-    /// periodic shifts and the per-particle offsets.
-    #[allow(clippy::type_complexity)]
+    /// 1 those of two owned particles, 2 those with a ghost): their number, the int2 list and
+    /// the per-particle offsets.
     fn list_pairs(
         &self,
         part: i32,
         cell_start: &CudaSlice<u32>,
-    ) -> Result<(usize, CudaSlice<i32>, CudaSlice<f64>, CudaSlice<u32>), CudaError> {
+    ) -> Result<(usize, CudaSlice<i32>, CudaSlice<u32>), CudaError> {
         let st = self.stream.clone();
         let n = self.n;
         let ni = n as i32;
@@ -312,8 +300,6 @@ impl CudaSimulation {
         let mut offset = zeros::<u32>(&st, n + 1)?;
         let np = self.scan(&counts, n, &mut offset)? as usize;
         let mut pairs = zeros::<i32>(&st, 2 * np)?;
-        let mut shift = zeros::<f64>(&st, if self.config.periodic { 3 * np } else { 1 })?;
-        let periodic = i32::from(self.config.periodic);
         unsafe {
             st.launch_builder(self.k.get("fill_pairs"))
                 .arg(&ni)
@@ -327,11 +313,9 @@ impl CudaSimulation {
                 .arg(&skin)
                 .arg(&offset)
                 .arg(&mut pairs)
-                .arg(&mut shift)
-                .arg(&periodic)
                 .launch(cfg(n))?;
         }
-        Ok((np, pairs, shift, offset))
+        Ok((np, pairs, offset))
     }
 
     pub(super) fn gather_all(&mut self, order: &CudaSlice<u32>) -> Result<(), CudaError> {

@@ -182,7 +182,6 @@ pub(super) struct DevicePairs {
     /// of the next build; `None` for a decomposed run's two-part list.
     pub(super) offset: Option<CudaSlice<u32>>,
     pub(super) pairs: CudaSlice<i32>,
-    pub(super) shift: CudaSlice<f64>,
     pub(super) axes: CudaSlice<f64>,
     pub(super) spring_in: CudaSlice<f64>,
     pub(super) spring_out: CudaSlice<f64>,
@@ -433,7 +432,8 @@ impl CudaSimulation {
         if let Some(q) = &self.pairs {
             total += q.offset.as_ref().map_or(0, b)
                 + b(&q.pairs)
-                + b(&q.shift)
+                + b(&q.deferred)
+                + b(&q.deferred_count)
                 + b(&q.axes)
                 + b(&q.spring_in)
                 + b(&q.spring_out)
