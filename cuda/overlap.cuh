@@ -325,10 +325,13 @@ PD_HD int overlap_pair_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& 
     PD_CLK(3)
     ChebyshevCentre<T> centre = chebyshev_centre(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>());
     PD_CLK(4)
-    // An inscribed ball inside the set-aside planes too proves an intersection with an interior
-    // (the narrow-phase verdict without GJK); otherwise GJK decides, and an intersection the
-    // check could not prove is evaluated on every plane that reaches the other body's ball.
-    bool proven = centre.radius > tol;
+    // A centre strictly inside every plane of both bodies proves an intersection with an
+    // interior (the narrow-phase verdict without GJK): the planes in use hold it by the LP's
+    // radius, the set-aside ones are checked, and those culled against a ball hold every point of
+    // that ball. Otherwise GJK decides, and an intersection the check could not prove is
+    // evaluated on every plane that reaches the other body's ball.
+    bool proven = centre.radius > tol && norm2(centre.point - ws.a.centre) < T(ra) * T(ra) &&
+                  norm2(centre.point - ws.b.centre) < T(rb) * T(rb);
     for (int i = 0; i < ws.a.n_aside && proven; ++i) proven = plane_distance(ws.a.aside[i], centre.point) < -tol;
     for (int i = 0; i < ws.b.n_aside && proven; ++i) proven = plane_distance(ws.b.aside[i], centre.point) < -tol;
     if (!proven) {

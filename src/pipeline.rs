@@ -7,7 +7,8 @@
 //! - 1: exchange (insertion of due particles, removal of those that left a closed domain,
 //!   periodic wrapping; migration between ranks comes with the MPI decomposition);
 //! - 2: neighbour list (rebuilt when some particle moved half the skin);
-//! - 3–7: per pair, bounding-sphere broad phase, GJK, dual-space overlap, contact law; per
+//! - 3–7: per pair, bounding-sphere broad phase, narrow phase (the interior-point LP's proof of an
+//!   intersection, GJK where it proves none), dual-space overlap, contact law; per
 //!   particle and wall, facet contacts and the contact law;
 //! - 8: deterministic per-particle reduction (pairs in partner-id order, then walls in order);
 //! - 9b: second half kick (integrate, second half);
@@ -800,7 +801,8 @@ impl Simulation {
                             ..PairOutcome::default()
                         });
                     }
-                    // Stages 4–5: GJK, then the overlap.
+                    // Stages 4–5: the narrow phase (GJK where the Chebyshev centre proves no
+                    // intersection), then the overlap.
                     let g = with_workspace(|ws| overlap_pair(ws, body_a, body_b)).map_err(|e| {
                         SimulationError::Geometry {
                             step,

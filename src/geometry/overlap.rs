@@ -402,12 +402,17 @@ pub fn overlap_pair<T: Real>(
     // scale of the overlap, and so is their round-off (which matters in f32 when one body is
     // much smaller than the distance between the centres).
     let mut centre = chebyshev_centre(ws.a.planes(), ws.b.planes(), Vector3::zeros());
-    // An inscribed ball inside the set-aside planes too proves that A ∩ B has an interior: the
-    // bodies intersect (the narrow-phase verdict, without GJK) and the set-aside planes are
-    // redundant. Otherwise GJK decides, and an intersection that the check could not prove
-    // (touching or flat) is evaluated on every plane that cuts the other body.
+    // A centre strictly inside every plane of both bodies proves that A ∩ B has an interior:
+    // the bodies intersect (the narrow-phase verdict, without GJK) and the set-aside planes are
+    // redundant. The planes in use hold it by the LP's radius, the set-aside ones are checked,
+    // and the planes culled against a ball hold every point of that ball: a centre inside both
+    // balls is inside them too. Otherwise GJK decides, and an intersection that the check could
+    // not prove (touching or flat) is evaluated on every plane that reaches the other's ball.
     let inside = |p: &Plane<T>| p.distance(&centre.point) < -tol;
+    let in_ball = |c: &Vector3<T>, r: f64| (centre.point - c).norm_squared() < T::of(r) * T::of(r);
     let proven = centre.radius > tol
+        && in_ball(&ws.a.centre, ra)
+        && in_ball(&ws.b.centre, rb)
         && ws.a.aside_planes().iter().all(inside)
         && ws.b.aside_planes().iter().all(inside);
     let separating_axis = if proven {
