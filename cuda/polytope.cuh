@@ -163,13 +163,6 @@ PD_HD void place(PosedPolytope<T>& p, const TemplateView& t, double scale, V3<do
     place_planes(p, t, scale, pos, rot_q, origin);
 }
 
-// PosedPolytope::radius: largest distance from the centre to a vertex.
-template <class T> PD_HD T polytope_radius(const PosedPolytope<T>& p) {
-    T r = T(0);
-    for (int i = 0; i < p.n_vertices; ++i) r = max_(r, norm(p.vertices[i] - p.centre));
-    return r;
-}
-
 // PosedPolytope::retain_planes_reaching: drops the planes whose half-space contains the whole ball
 // (centre, radius) around the other body (it then contains the whole intersection); planes within
 // `tol` of touching the ball are kept.

@@ -10,8 +10,6 @@ mod common;
 
 use common::*;
 use nalgebra::{Isometry3, Vector3};
-use parry3d_f64::math::{Pose, Vector as PV};
-use parry3d_f64::shape::ConvexPolyhedron;
 use polydem::geometry::interior::chebyshev_centre;
 use polydem::geometry::overlap::{OverlapWorkspace, PairWorkspace, overlap_pair, overlap_volume};
 use polydem::geometry::polytope::{PosedPolytope, set_aside_faces_apart};
@@ -112,26 +110,7 @@ fn faces_set_aside_leave_the_overlap_unchanged() {
 #[test]
 fn the_centre_proves_no_false_intersection() {
     let shapes = test_shapes();
-    let parry: Vec<_> = shapes
-        .iter()
-        .map(|s| {
-            let pts: Vec<PV> = s
-                .template
-                .vertices
-                .iter()
-                .map(|v| PV::new(v.x, v.y, v.z))
-                .collect();
-            ConvexPolyhedron::from_convex_hull(&pts).unwrap()
-        })
-        .collect();
-    let to_parry = |iso: &Isometry3<f64>| {
-        let t = iso.translation.vector;
-        let q = iso.rotation;
-        Pose::from_parts(
-            PV::new(t.x, t.y, t.z),
-            parry3d_f64::math::Rotation::from_xyzw(q.i, q.j, q.k, q.w),
-        )
-    };
+    let parry: Vec<_> = shapes.iter().map(|s| parry_hull(&s.template)).collect();
     let mut rng = Rng::new(31);
     let mut ws64 = PairWorkspace::<f64>::boxed();
     let mut ws32 = PairWorkspace::<f32>::boxed();
@@ -145,10 +124,14 @@ fn the_centre_proves_no_false_intersection() {
             (0.3 + 0.8 * rng.uniform()) * (ta.circumscribed_radius + tb.circumscribed_radius);
         let pa = pose(Vector3::zeros(), random_rotation(&mut rng));
         let pb = pose(dir * dist, random_rotation(&mut rng));
-        let gap =
-            parry3d_f64::query::distance(&to_parry(&pa), &parry[ia], &to_parry(&pb), &parry[ib])
-                .unwrap()
-                .distance;
+        let gap = parry3d_f64::query::distance(
+            &parry_pose(&pa),
+            &parry[ia],
+            &parry_pose(&pb),
+            &parry[ib],
+        )
+        .unwrap()
+        .distance;
         if gap <= 1e-9 * ta.circumscribed_radius.max(tb.circumscribed_radius) {
             continue;
         }

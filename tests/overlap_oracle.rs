@@ -9,7 +9,6 @@ use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use polydem::geometry::gjk_intersect;
 use polydem::geometry::overlap::{PairWorkspace, overlap_pair};
 use polydem::rng::Rng;
-use polydem::shape::ConvexTemplate;
 
 /// One random pair of the acceptance set.
 struct Case {
@@ -135,23 +134,10 @@ fn random_pairs_match_the_exact_oracle_in_f64_and_f32() {
 
 #[test]
 fn gjk_agrees_with_parry_intersection_test() {
-    use parry3d_f64::math::{Pose, Vector as PV};
-    use parry3d_f64::shape::ConvexPolyhedron;
     let shapes = test_shapes();
     let cases = random_cases(&shapes, 2420, 77);
-    let to_parry = |t: &ConvexTemplate| {
-        let pts: Vec<PV> = t.vertices.iter().map(|v| PV::new(v.x, v.y, v.z)).collect();
-        ConvexPolyhedron::from_convex_hull(&pts).unwrap()
-    };
-    let parry_shapes: Vec<_> = shapes.iter().map(|s| to_parry(&s.template)).collect();
-    let to_pose = |iso: &Isometry3<f64>| {
-        let t = iso.translation.vector;
-        let q = iso.rotation;
-        Pose::from_parts(
-            PV::new(t.x, t.y, t.z),
-            parry3d_f64::math::Rotation::from_xyzw(q.i, q.j, q.k, q.w),
-        )
-    };
+    let parry_shapes: Vec<_> = shapes.iter().map(|s| parry_hull(&s.template)).collect();
+    let to_pose = parry_pose;
     let (mut disagreements, mut near) = (Vec::new(), 0);
     for (i, c) in cases.iter().enumerate() {
         let (ta, tb) = (&shapes[c.a].template, &shapes[c.b].template);

@@ -91,6 +91,27 @@ pub fn world_planes(t: &ConvexTemplate, pose: &Isometry3<f64>) -> Vec<(Vector3<f
         .collect()
 }
 
+/// A template as parry3d-f64's convex polyhedron (the independent reference for GJK verdicts and
+/// distances).
+pub fn parry_hull(t: &ConvexTemplate) -> parry3d_f64::shape::ConvexPolyhedron {
+    let pts: Vec<parry3d_f64::math::Vector> = t
+        .vertices
+        .iter()
+        .map(|v| parry3d_f64::math::Vector::new(v.x, v.y, v.z))
+        .collect();
+    parry3d_f64::shape::ConvexPolyhedron::from_convex_hull(&pts).unwrap()
+}
+
+/// A pose as parry3d-f64's.
+pub fn parry_pose(iso: &Isometry3<f64>) -> parry3d_f64::math::Pose {
+    let t = iso.translation.vector;
+    let q = iso.rotation;
+    parry3d_f64::math::Pose::from_parts(
+        parry3d_f64::math::Vector::new(t.x, t.y, t.z),
+        parry3d_f64::math::Rotation::from_xyzw(q.i, q.j, q.k, q.w),
+    )
+}
+
 /// Exact oracle, independent of the code under test: the vertices of `∩ {n·x <= h}` by brute
 /// force over all plane triples, then parry3d-f64's convex hull of those vertices and the volume
 /// and centroid of that hull by signed tetrahedra.
