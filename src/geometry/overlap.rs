@@ -371,12 +371,13 @@ pub fn axis_separates(
 /// Narrow phase and overlap of template `ta` scaled by `sa` at `pose_a` against `tb` at
 /// `pose_b`, computed in arithmetic `T` in a frame centred near the contact (DESIGN.md §3).
 ///
-/// The planes are culled to those that reach the other body's bounding ball, and the faces that miss it are set
-/// aside ([`set_aside_faces_apart`]). The Chebyshev centre of what is left is the verdict when
-/// its ball proves an interior (it lies inside the set-aside planes too): the bodies intersect
-/// and the overlap is evaluated on the planes left, about 5–6 for a dense packing where every
-/// cut plane gives 12–16. Otherwise GJK (seed Alg. I) decides and gives the separating axis,
-/// and an intersection that the centre could not prove (touching or flat) is evaluated on every
+/// The planes are culled to those that reach the other body's bounding ball, and the faces
+/// that miss the other body are set aside ([`set_aside_faces_apart`]). The Chebyshev centre of
+/// what is left is the verdict when it proves an interior (it lies inside the set-aside planes
+/// and both bounding balls too, hence inside every plane of both bodies): the bodies intersect
+/// and the overlap is evaluated on the planes left, about 5–6 for a dense packing where 12–16
+/// reach the other ball. Otherwise GJK (seed Alg. I) decides and gives the separating axis, and
+/// an intersection that the centre could not prove (touching or flat) is evaluated on every
 /// plane that reaches the other body's ball.
 pub fn overlap_pair<T: Real>(
     ws: &mut PairWorkspace<T>,
