@@ -100,10 +100,10 @@ static_assert(sizeof(PairArgs) == PD_SIZEOF_PAIR_ARGS, "PairArgs differs from Ru
 // Stages 3–7 for pair k of the list (Simulation::pair_contacts). The periodic image of B is
 // taken from the current centroids by the minimum-image rule (`grid`), as the list build does,
 // not from the build's shift: a particle wrapped across a periodic face since the build keeps
-// its contacts. With kGjk false a polyhedral pair whose intersection the Chebyshev centre does
-// not prove is left for the deferred pass (returns true, its outputs cleared); with kGjk true
-// every pair is evaluated in full.
-template <bool kGjk> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) {
+// its contacts. With kFull false a polyhedral pair whose intersection the Chebyshev centre does
+// not prove, or whose overlap needs the dual hull, is left for the deferred pass (returns true,
+// its outputs cleared); with kFull true every pair is evaluated in full.
+template <bool kFull> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) {
     const ParticleView& p = q.p;
     const PairOutputs& out = q.out;
     PD_CLK_START
@@ -153,11 +153,11 @@ template <bool kGjk> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) {
     PairGeometry g;
     PD_CLK(0)
     PD_CLK_COUNT(11)
-    int status = overlap_pair_t<GeomReal, kGjk>(ws, A, B, &g);
+    int status = overlap_pair_t<GeomReal, kFull>(ws, A, B, &g);
 #if defined(PD_PHASE_CLOCKS)
     pd_t = clock64();
 #endif
-    if (status == STATUS_NEEDS_GJK) {
+    if (status == STATUS_DEFERRED) {
         return true;
     }
     if (status != STATUS_OK) {
@@ -235,9 +235,9 @@ template <bool kGjk> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) {
 
 // Stages 3–7 for pairs first .. n_pairs − 1 (Simulation::pair_contacts). A decomposed run
 // evaluates the pairs of two owned particles while the halo is in flight, then the rest. The
-// pairs that need GJK are appended to `deferred` (count in deferred_count[0]) for
-// pair_contacts_deferred: GJK is needed by a few per cent of the pairs of a dense packing, and
-// compiled in here it would size every thread's registers.
+// pairs that need GJK or the dual hull are appended to `deferred` (count in deferred_count[0])
+// for pair_contacts_deferred: a few per cent of the pairs of a dense packing need them, and
+// compiled in here they would size every thread's registers and local memory.
 extern "C" __global__ void PD_PAIR_BOUNDS pair_contacts(int first, int n_pairs, PairArgs args, unsigned int* deferred,
                                                        unsigned int* deferred_count) {
     int kk = first + (int)(blockIdx.x * blockDim.x + threadIdx.x);
@@ -255,7 +255,7 @@ extern "C" __global__ void PD_PAIR_BOUNDS pair_contacts(int first, int n_pairs, 
 #endif
 }
 
-// The deferred pairs of pair_contacts, evaluated in full (GJK included); a grid-stride loop over
+// The deferred pairs of pair_contacts, evaluated in full (GJK and the hull included); a grid-stride loop over
 // the count the pair pass left on the device, so the host launches it without reading it. Each
 // pair writes only its own slots, so the order of the list does not matter.
 extern "C" __global__ void pair_contacts_deferred(PairArgs args, const unsigned int* deferred,

@@ -14,6 +14,7 @@
 #include "interior.cuh"
 #include "polytope.cuh"
 #include "quickhull.cuh"
+#include "vertex_enumeration.cuh"
 
 // Profiling build (PD_PHASE_CLOCKS, from POLYDEM_PHASE_CLOCKS): thread-cycles of each phase of a
 // pair evaluation summed into pd_clk (slot meanings in src/backend/cuda/contacts.rs); the host
@@ -79,6 +80,7 @@ template <class T> PD_HD Overlap<double> to_world(const Overlap<T>& o, V3<double
 // Buffers of one overlap evaluation (Rust `OverlapWorkspace<T>`), one per thread, reused.
 template <class T> struct OverlapWorkspace {
     DualHull<T> hull;
+    FaceEnumeration<T> faces;
     V3<T> dual[PD_MAX_HULL_POINTS];
     V3<T> normal[PD_MAX_HULL_POINTS];
     T delta[PD_MAX_HULL_POINTS];
@@ -93,53 +95,9 @@ template <class T> struct OverlapWorkspace {
     PD_HD T face_area(int i) const { return area[i]; }
 };
 
-// overlap::overlap_about: the overlap of {n·x <= h for the na planes of a} and likewise b, about
-// the interior point x0 (normally the Chebyshev centre); seed Alg. II–VI. Returns a status code
-// (STATUS_TOO_MANY_PLANES or a hull error) with *out zeroed, or STATUS_OK; a zero overlap (with
-// depth = the inscribed radius) when the interiors are disjoint or only touch.
-template <class T>
-PD_HD int overlap_about(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, const Plane<T>* b, int nb, V3<T> x0,
-                        Overlap<T>* out) {
-    *out = overlap_zero<T>();
-    const int m = na + nb;
-    if (m > PD_MAX_HULL_POINTS) return STATUS_TOO_MANY_PLANES;
-    PD_CLK_START
-    ws.x0 = x0;
-    T scale = T(0);
-    T radius = Limits<T>::max();
-    for (int i = 0; i < m; ++i) {
-        const Plane<T>& p = i < na ? a[i] : b[i - na];
-        ws.normal[i] = p.normal;
-        ws.delta[i] = p.offset - dot(p.normal, x0);
-        scale = max_(scale, ws.delta[i]);
-        radius = min_(radius, ws.delta[i]);
-    }
-    Overlap<T> none = overlap_zero<T>();
-    none.depth = radius;
-    for (int i = 0; i < m; ++i) ws.area[i] = T(0);
-    if (radius <= T(16.0) * Limits<T>::epsilon() * scale) {
-        *out = none;
-        return STATUS_OK;
-    }
-    // Polar transform (seed Alg. II): every δ is at least the inscribed radius.
-    for (int i = 0; i < m; ++i) {
-        ws.delta[i] = max_(ws.delta[i], radius);
-        ws.dual[i] = ws.normal[i] / ws.delta[i];
-    }
-    // Outside tolerance of the dual hull (Rust HULL_EPS): retry coarser when round-off breaks
-    // the first attempt.
-    const double hull_eps[2] = {32.0, 4096.0};
-    int result = STATUS_HULL_DEGENERATE;
-    for (int e = 0; e < 2; ++e) {
-        result = ws.hull.build(ws.dual, m, T(hull_eps[e]));
-        if (result == STATUS_OK) break;
-    }
-    if (result != STATUS_OK) return result;
-    PD_CLK(13)
-
-    // Share of each plane's face in S: 1 for B's planes, 0 for A's; coincident planes of A and B
-    // (dual points within the hull tolerance) count half to each.
-    const T tol = ws.hull.tolerance();
+// overlap::set_shares: share of each plane's face in S, 1 for B's planes, 0 for A's, half to
+// each of a plane of A and a plane of B that coincide (dual points within tol).
+template <class T> PD_HD void set_shares(OverlapWorkspace<T>& ws, int m, int na, T tol) {
     for (int i = 0; i < m; ++i) ws.share_b[i] = i < na ? T(0) : T(1);
     for (int i = 0; i < na; ++i) {
         for (int j = na; j < m; ++j) {
@@ -149,6 +107,52 @@ PD_HD int overlap_about(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, cons
             }
         }
     }
+}
+
+// overlap::enumerate_faces: face areas and first moments by vertex enumeration for
+// m <= PD_ENUM_MAX_PLANES, coincident planes keeping the first copy; returns whether the faces
+// close (|Σ A_u n_u| <= 256 ε Σ |A_u|), else the caller uses the hull.
+template <class T> PD_HD bool enumerate_faces(OverlapWorkspace<T>& ws, int m, int na, T scale) {
+    T max_coord = T(0);
+    for (int i = 0; i < m; ++i) {
+        max_coord = max_(max_(max_(max_coord, abs_(ws.dual[i].x)), abs_(ws.dual[i].y)), abs_(ws.dual[i].z));
+    }
+    const T tol = T(32.0) * Limits<T>::epsilon() * max_coord;
+    set_shares(ws, m, na, tol);
+    unsigned int active = 0u;
+    for (int j = 0; j < m; ++j) {
+        bool copy = false;
+        for (int i = 0; i < j && !copy; ++i) copy = norm2(ws.dual[i] - ws.dual[j]) <= tol * tol;
+        if (!copy) active |= 1u << j;
+    }
+    const T vertex_tol = T(64.0) * Limits<T>::epsilon() * scale;
+    ws.faces.enumerate(ws.normal, ws.delta, m, active, vertex_tol);
+    V3<T> closure = zero3<T>();
+    T total = T(0);
+    for (int u = 0; u < m; ++u) {
+        ws.first_moment[u] = zero3<T>();
+        if (active & (1u << u)) {
+            ws.faces.face(u, ws.normal[u], ws.delta[u], &ws.area[u], &ws.first_moment[u]);
+            closure += ws.normal[u] * ws.area[u];
+            total += abs_(ws.area[u]);
+        }
+    }
+    const T closure_tol = T(256.0) * Limits<T>::epsilon() * total;
+    return norm2(closure) <= closure_tol * closure_tol;
+}
+
+// overlap::hull_faces: face areas and first moments from the dual hull (seed Alg. III–VI).
+template <class T> PD_HD int hull_faces(OverlapWorkspace<T>& ws, int m, int na) {
+    // Outside tolerance of the dual hull (Rust HULL_EPS): retry coarser when round-off breaks
+    // the first attempt.
+    const double hull_eps[2] = {32.0, 4096.0};
+    int result = STATUS_HULL_DEGENERATE;
+    for (int e = 0; e < 2; ++e) {
+        result = ws.hull.build(ws.dual, m, T(hull_eps[e]));
+        if (result == STATUS_OK) break;
+    }
+    if (result != STATUS_OK) return result;
+    set_shares(ws, m, na, ws.hull.tolerance());
 
     const int n_slots = ws.hull.n_tri;
     // Intersection vertices, one per dual triangle (seed Alg. VI, by Cramer's rule).
@@ -186,8 +190,59 @@ PD_HD int overlap_about(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, cons
             ws.first_moment[u] += (foot + p + q) * (tri_area * third);
         }
     }
-    PD_CLK(14)
-    // The traversal orientation is a global convention of the hull; make the areas positive.
+    return STATUS_OK;
+}
+
+// overlap::overlap_about: the overlap of {n·x <= h for the na planes of a} and likewise b, about
+// the interior point x0 (normally the Chebyshev centre); seed Alg. II–VI, the faces by vertex
+// enumeration for at most PD_ENUM_MAX_PLANES planes (when `enumerate`), else by the dual hull.
+// Returns a status code (STATUS_TOO_MANY_PLANES or a hull error) with *out zeroed, or
+// STATUS_OK; a zero overlap (with depth = the inscribed radius) when the interiors are disjoint
+// or only touch. With kHull false the hull is not compiled in: where it would be needed the
+// result is STATUS_DEFERRED (the pair kernel's lean pass).
+template <class T, bool kHull>
+PD_HD int overlap_about_t(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, const Plane<T>* b, int nb, V3<T> x0,
+                          bool enumerate, Overlap<T>* out) {
+    *out = overlap_zero<T>();
+    const int m = na + nb;
+    if (m > PD_MAX_HULL_POINTS) return STATUS_TOO_MANY_PLANES;
+    PD_CLK_START
+    ws.x0 = x0;
+    T scale = T(0);
+    T radius = Limits<T>::max();
+    for (int i = 0; i < m; ++i) {
+        const Plane<T>& p = i < na ? a[i] : b[i - na];
+        ws.normal[i] = p.normal;
+        ws.delta[i] = p.offset - dot(p.normal, x0);
+        scale = max_(scale, ws.delta[i]);
+        radius = min_(radius, ws.delta[i]);
+    }
+    Overlap<T> none = overlap_zero<T>();
+    none.depth = radius;
+    for (int i = 0; i < m; ++i) ws.area[i] = T(0);
+    if (radius <= T(16.0) * Limits<T>::epsilon() * scale) {
+        *out = none;
+        return STATUS_OK;
+    }
+    // Polar transform (seed Alg. II): every δ is at least the inscribed radius.
+    for (int i = 0; i < m; ++i) {
+        ws.delta[i] = max_(ws.delta[i], radius);
+        ws.dual[i] = ws.normal[i] / ws.delta[i];
+    }
+    const bool enumerated = enumerate && m <= PD_ENUM_MAX_PLANES && enumerate_faces(ws, m, na, scale);
+    if (!enumerated) {
+        if constexpr (!kHull) {
+            return STATUS_DEFERRED;
+        } else {
+            for (int i = 0; i < m; ++i) ws.area[i] = T(0);
+            int st = hull_faces(ws, m, na);
+            if (st != STATUS_OK) return st;
+        }
+    }
+    PD_CLK(13)
+    // The hull's traversal orientation is a global convention; make the areas positive (the
+    // enumeration's are by construction).
+    const T third = T(1.0 / 3.0);
     T volume = T(0);
     for (int i = 0; i < m; ++i) volume += ws.delta[i] * ws.area[i];
     if (volume < T(0)) {
@@ -221,14 +276,23 @@ PD_HD int overlap_about(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, cons
     if (area > T(0)) {
         V3<T> n = dv_dxb / area;
         T lo = Limits<T>::max(), hi = -Limits<T>::max();
-        for (int s = 0; s < n_slots; ++s) {
-            if (!ws.hull.tri[s].alive) continue;
-            T h = dot(n, ws.vertex[s]);
-            lo = min_(lo, h);
-            hi = max_(hi, h);
+        if (enumerated) {
+            for (int v = 0; v < ws.faces.n_vertices; ++v) {
+                T h = dot(n, ws.faces.vertex[v]);
+                lo = min_(lo, h);
+                hi = max_(hi, h);
+            }
+        } else if constexpr (kHull) {
+            for (int s = 0; s < ws.hull.n_tri; ++s) {
+                if (!ws.hull.tri[s].alive) continue;
+                T h = dot(n, ws.vertex[s]);
+                lo = min_(lo, h);
+                hi = max_(hi, h);
+            }
         }
         thickness = max_(hi - lo, T(0));
     }
+    PD_CLK(14)
     out->volume = volume;
     out->centroid = centroid + x0;
     out->dv_dxb = dv_dxb;
@@ -236,6 +300,19 @@ PD_HD int overlap_about(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, cons
     out->depth = radius;
     out->thickness = thickness;
     return STATUS_OK;
+}
+
+template <class T>
+PD_HD int overlap_about(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, const Plane<T>* b, int nb, V3<T> x0,
+                        Overlap<T>* out) {
+    return overlap_about_t<T, true>(ws, a, na, b, nb, x0, true, out);
+}
+
+// overlap::overlap_volume_by_hull's evaluation: overlap_about with the faces from the hull only.
+template <class T>
+PD_HD int overlap_about_by_hull(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, const Plane<T>* b, int nb,
+                                V3<T> x0, Overlap<T>* out) {
+    return overlap_about_t<T, true>(ws, a, na, b, nb, x0, false, out);
 }
 
 // overlap::overlap_volume: overlap_about about the Chebyshev centre of the two plane sets, the
@@ -301,10 +378,11 @@ PD_HD bool axis_separates(const BodyRef& A, const BodyRef& B, V3<double> axis, d
 // that miss it set aside, Chebyshev centre started at the origin (the verdict when it proves an
 // interior; GJK, seed Alg. I, otherwise), frame moved onto it in double, overlap about it (seed
 // Alg. II–VI), result back in world coordinates. Returns a status code; on error *out is
-// zeroed. With kGjk false, a pair whose intersection the centre does not prove returns
-// STATUS_NEEDS_GJK instead of running GJK (the pair kernel defers those to a second pass, so
-// that its registers are not sized by GJK); with kGjk true this is Rust's overlap_pair.
-template <class T, bool kGjk>
+// zeroed. With kFull false (the lean evaluation), a pair whose intersection the centre does not
+// prove, or whose faces need the dual hull, returns STATUS_DEFERRED instead of running GJK or
+// the hull (the pair kernel defers those to a second pass, so that neither its registers nor its
+// local memory are sized by them); with kFull true this is Rust's overlap_pair.
+template <class T, bool kFull>
 PD_HD int overlap_pair_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out) {
     out->intersects = 0;
     out->separating_axis = zero3<double>();
@@ -335,7 +413,7 @@ PD_HD int overlap_pair_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& 
     for (int i = 0; i < ws.a.n_aside && proven; ++i) proven = plane_distance(ws.a.aside[i], centre.point) < -tol;
     for (int i = 0; i < ws.b.n_aside && proven; ++i) proven = plane_distance(ws.b.aside[i], centre.point) < -tol;
     if (!proven) {
-        if (!kGjk) return STATUS_NEEDS_GJK;
+        if (!kFull) return STATUS_DEFERRED;
         PD_CLK_COUNT(12)
         place_vertices(ws.a, A.tpl, A.scale, A.pos, A.rot, origin);
         place_vertices(ws.b, B.tpl, B.scale, B.pos, B.rot, origin);
@@ -355,7 +433,8 @@ PD_HD int overlap_pair_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& 
     reposition_planes(ws.b, B.tpl, B.scale, B.pos, B.rot, origin);
     PD_CLK(6)
     Overlap<T> o;
-    int st = overlap_about(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>(), &o);
+    int st = overlap_about_t<T, kFull>(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>(),
+                                       true, &o);
     PD_CLK(7)
     if (st != STATUS_OK) return st;
     out->intersects = 1;

@@ -38,9 +38,10 @@ enum GeometryStatus {
     STATUS_HULL_TOPOLOGY = 5,
     // facet_prism: degenerate triangle (Rust returns None).
     STATUS_DEGENERATE_FACET = 6,
-    // overlap_pair_t without GJK: the centre did not prove an intersection, the pair needs the
-    // full evaluation (never returned by overlap_pair).
-    STATUS_NEEDS_GJK = 7,
+    // The lean evaluation (overlap_pair_t<T, false>, no GJK and no hull compiled in): the centre
+    // did not prove an intersection, or the faces need the dual hull; the pair needs the full
+    // evaluation (never returned by overlap_pair).
+    STATUS_DEFERRED = 7,
 };
 
 // A convex template in its body frame, as plain arrays: kernels point it at constant or global

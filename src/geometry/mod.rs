@@ -12,6 +12,8 @@
 //!   Eq. 4–9; Feng, Han & Owen 2012 for `S`).
 //! - [`clip`]: polyhedron against a triangle facet (seed Alg. VII, Sutherland–Hodgman).
 //! - [`polytope`]: a template placed in a pair frame (vertices and face planes).
+//! - [`vertex_enumeration`]: the overlap's faces by vertex enumeration, the exact alternative to
+//!   the dual hull for the few planes a culled pair keeps.
 //! - [`sphere`]: the sphere fast path: lens and cap overlaps in closed form.
 
 pub mod clip;
@@ -22,6 +24,7 @@ pub mod polytope;
 pub mod quickhull;
 mod real;
 pub mod sphere;
+pub mod vertex_enumeration;
 
 pub use clip::{FacetContact, facet_contact, section_polygon, sutherland_hodgman};
 pub use gjk::gjk_intersect;

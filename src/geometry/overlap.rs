@@ -30,6 +30,7 @@ use super::gjk::gjk_separating_axis;
 use super::interior::chebyshev_centre;
 use super::polytope::{Plane, PosedPolytope, set_aside_faces_apart, widen};
 use super::quickhull::{DualHull, HullError, MAX_HULL_FACES, MAX_HULL_POINTS};
+use super::vertex_enumeration::{ENUM_MAX_PLANES, FaceEnumeration};
 use crate::shape::ConvexTemplate;
 use nalgebra::{Isometry3, Vector3};
 
@@ -90,6 +91,9 @@ pub enum OverlapError {
 #[derive(Clone, Debug)]
 pub struct OverlapWorkspace<T: Real> {
     hull: DualHull<T>,
+    faces: FaceEnumeration<T>,
+    /// The last evaluation would have used the enumeration, but its faces did not close.
+    declined: bool,
     dual: [Vector3<T>; MAX_HULL_POINTS],
     normal: [Vector3<T>; MAX_HULL_POINTS],
     delta: [T; MAX_HULL_POINTS],
@@ -104,6 +108,8 @@ impl<T: Real> Default for OverlapWorkspace<T> {
     fn default() -> Self {
         OverlapWorkspace {
             hull: DualHull::default(),
+            faces: FaceEnumeration::default(),
+            declined: false,
             dual: [Vector3::zeros(); MAX_HULL_POINTS],
             normal: [Vector3::zeros(); MAX_HULL_POINTS],
             delta: [T::zero(); MAX_HULL_POINTS],
@@ -154,15 +160,53 @@ pub fn overlap_volume<T: Real>(
         return Err(OverlapError::TooManyPlanes(m));
     }
     let centre = chebyshev_centre(a, b, start);
-    overlap_about(ws, a, b, centre.point)
+    overlap_about(ws, a, b, centre.point, true)
 }
 
-/// [`overlap_volume`] about a given interior point `x0` (normally the Chebyshev centre).
+/// [`overlap_volume`] with the faces always taken from the dual hull, also for the few planes
+/// that [`overlap_volume`] hands to the vertex enumeration: the reference the enumeration is
+/// tested against.
+pub fn overlap_volume_by_hull<T: Real>(
+    ws: &mut OverlapWorkspace<T>,
+    a: &[Plane<T>],
+    b: &[Plane<T>],
+    start: Vector3<T>,
+) -> Result<Overlap<T>, OverlapError> {
+    let m = a.len() + b.len();
+    if m > MAX_HULL_POINTS {
+        return Err(OverlapError::TooManyPlanes(m));
+    }
+    let centre = chebyshev_centre(a, b, start);
+    overlap_about(ws, a, b, centre.point, false)
+}
+
+/// [`overlap_volume`] with the faces from the vertex enumeration only: `None` where
+/// [`overlap_volume`] would use the dual hull (more than [`ENUM_MAX_PLANES`] planes, or faces
+/// that do not close). For tests of the enumeration and of how often it declines.
+pub fn overlap_volume_by_enumeration<T: Real>(
+    ws: &mut OverlapWorkspace<T>,
+    a: &[Plane<T>],
+    b: &[Plane<T>],
+    start: Vector3<T>,
+) -> Option<Overlap<T>> {
+    if a.len() + b.len() > ENUM_MAX_PLANES {
+        return None;
+    }
+    let centre = chebyshev_centre(a, b, start);
+    ws.declined = false;
+    let o = overlap_about(ws, a, b, centre.point, true).ok()?;
+    (!ws.declined).then_some(o)
+}
+
+/// [`overlap_volume`] about a given interior point `x0` (normally the Chebyshev centre). The
+/// faces come from the vertex enumeration for at most [`ENUM_MAX_PLANES`] planes when
+/// `enumerate` is set, else from the dual hull.
 fn overlap_about<T: Real>(
     ws: &mut OverlapWorkspace<T>,
     a: &[Plane<T>],
     b: &[Plane<T>],
     x0: Vector3<T>,
+    enumerate: bool,
 ) -> Result<Overlap<T>, OverlapError> {
     let m = a.len() + b.len();
     if m > MAX_HULL_POINTS {
@@ -193,69 +237,18 @@ fn overlap_about<T: Real>(
         ws.delta[i] = ws.delta[i].max(radius);
         ws.dual[i] = ws.normal[i] / ws.delta[i];
     }
-    let mut result = Err(HullError::Degenerate);
-    for eps in HULL_EPS {
-        result = ws.hull.build(&ws.dual[..m], T::of(eps));
-        if result.is_ok() {
-            break;
-        }
-    }
-    result?;
-
-    // Share of each plane's face in S: 1 for B's planes, 0 for A's, except that a plane of A and
-    // a plane of B that coincide (dual points within the hull tolerance: aligned faces, a cube
-    // on a cube) bound the overlap with one face, of which the hull keeps one copy. V is not
-    // differentiable there (moving B one way grows the overlap, the other way does not); we take
-    // the mean of the one-sided derivatives, half the face to each body, so that S does not
-    // depend on which copy the hull happened to keep.
-    let tol = ws.hull.tolerance();
     let na = a.len();
-    for i in 0..m {
-        ws.share_b[i] = if i < na { T::zero() } else { T::one() };
-    }
-    for i in 0..na {
-        for j in na..m {
-            if (ws.dual[i] - ws.dual[j]).norm_squared() <= tol * tol {
-                ws.share_b[i] = T::of(0.5);
-                ws.share_b[j] = T::of(0.5);
-            }
+    let enumerated = enumerate && m <= ENUM_MAX_PLANES && enumerate_faces(ws, m, na, scale);
+    ws.declined = enumerate && m <= ENUM_MAX_PLANES && !enumerated;
+    if !enumerated {
+        for i in 0..m {
+            ws.area[i] = T::zero();
         }
+        hull_faces(ws, m, na)?;
     }
-
-    // Intersection vertices, one per dual triangle (seed Alg. VI, by Cramer's rule).
-    for (s, t) in ws.hull.triangles() {
-        let [i, j, k] = t.v.map(usize::from);
-        let (ni, nj, nk) = (ws.normal[i], ws.normal[j], ws.normal[k]);
-        let (cjk, cki, cij) = (nj.cross(&nk), nk.cross(&ni), ni.cross(&nj));
-        let det = ni.dot(&cjk);
-        ws.vertex[s] = if det.abs() > T::of(64.0) * T::EPSILON {
-            (cjk * ws.delta[i] + cki * ws.delta[j] + cij * ws.delta[k]) / det
-        } else if t.offset > T::zero() {
-            // Nearly dependent normals: unpolarise the dual plane instead (seed Eq. 6–8).
-            t.normal / t.offset
-        } else {
-            Vector3::zeros()
-        };
-    }
-
-    // Faces of the intersection: fan every face from the foot of x₀ on its plane.
-    for i in 0..m {
-        ws.first_moment[i] = Vector3::zeros();
-    }
+    // The hull's traversal orientation is a global convention; make the areas positive (the
+    // enumeration's are by construction).
     let third = T::of(1.0 / 3.0);
-    for (s, t) in ws.hull.triangles() {
-        for k in 0..3 {
-            let u = t.v[k] as usize;
-            let p = ws.vertex[s];
-            let q = ws.vertex[t.adj[k] as usize];
-            let foot = ws.normal[u] * ws.delta[u];
-            let twice = ws.normal[u].dot(&(p - foot).cross(&(q - foot)));
-            let tri_area = twice * T::of(0.5);
-            ws.area[u] += tri_area;
-            ws.first_moment[u] += (foot + p + q) * (tri_area * third);
-        }
-    }
-    // The traversal orientation is a global convention of the hull; make the areas positive.
     let mut volume = T::zero();
     for i in 0..m {
         volume += ws.delta[i] * ws.area[i];
@@ -293,10 +286,15 @@ fn overlap_about<T: Real>(
             T::max_value().unwrap_or(T::one()),
             -T::max_value().unwrap_or(T::one()),
         );
-        for (s, _) in ws.hull.triangles() {
-            let h = n.dot(&ws.vertex[s]);
+        let mut extend = |v: &Vector3<T>| {
+            let h = n.dot(v);
             lo = lo.min(h);
             hi = hi.max(h);
+        };
+        if enumerated {
+            ws.faces.vertices().iter().for_each(&mut extend);
+        } else {
+            ws.hull.triangles().for_each(|(s, _)| extend(&ws.vertex[s]));
         }
         thickness = (hi - lo).max(T::zero());
     }
@@ -308,6 +306,116 @@ fn overlap_about<T: Real>(
         depth: radius,
         thickness,
     })
+}
+
+/// Share of each plane's face in S: 1 for B's planes, 0 for A's, except that a plane of A and a
+/// plane of B that coincide (dual points within `tol`: aligned faces, a cube on a cube) bound
+/// the overlap with one face, of which the hull (or the enumeration) keeps one copy. V is not
+/// differentiable there (moving B one way grows the overlap, the other way does not); we take the
+/// mean of the one-sided derivatives, half the face to each body, so that S does not depend on
+/// which copy was kept.
+fn set_shares<T: Real>(ws: &mut OverlapWorkspace<T>, m: usize, na: usize, tol: T) {
+    for i in 0..m {
+        ws.share_b[i] = if i < na { T::zero() } else { T::one() };
+    }
+    for i in 0..na {
+        for j in na..m {
+            if (ws.dual[i] - ws.dual[j]).norm_squared() <= tol * tol {
+                ws.share_b[i] = T::of(0.5);
+                ws.share_b[j] = T::of(0.5);
+            }
+        }
+    }
+}
+
+/// Face areas and first moments of the intersection of the `m` planes in `ws` (the first `na`
+/// of A) by vertex enumeration ([`super::vertex_enumeration`]), for `m <= ENUM_MAX_PLANES`.
+/// Coincident planes (dual points within the dual hull's first tolerance) keep the first copy.
+/// `scale`: the largest distance δ, to which the vertex tolerance is relative.
+///
+/// Returns whether the faces close: `|Σ_u A_u n_u| <= 256 ε Σ_u |A_u|` (the vector area of a
+/// closed surface is zero). A face given an area it does not have, or one that lost a vertex
+/// (a triple skipped as singular, as where two planes cross at an angle of round-off size and
+/// both would claim the whole face), leaves the surface open; the caller then uses the hull.
+fn enumerate_faces<T: Real>(ws: &mut OverlapWorkspace<T>, m: usize, na: usize, scale: T) -> bool {
+    let mut max_coord = T::zero();
+    for y in &ws.dual[..m] {
+        max_coord = max_coord.max(y.x.abs()).max(y.y.abs()).max(y.z.abs());
+    }
+    let tol = T::of(HULL_EPS[0]) * T::EPSILON * max_coord;
+    set_shares(ws, m, na, tol);
+    let mut active = 0u8;
+    for j in 0..m {
+        let copy = (0..j).any(|i| (ws.dual[i] - ws.dual[j]).norm_squared() <= tol * tol);
+        if !copy {
+            active |= 1 << j;
+        }
+    }
+    let vertex_tol = T::of(64.0) * T::EPSILON * scale;
+    ws.faces
+        .enumerate(&ws.normal[..m], &ws.delta[..m], active, vertex_tol);
+    let mut closure = Vector3::zeros();
+    let mut total = T::zero();
+    for u in 0..m {
+        ws.first_moment[u] = Vector3::zeros();
+        if active & (1 << u) != 0 {
+            (ws.area[u], ws.first_moment[u]) = ws.faces.face(u, ws.normal[u], ws.delta[u]);
+            closure += ws.normal[u] * ws.area[u];
+            total += ws.area[u].abs();
+        }
+    }
+    let closure_tol = T::of(256.0) * T::EPSILON * total;
+    closure.norm_squared() <= closure_tol * closure_tol
+}
+
+/// Face areas and first moments of the intersection of the `m` planes in `ws` (the first `na`
+/// of A) from the dual hull of their dual points (seed Alg. III–VI).
+fn hull_faces<T: Real>(ws: &mut OverlapWorkspace<T>, m: usize, na: usize) -> Result<(), HullError> {
+    let mut result = Err(HullError::Degenerate);
+    for eps in HULL_EPS {
+        result = ws.hull.build(&ws.dual[..m], T::of(eps));
+        if result.is_ok() {
+            break;
+        }
+    }
+    result?;
+    let tol = ws.hull.tolerance();
+    set_shares(ws, m, na, tol);
+
+    // Intersection vertices, one per dual triangle (seed Alg. VI, by Cramer's rule).
+    for (s, t) in ws.hull.triangles() {
+        let [i, j, k] = t.v.map(usize::from);
+        let (ni, nj, nk) = (ws.normal[i], ws.normal[j], ws.normal[k]);
+        let (cjk, cki, cij) = (nj.cross(&nk), nk.cross(&ni), ni.cross(&nj));
+        let det = ni.dot(&cjk);
+        ws.vertex[s] = if det.abs() > T::of(64.0) * T::EPSILON {
+            (cjk * ws.delta[i] + cki * ws.delta[j] + cij * ws.delta[k]) / det
+        } else if t.offset > T::zero() {
+            // Nearly dependent normals: unpolarise the dual plane instead (seed Eq. 6–8).
+            t.normal / t.offset
+        } else {
+            Vector3::zeros()
+        };
+    }
+
+    // Faces of the intersection: fan every face from the foot of x₀ on its plane.
+    for i in 0..m {
+        ws.first_moment[i] = Vector3::zeros();
+    }
+    let third = T::of(1.0 / 3.0);
+    for (s, t) in ws.hull.triangles() {
+        for k in 0..3 {
+            let u = t.v[k] as usize;
+            let p = ws.vertex[s];
+            let q = ws.vertex[t.adj[k] as usize];
+            let foot = ws.normal[u] * ws.delta[u];
+            let twice = ws.normal[u].dot(&(p - foot).cross(&(q - foot)));
+            let tri_area = twice * T::of(0.5);
+            ws.area[u] += tri_area;
+            ws.first_moment[u] += (foot + p + q) * (tri_area * third);
+        }
+    }
+    Ok(())
 }
 
 /// Buffers for a full pair evaluation: both placed polytopes and the overlap workspace.
@@ -442,6 +550,7 @@ pub fn overlap_pair<T: Real>(
             ws.a.planes(),
             ws.b.planes(),
             Vector3::zeros(),
+            true,
         )?
         .to_world(&origin)
     } else {

@@ -23,14 +23,14 @@ impl CudaSimulation {
             "Chebyshev centre",
             "proof of intersection",
             "planes moved to the centre",
-            "overlap (dual hull and faces)",
+            "overlap (faces and their sums)",
             "contact law",
             "",
             "",
             "pairs evaluated (count)",
             "pairs needing GJK (count)",
-            "  of which the hull build",
-            "  of which vertices and face areas",
+            "  of which the faces (enumeration, or dual hull)",
+            "  of which volume, centroid, S and moment",
             "",
         ];
         let view = self.k.contact.get_global("pd_clk", &self.stream)?;

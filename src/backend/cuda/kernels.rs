@@ -15,6 +15,10 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("gjk.cuh", include_str!("../../../cuda/gjk.cuh")),
     ("interior.cuh", include_str!("../../../cuda/interior.cuh")),
     ("quickhull.cuh", include_str!("../../../cuda/quickhull.cuh")),
+    (
+        "vertex_enumeration.cuh",
+        include_str!("../../../cuda/vertex_enumeration.cuh"),
+    ),
     ("overlap.cuh", include_str!("../../../cuda/overlap.cuh")),
     ("prism.cuh", include_str!("../../../cuda/prism.cuh")),
     ("sphere.cuh", include_str!("../../../cuda/sphere.cuh")),
