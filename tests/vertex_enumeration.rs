@@ -177,7 +177,8 @@ fn degenerate_cuts_of_a_cube_have_their_exact_volumes() {
     let h = 0.5;
     let v = Vector3::new;
     // (name, planes of B, exact volume, exact S when known)
-    let cases: Vec<(&str, Vec<Plane<f64>>, f64, Option<Vector3<f64>>)> = vec![
+    type Case = (&'static str, Vec<Plane<f64>>, f64, Option<Vector3<f64>>);
+    let cases: Vec<Case> = vec![
         (
             "plane along the top edge (x + z <= 1)",
             vec![plane(v(1.0, 0.0, 1.0), v(h, 0.0, h))],
