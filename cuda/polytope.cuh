@@ -194,51 +194,40 @@ template <class T> PD_HD void restore_aside(PosedPolytope<T>& p) {
 
 // PosedPolytope::set_aside_beyond: moves the planes whose face polygon lies beyond one of
 // q[0..nq] ∪ r[0..nr] by more than `tol` to the set-aside list, keeping both lists in order. The
-// face corners are placed from the template (`pl`: the body's placement) exactly as
-// PosedPolytope::place places the vertices that Rust reads here.
+// faces are tested in the body's frame from the template's corners, in double, against each
+// plane carried into that frame once: for a corner v, s (Rᵀ n)·v − (o − n·(pos − origin)).
 template <class T>
 PD_HD void set_aside_beyond(PosedPolytope<T>& p, const TemplateView& t, const Placement& pl, const Plane<T>* q, int nq,
                             const Plane<T>* r, int nr, T tol) {
-    // Faces of up to this many corners are tested from registers (the test is a pure
-    // predicate, so the order of its distance evaluations does not change the result).
-    const int in_registers = 8;
+    const double tol_d = double(tol);
+    const Mat3<double>& m = pl.rot;
+    bool apart[PD_MAX_TEMPLATE_FACES];
+    for (int i = 0; i < p.n_planes; ++i) apart[i] = false;
+    for (int j = 0; j < nq + nr; ++j) {
+        const Plane<T> h = j < nq ? q[j] : r[j - nq];
+        const V3<double> n = widen(h.normal);
+        const V3<double> body_normal = v3(m.m[0][0] * n.x + m.m[1][0] * n.y + m.m[2][0] * n.z,
+                                          m.m[0][1] * n.x + m.m[1][1] * n.y + m.m[2][1] * n.z,
+                                          m.m[0][2] * n.x + m.m[1][2] * n.y + m.m[2][2] * n.z) *
+                                       pl.scale;
+        const double body_offset = double(h.offset) - dot(n, pl.shift);
+        for (int i = 0; i < p.n_planes; ++i) {
+            if (apart[i]) continue;
+            const int f = p.face[i];
+            const int first = t.face_start[f], last = t.face_start[f + 1];
+            const double* corner = t.face_points + 3 * first;
+            bool beyond = true;
+            for (int k = 0; k < last - first && beyond; ++k) {
+                V3<double> v = v3(corner[3 * k], corner[3 * k + 1], corner[3 * k + 2]);
+                beyond = dot(body_normal, v) - body_offset > tol_d;
+            }
+            apart[i] = beyond;
+        }
+    }
     int kept = 0;
     p.n_aside = 0;
     for (int i = 0; i < p.n_planes; ++i) {
-        const int f = p.face[i];
-        const int first = t.face_start[f], last = t.face_start[f + 1];
-        const int nv = last - first;
-        const double* corner = t.face_points + 3 * first;
-        bool apart = false;
-        if (nv <= in_registers) {
-            V3<T> fv[in_registers];
-#pragma unroll
-            for (int k = 0; k < in_registers; ++k) {
-                if (k < nv) fv[k] = placed_point<T>(pl, v3(corner[3 * k], corner[3 * k + 1], corner[3 * k + 2]));
-            }
-            for (int j = 0; j < nq + nr && !apart; ++j) {
-                const Plane<T> h = j < nq ? q[j] : r[j - nq];
-                // Most planes already fail on the first corner: test the rest only then.
-                if (!(plane_distance(h, fv[0]) > tol)) continue;
-                bool beyond = true;
-#pragma unroll
-                for (int k = 1; k < in_registers; ++k) {
-                    if (k < nv && beyond) beyond = plane_distance(h, fv[k]) > tol;
-                }
-                apart = beyond;
-            }
-        } else {
-            for (int j = 0; j < nq + nr && !apart; ++j) {
-                const Plane<T>& h = j < nq ? q[j] : r[j - nq];
-                bool beyond = true;
-                for (int k = 0; k < nv && beyond; ++k) {
-                    V3<T> c = placed_point<T>(pl, v3(corner[3 * k], corner[3 * k + 1], corner[3 * k + 2]));
-                    beyond = plane_distance(h, c) > tol;
-                }
-                apart = beyond;
-            }
-        }
-        if (apart) {
+        if (apart[i]) {
             p.aside[p.n_aside] = p.planes[i];
             p.aside_face[p.n_aside] = p.face[i];
             p.n_aside += 1;

@@ -52,15 +52,22 @@ template <class T> struct FaceEnumeration {
                     T det = dot(ni, cjk);
                     if (abs_(det) <= singular) continue;
                     V3<T> cki = cross(nk, ni);
-                    V3<T> x = (cjk * delta[i] + cki * delta[j] + cij * delta[k]) / det;
+                    // det · x with det made positive: the tests are scaled by det, so only the
+                    // vertices kept pay for the division.
+                    V3<T> scaled = cjk * delta[i] + cki * delta[j] + cij * delta[k];
+                    if (det < T(0)) {
+                        scaled = -scaled;
+                        det = -det;
+                    }
+                    const T margin = tol * det;
                     bool inside = true;
                     for (int l = 0; l < m && inside; ++l) {
                         if (l != i && l != j && l != k && (active & (1u << l))) {
-                            inside = dot(normal[l], x) - delta[l] <= tol;
+                            inside = dot(normal[l], scaled) - delta[l] * det <= margin;
                         }
                     }
                     if (inside) {
-                        vertex[n_vertices] = x;
+                        vertex[n_vertices] = scaled / det;
                         on[n_vertices] = (unsigned char)((1u << i) | (1u << j) | (1u << k));
                         n_vertices += 1;
                     }

@@ -37,7 +37,7 @@ fn culled(
     let (ca, cb) = (a.centre, b.centre);
     a.retain_planes_reaching(&cb, rb, tol);
     b.retain_planes_reaching(&ca, ra, tol);
-    set_aside_faces_apart(&mut a, ta, &mut b, tb, tol);
+    set_aside_faces_apart(&mut a, (ta, 1.0, pa), &mut b, (tb, 1.0, pb), &origin, tol);
     let r = chebyshev_centre(a.planes(), b.planes(), Vector3::zeros()).radius;
     (a, b, r)
 }

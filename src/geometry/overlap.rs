@@ -506,7 +506,14 @@ pub fn overlap_pair<T: Real>(
     let tol = T::of(64.0) * T::EPSILON * T::of(ra + rb);
     ws.a.retain_planes_reaching(&ws.b.centre, T::of(rb), tol);
     ws.b.retain_planes_reaching(&ws.a.centre, T::of(ra), tol);
-    set_aside_faces_apart(&mut ws.a, ta, &mut ws.b, tb, tol);
+    set_aside_faces_apart(
+        &mut ws.a,
+        (ta, sa, pose_a),
+        &mut ws.b,
+        (tb, sb, pose_b),
+        &origin,
+        tol,
+    );
     // Start the LP at the frame origin, which is near the contact: its steps are then on the
     // scale of the overlap, and so is their round-off (which matters in f32 when one body is
     // much smaller than the distance between the centres).

@@ -182,40 +182,64 @@ impl<T: Real> PosedPolytope<T> {
 /// checking an interior point against [`PosedPolytope::aside_planes`], and otherwise restores
 /// them ([`PosedPolytope::restore_aside`]).
 ///
-/// `ta` and `tb` are the templates `a` and `b` were placed from (their face polygons index the
-/// placed vertices); `tol` is the round-off margin (a face within it of a plane is kept). Both
-/// bodies are tested against all of the other's planes in use on entry.
+/// Each body comes with the template, scale and pose it was placed from, and `origin` is the
+/// frame's origin: the faces are tested in the body's own frame, from the template's corners,
+/// against the other body's planes carried into that frame, in f64 (one transform per plane
+/// instead of one placement per corner, and the first corner settles most tests). `tol` is the
+/// round-off margin (a face within it of a plane is kept). Both bodies are tested against all of
+/// the other's planes in use on entry.
 pub fn set_aside_faces_apart<T: Real>(
     a: &mut PosedPolytope<T>,
-    ta: &ConvexTemplate,
+    body_a: (&ConvexTemplate, f64, &Isometry3<f64>),
     b: &mut PosedPolytope<T>,
-    tb: &ConvexTemplate,
+    body_b: (&ConvexTemplate, f64, &Isometry3<f64>),
+    origin: &Vector3<f64>,
     tol: T,
 ) {
-    a.set_aside_beyond(ta, b.planes(), &[], tol);
-    b.set_aside_beyond(tb, &a.planes[..a.n_planes], &a.aside[..a.n_aside], tol);
+    a.set_aside_beyond(body_a, origin, b.planes(), &[], tol);
+    b.set_aside_beyond(body_b, origin, &a.planes[..a.n_planes], &a.aside[..a.n_aside], tol);
 }
 
 impl<T: Real> PosedPolytope<T> {
     /// Moves the planes whose face lies beyond one of `p ∪ q` by more than `tol` to the
-    /// set-aside list, keeping both lists in order.
+    /// set-aside list, keeping both lists in order. A plane `n·x <= o` of the pair frame is, for
+    /// a corner `v` of this body's template, `s (Rᵀ n)·v − (o − n·(t − origin))` from the plane.
     fn set_aside_beyond(
         &mut self,
-        template: &ConvexTemplate,
+        (template, scale, pose): (&ConvexTemplate, f64, &Isometry3<f64>),
+        origin: &Vector3<f64>,
         p: &[Plane<T>],
         q: &[Plane<T>],
         tol: T,
     ) {
+        let rot = pose.rotation.to_rotation_matrix();
+        let r = rot.matrix();
+        let shift = pose.translation.vector - origin;
+        let tol = tol.f64();
+        let mut apart = [false; MAX_TEMPLATE_FACES];
+        for pl in p.iter().chain(q) {
+            let n = widen(&pl.normal);
+            // Rᵀ n written out (column k of R dotted with n), then the scale.
+            let body_normal = Vector3::new(
+                r[(0, 0)] * n.x + r[(1, 0)] * n.y + r[(2, 0)] * n.z,
+                r[(0, 1)] * n.x + r[(1, 1)] * n.y + r[(2, 1)] * n.z,
+                r[(0, 2)] * n.x + r[(1, 2)] * n.y + r[(2, 2)] * n.z,
+            ) * scale;
+            let body_offset = pl.offset.f64() - n.dot(&shift);
+            for (i, apart) in apart[..self.n_planes].iter_mut().enumerate() {
+                if *apart {
+                    continue;
+                }
+                let face = &template.faces[self.face[i] as usize];
+                *apart = face.vertices.iter().all(|&v| {
+                    body_normal.dot(&template.vertices[v as usize].coords) - body_offset > tol
+                });
+            }
+        }
         let mut kept = 0;
         self.n_aside = 0;
-        for i in 0..self.n_planes {
-            let face = &template.faces[self.face[i] as usize];
-            let beyond = |pl: &Plane<T>| {
-                face.vertices
-                    .iter()
-                    .all(|&v| pl.distance(&self.vertices[v as usize]) > tol)
-            };
-            if p.iter().chain(q).any(beyond) {
+        for (i, &apart) in apart[..self.n_planes].iter().enumerate() {
+            if apart {
                 self.aside[self.n_aside] = self.planes[i];
                 self.aside_face[self.n_aside] = self.face[i];
                 self.n_aside += 1;

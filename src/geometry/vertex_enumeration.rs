@@ -112,18 +112,26 @@ impl<T: Real> FaceEnumeration<T> {
                         continue;
                     }
                     let cki = nk.cross(&ni);
-                    let x = (cjk * delta[i] + cki * delta[j] + cij * delta[k]) / det;
+                    // det · x, with det made positive (exact negations): the tests below are
+                    // scaled by det, so only the vertices kept pay for the division.
+                    let mut scaled = cjk * delta[i] + cki * delta[j] + cij * delta[k];
+                    let mut det = det;
+                    if det < T::zero() {
+                        scaled = -scaled;
+                        det = -det;
+                    }
+                    let margin = tol * det;
                     let mut inside = true;
                     for l in 0..m {
                         if l != i && l != j && l != k && is_active(l) {
-                            inside = normal[l].dot(&x) - delta[l] <= tol;
+                            inside = normal[l].dot(&scaled) - delta[l] * det <= margin;
                             if !inside {
                                 break;
                             }
                         }
                     }
                     if inside {
-                        self.vertex[self.n_vertices] = x;
+                        self.vertex[self.n_vertices] = scaled / det;
                         self.on[self.n_vertices] = (1 << i) | (1 << j) | (1 << k);
                         self.n_vertices += 1;
                     }
