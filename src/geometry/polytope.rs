@@ -197,7 +197,13 @@ pub fn set_aside_faces_apart<T: Real>(
     tol: T,
 ) {
     a.set_aside_beyond(body_a, origin, b.planes(), &[], tol);
-    b.set_aside_beyond(body_b, origin, &a.planes[..a.n_planes], &a.aside[..a.n_aside], tol);
+    b.set_aside_beyond(
+        body_b,
+        origin,
+        &a.planes[..a.n_planes],
+        &a.aside[..a.n_aside],
+        tol,
+    );
 }
 
 impl<T: Real> PosedPolytope<T> {
