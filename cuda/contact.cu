@@ -31,6 +31,8 @@ __constant__ double pd_template_radius[PD_TEMPLATES];  // circumscribed radius
 // read different faces, which constant memory would serialise.
 __device__ unsigned short pd_template_face_start[PD_TEMPLATES * (PD_MAX_TEMPLATE_FACES + 1)];
 __device__ double pd_template_face_points[PD_TEMPLATES * PD_MAX_TEMPLATE_FACE_INDICES * 3];
+// Face corners as vertex bit sets (TemplateView::face_mask), for templates of at most 64 vertices.
+__device__ unsigned long long pd_template_face_mask[PD_TEMPLATES * PD_MAX_TEMPLATE_FACES];
 
 PD_DEVICE TemplateView template_view(unsigned int t) {
     TemplateView v;
@@ -41,6 +43,7 @@ PD_DEVICE TemplateView template_view(unsigned int t) {
     v.n_faces = pd_template_counts[2 * t + 1];
     v.face_start = pd_template_face_start + (size_t)t * (PD_MAX_TEMPLATE_FACES + 1);
     v.face_points = pd_template_face_points + (size_t)t * PD_MAX_TEMPLATE_FACE_INDICES * 3;
+    v.face_mask = PD_MAX_TEMPLATE_VERTICES <= 64 ? pd_template_face_mask + (size_t)t * PD_MAX_TEMPLATE_FACES : nullptr;
     v.circumscribed_radius = pd_template_radius[t];
     return v;
 }

@@ -57,6 +57,9 @@ struct TemplateView {
     // thread reads a face's corners without an index, in global memory for divergent reads).
     const unsigned short* face_start;
     const double* face_points;
+    // Face i's corners as a bit set of vertex indices (bit v: vertex v), for templates of at
+    // most 64 vertices; null where not provided (the face test then reads the corners).
+    const unsigned long long* face_mask;
     int n_faces;
     double circumscribed_radius;
 };
@@ -211,6 +214,21 @@ PD_HD void set_aside_beyond(PosedPolytope<T>& p, const TemplateView& t, const Pl
                                           m.m[0][2] * n.x + m.m[1][2] * n.y + m.m[2][2] * n.z) *
                                        pl.scale;
         const double body_offset = double(h.offset) - dot(n, pl.shift);
+        if (t.face_mask && t.n_vertices <= 64) {
+            // The same corner test once per template vertex, in a loop every thread of a warp
+            // runs alike (broadcast reads of the template); a face is apart when all its
+            // corners are beyond.
+            unsigned long long beyond = 0ull;
+            for (int v = 0; v < t.n_vertices; ++v) {
+                if (dot(body_normal, template_vertex(t, v)) - body_offset > tol_d) beyond |= 1ull << v;
+            }
+            if (beyond == 0ull) continue;
+            for (int i = 0; i < p.n_planes; ++i) {
+                const unsigned long long corners = t.face_mask[p.face[i]];
+                apart[i] = apart[i] || (beyond & corners) == corners;
+            }
+            continue;
+        }
         for (int i = 0; i < p.n_planes; ++i) {
             if (apart[i]) continue;
             const int f = p.face[i];

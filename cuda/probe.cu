@@ -38,6 +38,7 @@ PD_DEVICE TemplateView probe_template(const ProbeTemplates& t, int i) {
     v.n_faces = t.counts[2 * i + 1];
     v.face_start = t.face_start + (size_t)i * (t.max_faces + 1);
     v.face_points = t.face_points + (size_t)i * t.max_face_indices * 3;
+    v.face_mask = nullptr; // the face test reads the corners (the same decisions)
     v.circumscribed_radius = t.radius[i];
     return v;
 }

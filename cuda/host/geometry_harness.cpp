@@ -39,6 +39,7 @@ struct Template {
     std::vector<double> vertices, normals, offsets;
     std::vector<unsigned short> face_start;
     std::vector<double> face_points;
+    std::vector<unsigned long long> face_mask;
     double radius = 0.0;
     pd::TemplateView view() const {
         pd::TemplateView v;
@@ -49,6 +50,7 @@ struct Template {
         v.n_faces = int(offsets.size());
         v.face_start = face_start.data();
         v.face_points = face_points.data();
+        v.face_mask = face_mask.size() == offsets.size() ? face_mask.data() : nullptr;
         v.circumscribed_radius = radius;
         return v;
     }
@@ -219,11 +221,14 @@ int main(int argc, char** argv) {
             t.offsets.push_back(read_f64());
             long fv = read_int();
             t.face_start.push_back((unsigned short)(t.face_points.size() / 3));
+            unsigned long long mask = 0ull;
             for (long k = 0; k < fv; ++k) {
                 long v = read_int();
                 if (v < 0 || v >= nv) fail("face vertex index");
                 for (int c = 0; c < 3; ++c) t.face_points.push_back(t.vertices[3 * v + c]);
+                if (v < 64) mask |= 1ull << v;
             }
+            if (nv <= 64) t.face_mask.push_back(mask);
         }
         t.face_start.push_back((unsigned short)(t.face_points.size() / 3));
         t.radius = read_f64();

@@ -76,7 +76,9 @@ pub fn size_defines() -> Vec<String> {
 /// the circumscribed radius at `t`; `nt` slots (at least the templates given). The face polygons
 /// (`cuda/polytope.cuh: TemplateView`): face i's corners are points
 /// `t mi + face_start[t (mf + 1) + i] ..` up to the next start of `face_points` (xyz, copies of
-/// the vertices), with `mi = `[`max_face_indices`]`(mv)`.
+/// the vertices), with `mi = `[`max_face_indices`]`(mv)`; `face_mask[t mf + i]` holds the same
+/// corners as a bit set of vertex indices (`TemplateView::face_mask`, zero for a template of
+/// more than 64 vertices, which the kernels do not read).
 pub struct TemplateTables {
     pub vertices: Vec<f64>,
     pub normals: Vec<f64>,
@@ -85,6 +87,7 @@ pub struct TemplateTables {
     pub radius: Vec<f64>,
     pub face_start: Vec<u16>,
     pub face_points: Vec<f64>,
+    pub face_mask: Vec<u64>,
 }
 
 /// Room for the face polygons' vertex indices of a template of at most `max_vertices` vertices
@@ -110,6 +113,7 @@ impl TemplateTables {
             radius: vec![0.0; nt],
             face_start: vec![0; nt * (mf + 1)],
             face_points: vec![0.0; nt * mi * 3],
+            face_mask: vec![0; nt * mf],
         };
         for (k, tpl) in templates.into_iter().enumerate() {
             for (i, v) in tpl.vertices.iter().enumerate() {
@@ -125,6 +129,9 @@ impl TemplateTables {
             let mut n = 0;
             for (i, f) in tpl.faces.iter().enumerate() {
                 t.face_start[k * (mf + 1) + i] = n as u16;
+                if tpl.vertices.len() <= 64 {
+                    t.face_mask[k * mf + i] = f.vertices.iter().fold(0, |m, &v| m | 1 << v);
+                }
                 for &v in &f.vertices {
                     let at = (k * mi + n) * 3;
                     t.face_points[at..at + 3]
