@@ -7,6 +7,12 @@
 //! vertices, its vertices are the planes that bound it (points inside the dual hull are redundant
 //! planes), and its edges are the intersection's edges.
 //!
+//! For the few planes a culled pair keeps (at most [`ENUM_MAX_PLANES`]) the faces are found by
+//! vertex enumeration instead ([`super::vertex_enumeration`]): the same faces, fanned the same
+//! way, from a workspace of a few hundred bytes; the hull takes over for more planes and
+//! wherever the enumerated faces do not close. [`overlap_volume_by_hull`] forces the hull, the
+//! reference the enumeration is tested against.
+//!
 //! We use the hull for the combinatorics only. Each intersection vertex is recomputed from the
 //! three original planes of its dual triangle (`n_i · m = δ_i`, Cramer's rule), which is better
 //! conditioned than unpolarising the dual plane (Eq. 6–8) when some `δ` are small. Each
