@@ -161,12 +161,7 @@ pub fn overlap_volume<T: Real>(
     b: &[Plane<T>],
     start: Vector3<T>,
 ) -> Result<Overlap<T>, OverlapError> {
-    let m = a.len() + b.len();
-    if m > MAX_HULL_POINTS {
-        return Err(OverlapError::TooManyPlanes(m));
-    }
-    let centre = chebyshev_centre(a, b, start);
-    overlap_about(ws, a, b, centre.point, true)
+    overlap_about_centre(ws, a, b, start, true)
 }
 
 /// [`overlap_volume`] with the faces always taken from the dual hull, also for the few planes
@@ -178,12 +173,7 @@ pub fn overlap_volume_by_hull<T: Real>(
     b: &[Plane<T>],
     start: Vector3<T>,
 ) -> Result<Overlap<T>, OverlapError> {
-    let m = a.len() + b.len();
-    if m > MAX_HULL_POINTS {
-        return Err(OverlapError::TooManyPlanes(m));
-    }
-    let centre = chebyshev_centre(a, b, start);
-    overlap_about(ws, a, b, centre.point, false)
+    overlap_about_centre(ws, a, b, start, false)
 }
 
 /// [`overlap_volume`] with the faces from the vertex enumeration only: `None` where
@@ -198,10 +188,25 @@ pub fn overlap_volume_by_enumeration<T: Real>(
     if a.len() + b.len() > ENUM_MAX_PLANES {
         return None;
     }
-    let centre = chebyshev_centre(a, b, start);
     ws.declined = false;
-    let o = overlap_about(ws, a, b, centre.point, true).ok()?;
+    let o = overlap_about_centre(ws, a, b, start, true).ok()?;
     (!ws.declined).then_some(o)
+}
+
+/// [`overlap_about`] about the Chebyshev centre of the planes, the LP started at `start`.
+fn overlap_about_centre<T: Real>(
+    ws: &mut OverlapWorkspace<T>,
+    a: &[Plane<T>],
+    b: &[Plane<T>],
+    start: Vector3<T>,
+    enumerate: bool,
+) -> Result<Overlap<T>, OverlapError> {
+    let m = a.len() + b.len();
+    if m > MAX_HULL_POINTS {
+        return Err(OverlapError::TooManyPlanes(m));
+    }
+    let centre = chebyshev_centre(a, b, start);
+    overlap_about(ws, a, b, centre.point, enumerate)
 }
 
 /// [`overlap_volume`] about a given interior point `x0` (normally the Chebyshev centre). The
