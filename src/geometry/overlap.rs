@@ -509,8 +509,9 @@ pub fn overlap_pair<T: Real>(
     let (xa, xb) = (pose_a.translation.vector, pose_b.translation.vector);
     let (ra, rb) = (ta.circumscribed_radius * sa, tb.circumscribed_radius * sb);
     let origin = xa + (xb - xa) * (ra / (ra + rb));
-    ws.a.place(ta, sa, pose_a, &origin);
-    ws.b.place(tb, sb, pose_b, &origin);
+    // The planes only: the vertices are placed when GJK needs them (few pairs, see below).
+    ws.a.place_planes(ta, sa, pose_a, &origin);
+    ws.b.place_planes(tb, sb, pose_b, &origin);
     // Exact culling first (a plane whose half-space holds the other body's bounding ball bounds
     // nothing), then the faces that miss the other body set aside: what is left is about the
     // planes that bound the overlap, and the LP below runs on those.
@@ -545,6 +546,8 @@ pub fn overlap_pair<T: Real>(
     let separating_axis = if proven {
         None
     } else {
+        ws.a.place_vertices(ta, sa, pose_a, &origin);
+        ws.b.place_vertices(tb, sb, pose_b, &origin);
         let dir = ws.b.centre - ws.a.centre;
         let axis = gjk_separating_axis(ws.a.vertices(), ws.b.vertices(), dir);
         if axis.is_none() {

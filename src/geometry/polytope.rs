@@ -70,12 +70,36 @@ impl<T: Real> PosedPolytope<T> {
         pose: &Isometry3<f64>,
         origin: &Vector3<f64>,
     ) {
+        self.place_vertices(template, scale, pose, origin);
+        self.place_planes(template, scale, pose, origin);
+    }
+
+    /// The vertex half of [`Self::place`] (for the support functions of GJK and the wall
+    /// clipping); the planes are left as they were.
+    pub fn place_vertices(
+        &mut self,
+        template: &ConvexTemplate,
+        scale: f64,
+        pose: &Isometry3<f64>,
+        origin: &Vector3<f64>,
+    ) {
         let rot = pose.rotation.to_rotation_matrix();
         let shift = pose.translation.vector - origin;
         self.n_vertices = template.vertices.len().min(MAX_TEMPLATE_VERTICES);
         for (dst, v) in self.vertices.iter_mut().zip(&template.vertices) {
             *dst = cast(&(rot * (v.coords * scale) + shift));
         }
+    }
+
+    /// The face-plane half of [`Self::place`]: every plane in use, none set aside; the
+    /// vertices are left as they were.
+    pub fn place_planes(
+        &mut self,
+        template: &ConvexTemplate,
+        scale: f64,
+        pose: &Isometry3<f64>,
+        origin: &Vector3<f64>,
+    ) {
         self.n_planes = template.faces.len().min(MAX_TEMPLATE_FACES);
         self.n_aside = 0;
         for (i, slot) in self.face[..self.n_planes].iter_mut().enumerate() {
