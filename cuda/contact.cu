@@ -1,8 +1,8 @@
-// Stages 3–8 on the GPU: per pair, the bounding-sphere broad phase, last step's separating axis,
+// Stages 3–7 on the GPU: per pair, the bounding-sphere broad phase, last step's separating axis,
 // GJK and the dual-space overlap (overlap.cuh), the contact law (contact_law.cuh) with the
-// tangential spring carried in pair slots; per particle, the wall contacts (prism.cuh) and the
-// deterministic reduction in partner-id order. The GPU twin of `Simulation::pair_contacts`,
-// `wall_contacts` and the reduction in src/pipeline.rs. One thread per pair, per particle–facet
+// tangential spring carried in pair slots; per particle, the wall contacts (prism.cuh). The GPU
+// twin of `Simulation::pair_contacts` and `wall_contacts` in src/pipeline.rs; the reduction
+// (stage 8) is fused with the half kick in integrate.cu. One thread per pair, per particle–facet
 // (the wall prism overlaps) or per particle;
 // each thread's geometry workspace is sized by the scene's largest template
 // (PD_MAX_TEMPLATE_VERTICES/FACES), so a dodecahedron scene pays for 20 vertices and 12 faces.
@@ -100,91 +100,42 @@ struct PairArgs {
 };
 static_assert(sizeof(PairArgs) == PD_SIZEOF_PAIR_ARGS, "PairArgs differs from Rust's simulation::PairArgs");
 
-// Stages 3–7 for pair k of the list (Simulation::pair_contacts). The periodic image of B is
-// taken from the current centroids by the minimum-image rule (`grid`), as the list build does,
-// not from the build's shift: a particle wrapped across a periodic face since the build keeps
-// its contacts. With kFull false a polyhedral pair whose intersection the Chebyshev centre does
-// not prove, or whose overlap needs the dual hull, is left for the deferred pass (returns true,
-// its outputs cleared); with kFull true every pair is evaluated in full.
-template <bool kFull> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) {
+// Stage 3 for pair k of the list (Simulation::pair_contacts): its outputs cleared, the centroids
+// (the periodic image of B taken from the current centroids by the minimum-image rule, `grid`,
+// as the list build does, not from the build's shift: a particle wrapped across a periodic face
+// since the build keeps its contacts), and whether the bounding spheres meet.
+PD_DEVICE bool pair_broad_phase(const PairArgs& q, size_t k, int* a, int* b, V3<double>* xa, V3<double>* xb) {
     const ParticleView& p = q.p;
-    const PairOutputs& out = q.out;
-    PD_CLK_START
-    int a = q.pairs[k].x, b = q.pairs[k].y;
-    V3<double> xa = load3(p.position, a);
-    V3<double> xb = load3(p.position, b);
+    *a = q.pairs[k].x;
+    *b = q.pairs[k].y;
+    *xa = load3(p.position, *a);
+    *xb = load3(p.position, *b);
 #if PD_PERIODIC
-    xb = xb + (displacement(q.grid, xa, xb) - (xb - xa));
+    *xb = *xb + (displacement(q.grid, *xa, *xb) - (*xb - *xa));
 #endif
-    V3<double> d = xb - xa;
-    double reach = p.radius[a] + p.radius[b];
-    clear_pair(out, k);
+    V3<double> d = *xb - *xa;
+    double reach = p.radius[*a] + p.radius[*b];
+    clear_pair(q.out, k);
     store3(q.spring_out, k, zero3<double>());
-    // Stage 3: bounding spheres.
     if (norm2(d) >= reach * reach) {
 #if !PD_SPHERES
         store3(q.axes, k, zero3<double>());
 #endif
         return false;
     }
-#if PD_SPHERES
-    // Stages 4–5 for spheres: the lens in closed form (Simulation::pair_contacts).
-    Overlap<double> ov = sphere_lens(p.radius[a], p.radius[b], d);
-    if (!(ov.volume > 0.0)) {
-        return false;
-    }
-    ov.centroid = ov.centroid + xa;
-#else
-    Quat<double> qa = load_quat(p.orientation, a), qb = load_quat(p.orientation, b);
-    BodyRef A, B;
-    A.tpl = template_view(p.tmpl[a]);
-    A.scale = p.scale[a];
-    A.pos = xa;
-    A.rot = qa;
-    B.tpl = template_view(p.tmpl[b]);
-    B.scale = p.scale[b];
-    B.pos = xb;
-    B.rot = qb;
-    // Stage 4 shortcut: last step's separating axis, with a margin far above GJK's touching
-    // tolerance, so the verdict is GJK's.
-    V3<double> axis = load3(q.axes, k);
-    if (!(axis == zero3<double>()) && axis_separates(A, B, axis, 1e-9 * reach)) {
-        return false;
-    }
-    // Stages 4–5: the overlap, with GJK where the Chebyshev centre proves nothing.
-    PairWorkspace<GeomReal> ws;
-    PairGeometry g;
-    PD_CLK(0)
-    PD_CLK_COUNT(11)
-    int status = overlap_pair_t<GeomReal, kFull>(ws, A, B, &g);
-#if defined(PD_PHASE_CLOCKS)
-    pd_t = clock64();
-#endif
-    if (status == STATUS_DEFERRED) {
-        return true;
-    }
-    if (status != STATUS_OK) {
-        report_error(q.error, status, (unsigned int)k);
-        store3(q.axes, k, zero3<double>());
-        return false;
-    }
-    if (g.overlap.volume <= 0.0) {
-        store3(q.axes, k, g.separating_axis);
-        return false;
-    }
-    store3(q.axes, k, zero3<double>());
-    Overlap<double> ov = g.overlap;
-#endif
-    // Stage 7: the contact law. The poses are read again rather than kept in registers through
-    // the geometry, which would size every thread's registers by them.
-#if !PD_SPHERES
-    xa = load3(p.position, a);
-    xb = load3(p.position, b);
+    return true;
+}
+
+// Stage 7 for pair k with overlap `ov` (world frame): the contact law with the tangential
+// spring, written to the pair's slots. The poses are read again rather than kept in registers
+// through the geometry, which would size every thread's registers by them.
+PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const Overlap<double>& ov) {
+    const ParticleView& p = q.p;
+    const PairOutputs& out = q.out;
+    V3<double> xa = load3(p.position, a);
+    V3<double> xb = load3(p.position, b);
 #if PD_PERIODIC
     xb = xb + (displacement(q.grid, xa, xb) - (xb - xa));
-#endif
-    qa = load_quat(p.orientation, a);
-    qb = load_quat(p.orientation, b);
 #endif
     unsigned int ma = p.material[a], mb = p.material[b];
     const PairMaterial& pm = q.materials[ma * (unsigned int)q.n_materials + mb];
@@ -204,6 +155,7 @@ template <bool kFull> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) 
     // The lens's centroid is on the line of centres: no lever arm, no rotational term.
     kin.effective_mass = 1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b]);
 #else
+    Quat<double> qa = load_quat(p.orientation, a), qb = load_quat(p.orientation, b);
     double area = norm(ov.dv_dxb);
     if (area > 0.0) {
         V3<double> nrm = (-ov.dv_dxb) / area;
@@ -226,6 +178,90 @@ template <bool kFull> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) 
     out.energy[k] = f.elastic_energy;
     out.contact[k] = 1u;
     store3(q.spring_out, k, spring);
+}
+
+#if !PD_SPHERES
+// The two bodies of pair k (templates, scales, poses), B at the image `xb`.
+PD_DEVICE void pair_bodies(const PairArgs& q, int a, int b, V3<double> xa, V3<double> xb, BodyRef* A, BodyRef* B) {
+    const ParticleView& p = q.p;
+    A->tpl = template_view(p.tmpl[a]);
+    A->scale = p.scale[a];
+    A->pos = xa;
+    A->rot = load_quat(p.orientation, a);
+    B->tpl = template_view(p.tmpl[b]);
+    B->scale = p.scale[b];
+    B->pos = xb;
+    B->rot = load_quat(p.orientation, b);
+}
+
+// Stage 4 shortcut: last step's separating axis, with a margin far above GJK's touching
+// tolerance, so the verdict is GJK's.
+PD_DEVICE bool cached_axis_separates(const PairArgs& q, size_t k, const BodyRef& A, const BodyRef& B, int a, int b) {
+    V3<double> axis = load3(q.axes, k);
+    double reach = q.p.radius[a] + q.p.radius[b];
+    return !(axis == zero3<double>()) && axis_separates(A, B, axis, 1e-9 * reach);
+}
+
+// Stages 4–5 finished: the geometry status of pair k and its overlap. Returns whether the pair
+// goes on to the contact law (errors are reported, the separating axis or its absence kept for
+// the next step).
+PD_DEVICE bool pair_geometry_outcome(const PairArgs& q, size_t k, int status, const PairGeometry& g) {
+    if (status != STATUS_OK) {
+        report_error(q.error, status, (unsigned int)k);
+        store3(q.axes, k, zero3<double>());
+        return false;
+    }
+    if (g.overlap.volume <= 0.0) {
+        store3(q.axes, k, g.separating_axis);
+        return false;
+    }
+    store3(q.axes, k, zero3<double>());
+    return true;
+}
+#endif
+
+// Stages 3–7 for pair k of the list (Simulation::pair_contacts), in one pass. With kFull false
+// a polyhedral pair whose intersection the Chebyshev centre does not prove, or whose overlap
+// needs the dual hull, is left for the deferred pass (returns true, its outputs cleared); with
+// kFull true every pair is evaluated in full.
+template <bool kFull> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) {
+    PD_CLK_START
+    int a, b;
+    V3<double> xa, xb;
+    if (!pair_broad_phase(q, k, &a, &b, &xa, &xb)) {
+        return false;
+    }
+#if PD_SPHERES
+    // Stages 4–5 for spheres: the lens in closed form (Simulation::pair_contacts).
+    Overlap<double> ov = sphere_lens(q.p.radius[a], q.p.radius[b], xb - xa);
+    if (!(ov.volume > 0.0)) {
+        return false;
+    }
+    ov.centroid = ov.centroid + xa;
+#else
+    BodyRef A, B;
+    pair_bodies(q, a, b, xa, xb, &A, &B);
+    if (cached_axis_separates(q, k, A, B, a, b)) {
+        return false;
+    }
+    // Stages 4–5: the overlap, with GJK where the Chebyshev centre proves nothing.
+    PairWorkspace<GeomReal> ws;
+    PairGeometry g;
+    PD_CLK(0)
+    PD_CLK_COUNT(11)
+    int status = overlap_pair_t<GeomReal, kFull>(ws, A, B, &g);
+#if defined(PD_PHASE_CLOCKS)
+    pd_t = clock64();
+#endif
+    if (status == STATUS_DEFERRED) {
+        return true;
+    }
+    if (!pair_geometry_outcome(q, k, status, g)) {
+        return false;
+    }
+    Overlap<double> ov = g.overlap;
+#endif
+    pair_contact_law(q, k, a, b, ov);
     PD_CLK(8)
     return false;
 }
@@ -236,31 +272,188 @@ template <bool kFull> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) 
 #define PD_PAIR_BOUNDS
 #endif
 
-// Stages 3–7 for pairs first .. n_pairs − 1 (Simulation::pair_contacts). A decomposed run
-// evaluates the pairs of two owned particles while the halo is in flight, then the rest. The
-// pairs that need GJK or the dual hull are appended to `deferred` (count in deferred_count[0])
-// for pair_contacts_deferred: a few per cent of the pairs of a dense packing need them, and
-// compiled in here they would size every thread's registers and local memory.
-extern "C" __global__ void PD_PAIR_BOUNDS pair_contacts(int first, int n_pairs, PairArgs args, unsigned int* deferred,
-                                                       unsigned int* deferred_count) {
+// Appends `item` to the list `list` whose length is *count.
+PD_DEVICE void append(unsigned int* list, unsigned int* count, unsigned int item) { list[atomicAdd(count, 1u)] = item; }
+
+// Stages 3–7 of the sphere fast path for pairs first .. n_pairs − 1, one pass.
+extern "C" __global__ void PD_PAIR_BOUNDS pair_contacts(int first, int n_pairs, PairArgs args) {
     int kk = first + (int)(blockIdx.x * blockDim.x + threadIdx.x);
     if (kk >= n_pairs) {
         return;
     }
 #if PD_SPHERES
-    (void)deferred;
-    (void)deferred_count;
     evaluate_pair<true>(args, (size_t)kk);
 #else
-    if (evaluate_pair<false>(args, (size_t)kk)) {
-        deferred[atomicAdd(deferred_count, 1u)] = (unsigned int)kk;
+    (void)args;
+#endif
+}
+
+// A polyhedral pair's planes between the two lean passes (pair_planes, pair_faces): at most
+// PD_ENUM_MAX_PLANES planes (A's first), in the pair frame about `frame`.
+struct StagedPlanes {
+    Plane<GeomReal> planes[PD_ENUM_MAX_PLANES];
+    double frame[3];
+    int na;
+    int nb;
+};
+#ifdef PD_SIZEOF_STAGED_PLANES
+static_assert(sizeof(StagedPlanes) == PD_SIZEOF_STAGED_PLANES, "StagedPlanes differs from Rust's layout::staged_planes_bytes");
+#endif
+
+// Bucket of a staged plane count: the largest counts first, so that the costliest warps start
+// first and the tail of the pass is short.
+PD_DEVICE int plane_bucket(int m) { return PD_ENUM_MAX_PLANES - m; }
+#define PD_PLANE_BUCKETS (PD_ENUM_MAX_PLANES + 1)
+
+// Lean pass 1 for polyhedral pairs first .. n_pairs − 1 (Simulation::pair_contacts): the broad
+// phase, the cached axis, the planes culled and placed about the Chebyshev centre. A pair whose
+// intersection the centre proves, with at most PD_ENUM_MAX_PLANES planes, is staged for
+// pair_faces: its planes in staged[k], its bucket (by plane count) in bucket[k], counted in
+// bucket_count. Pairs needing GJK or the dual hull are appended to `deferred` (count in
+// deferred_count[0]) for pair_contacts_deferred: a few per cent of the pairs of a dense packing
+// need them, and compiled in here they would size every thread's registers and local memory.
+// The faces, whose cost grows as the fourth power of the plane count, run in pass 2 in warps
+// of equal counts: here a warp would run at the pace of its largest count.
+extern "C" __global__ void PD_PAIR_BOUNDS pair_planes(int first, int n_pairs, PairArgs args, unsigned int* deferred,
+                                                     unsigned int* deferred_count, StagedPlanes* staged,
+                                                     unsigned char* bucket, unsigned int* bucket_count) {
+    int kk = first + (int)(blockIdx.x * blockDim.x + threadIdx.x);
+    if (kk >= n_pairs) {
+        return;
+    }
+#if PD_SPHERES
+    (void)args;
+    (void)deferred;
+    (void)deferred_count;
+    (void)staged;
+    (void)bucket;
+    (void)bucket_count;
+#else
+    PD_CLK_START
+    size_t k = (size_t)kk;
+    int key = -1; // the pair's bucket, or −1 when it is not staged
+    int a, b;
+    V3<double> xa, xb;
+    if (pair_broad_phase(args, k, &a, &b, &xa, &xb)) {
+        BodyRef A, B;
+        pair_bodies(args, a, b, xa, xb, &A, &B);
+        if (!cached_axis_separates(args, k, A, B, a, b)) {
+            PairWorkspace<GeomReal> ws;
+            PairGeometry g;
+            V3<double> frame;
+            bool ready;
+            PD_CLK(0)
+            PD_CLK_COUNT(11)
+            int status = pair_planes_t<GeomReal, false>(ws, A, B, &g, &frame, &ready);
+            int m = ws.a.n_planes + ws.b.n_planes;
+            if (status == STATUS_DEFERRED || (status == STATUS_OK && ready && m > PD_ENUM_MAX_PLANES)) {
+                append(deferred, deferred_count, (unsigned int)kk);
+            } else if (status == STATUS_OK && ready) {
+                StagedPlanes& s = staged[k];
+                for (int i = 0; i < ws.a.n_planes; ++i) s.planes[i] = ws.a.planes[i];
+                for (int i = 0; i < ws.b.n_planes; ++i) s.planes[ws.a.n_planes + i] = ws.b.planes[i];
+                s.frame[0] = frame.x;
+                s.frame[1] = frame.y;
+                s.frame[2] = frame.z;
+                s.na = ws.a.n_planes;
+                s.nb = ws.b.n_planes;
+                key = plane_bucket(m);
+            } else {
+                pair_geometry_outcome(args, k, status, g);
+            }
+        }
+    }
+    bucket[k] = key < 0 ? (unsigned char)PD_PLANE_BUCKETS : (unsigned char)key;
+    // One atomic per bucket and warp: the lanes of a bucket add together.
+    unsigned int lanes = __match_any_sync(__activemask(), key);
+    int leader = __ffs(lanes) - 1;
+    if (key >= 0 && (int)(threadIdx.x & 31u) == leader) {
+        atomicAdd(&bucket_count[key], (unsigned int)__popc(lanes));
     }
 #endif
 }
 
-// The deferred pairs of pair_contacts, evaluated in full (GJK and the hull included); a grid-stride loop over
-// the count the pair pass left on the device, so the host launches it without reading it. Each
-// pair writes only its own slots, so the order of the list does not matter.
+// Between the lean passes: the staged pairs of first .. n_pairs − 1 listed bucket by bucket in
+// `order` (bucket_count from pair_planes; bucket_fill zeroed by the host). Within a bucket the
+// order is that of the atomics, which changes no result: each pair writes only its own slots.
+extern "C" __global__ void bucket_pairs(int first, int n_pairs, const unsigned char* bucket,
+                                        const unsigned int* bucket_count, unsigned int* bucket_fill,
+                                        unsigned int* order) {
+    int kk = first + (int)(blockIdx.x * blockDim.x + threadIdx.x);
+    if (kk >= n_pairs) {
+        return;
+    }
+    int key = bucket[kk];
+    if (key >= PD_PLANE_BUCKETS) {
+        return;
+    }
+    unsigned int base = 0;
+    for (int c = 0; c < key; ++c) base += bucket_count[c];
+    unsigned int lanes = __match_any_sync(__activemask(), key);
+    int leader = __ffs(lanes) - 1;
+    int lane = (int)(threadIdx.x & 31u);
+    unsigned int start = 0;
+    if (lane == leader) {
+        start = atomicAdd(&bucket_fill[key], (unsigned int)__popc(lanes));
+    }
+    start = __shfl_sync(lanes, start, leader);
+    order[base + start + (unsigned int)__popc(lanes & ((1u << lane) - 1u))] = (unsigned int)kk;
+}
+
+// Lean pass 2: the faces of the staged pairs, listed by bucket_pairs, by vertex enumeration,
+// then the contact law. A pair whose faces do not close (which the dual hull must settle) goes
+// to the deferred list. Launched for every pair of the range, the threads past the staged count
+// return at once.
+extern "C" __global__ void PD_PAIR_BOUNDS pair_faces(PairArgs args, const unsigned int* order,
+                                                    const unsigned int* bucket_count, const StagedPlanes* staged,
+                                                    unsigned int* deferred, unsigned int* deferred_count) {
+#if PD_SPHERES
+    (void)args;
+    (void)order;
+    (void)bucket_count;
+    (void)staged;
+    (void)deferred;
+    (void)deferred_count;
+#else
+    unsigned int total = 0;
+    for (int c = 0; c < PD_PLANE_BUCKETS; ++c) total += bucket_count[c];
+    unsigned int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= total) {
+        return;
+    }
+    PD_CLK_START
+    size_t k = order[i];
+    const StagedPlanes& s = staged[k];
+    Plane<GeomReal> planes[PD_ENUM_MAX_PLANES];
+    int na = s.na, nb = s.nb;
+    for (int j = 0; j < na + nb; ++j) planes[j] = s.planes[j];
+    V3<double> frame = v3(s.frame[0], s.frame[1], s.frame[2]);
+    OverlapWorkspace<GeomReal> ws;
+    PairGeometry g;
+    g.intersects = 0;
+    g.separating_axis = zero3<double>();
+    g.overlap = overlap_zero<double>();
+    int status = overlap_of_planes<GeomReal, false>(ws, planes, na, planes + na, nb, frame, &g);
+#if defined(PD_PHASE_CLOCKS)
+    pd_t = clock64();
+#endif
+    if (status == STATUS_DEFERRED) {
+        append(deferred, deferred_count, (unsigned int)k);
+        return;
+    }
+    if (!pair_geometry_outcome(args, k, status, g)) {
+        return;
+    }
+    int2 ab = args.pairs[k];
+    pair_contact_law(args, k, ab.x, ab.y, g.overlap);
+    PD_CLK(8)
+#endif
+}
+
+// The deferred pairs of the lean passes, evaluated in full (GJK and the hull included); a
+// grid-stride loop over the count the passes left on the device, so the host launches it
+// without reading it. Each pair writes only its own slots, so the order of the list does not
+// matter.
 extern "C" __global__ void pair_contacts_deferred(PairArgs args, const unsigned int* deferred,
                                                   const unsigned int* deferred_count) {
 #if PD_SPHERES
@@ -640,33 +833,3 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
     wall_energy[i] = energy;
 }
 #endif
-
-// Stage 8: per particle, its pairs' forces and torques summed in partner-global-id order, then
-// its wall contribution (the reduction of Simulation::forces_with_history_step).
-extern "C" __global__ void reduce_forces(int n, const unsigned int* ref_offset, const unsigned int* refs,
-                                         const double* pair_forces, const double* wall_force,
-                                         const double* wall_torque, double* force, double* torque) {
-    int ii = blockIdx.x * blockDim.x + threadIdx.x;
-    if (ii >= n) {
-        return;
-    }
-    size_t i = (size_t)ii;
-    V3<double> f = zero3<double>(), t = zero3<double>();
-    for (unsigned int m = ref_offset[i]; m < ref_offset[i + 1]; ++m) {
-        unsigned int r = refs[m];
-        size_t k = r >> 1;
-        if (r & 1u) {
-            f += load3(pair_forces, 3 * k);
-            t += load3(pair_forces, 3 * k + 2);
-        } else {
-            f -= load3(pair_forces, 3 * k);
-            t += load3(pair_forces, 3 * k + 1);
-        }
-    }
-#if PD_WALLS
-    f += load3(wall_force, i);
-    t += load3(wall_torque, i);
-#endif
-    store3(force, i, f);
-    store3(torque, i, t);
-}

@@ -382,8 +382,14 @@ PD_HD bool axis_separates(const BodyRef& A, const BodyRef& B, V3<double> axis, d
 // prove, or whose faces need the dual hull, returns STATUS_DEFERRED instead of running GJK or
 // the hull (the pair kernel defers those to a second pass, so that neither its registers nor its
 // local memory are sized by them); with kFull true this is Rust's overlap_pair.
+//
+// The work splits in two at the frame move: pair_planes_t leaves the planes about the centre,
+// overlap_pair_t then computes their overlap. The GPU's lean pass stages the planes between
+// two kernels, so that the faces run in warps of pairs with equal plane counts.
 template <class T, bool kFull>
-PD_HD int overlap_pair_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out) {
+PD_HD int pair_planes_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out,
+                        V3<double>* frame, bool* ready) {
+    *ready = false;
     out->intersects = 0;
     out->separating_axis = zero3<double>();
     out->overlap = overlap_zero<double>();
@@ -432,14 +438,33 @@ PD_HD int overlap_pair_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& 
     reposition_planes(ws.a, A.tpl, A.scale, A.pos, A.rot, origin);
     reposition_planes(ws.b, B.tpl, B.scale, B.pos, B.rot, origin);
     PD_CLK(6)
+    *frame = origin;
+    *ready = true;
+    return STATUS_OK;
+}
+
+// The second half of overlap_pair: the overlap of the planes pair_planes_t left about the
+// origin of `frame`, back in world coordinates.
+template <class T, bool kFull>
+PD_HD int overlap_of_planes(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, const Plane<T>* b, int nb,
+                            V3<double> frame, PairGeometry* out) {
+    PD_CLK_START
     Overlap<T> o;
-    int st = overlap_about_t<T, kFull>(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>(),
-                                       true, &o);
+    int st = overlap_about_t<T, kFull>(ws, a, na, b, nb, zero3<T>(), true, &o);
     PD_CLK(7)
     if (st != STATUS_OK) return st;
     out->intersects = 1;
-    out->overlap = to_world(o, origin);
+    out->overlap = to_world(o, frame);
     return STATUS_OK;
+}
+
+template <class T, bool kFull>
+PD_HD int overlap_pair_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out) {
+    V3<double> frame;
+    bool ready;
+    int st = pair_planes_t<T, kFull>(ws, A, B, out, &frame, &ready);
+    if (st != STATUS_OK || !ready) return st;
+    return overlap_of_planes<T, kFull>(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, frame, out);
 }
 
 template <class T> PD_HD int overlap_pair(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out) {

@@ -1,8 +1,10 @@
 //! Stages 3–8 on the GPU, host side: the pair contacts, the wall contacts with the walls'
-//! poses at the current time, and the deterministic reduction (kernels in `cuda/contact.cu`).
+//! poses at the current time, and the deterministic reduction fused with the half kick
+//! (kernels in `cuda/contact.cu` and `cuda/integrate.cu`).
 
 use super::simulation::{
-    CudaError, CudaSimulation, PairArgs, PairOutputs, ParticleView, WallState, cfg, ptr, zeros,
+    CudaError, CudaSimulation, PairArgs, PairOutputs, ParticleView, SPHERE_PAIR_BLOCK, WallState,
+    cfg, cfg_with, ptr, zeros,
 };
 use crate::pipeline::SimulationError;
 use crate::scene::WallMotion;
@@ -73,8 +75,10 @@ impl CudaSimulation {
         }
     }
 
-    /// Stages 3–7 for the pairs `first..last` of the list; the pairs that need GJK are queued
-    /// for [`Self::launch_deferred_pairs`].
+    /// Stages 3–7 for the pairs `first..last` of the list. Spheres in one pass; polyhedra in
+    /// two lean passes (`pair_planes`, then the faces and the contact law in `pair_faces`, with
+    /// the staged pairs listed by plane count in between by `bucket_pairs`), the pairs that need
+    /// GJK or the dual hull queued for [`Self::launch_deferred_pairs`].
     fn launch_pair_contacts(
         &mut self,
         first: usize,
@@ -87,13 +91,48 @@ impl CudaSimulation {
         let st = self.stream.clone();
         let pairs = self.pairs.as_mut().expect("built");
         let (fi, li) = (first as i32, last as i32);
-        // SAFETY: the argument list matches `pair_contacts` of cuda/contact.cu; `args` points
-        // into buffers alive for the whole call, `deferred` holds one slot per pair.
+        if self.config.spheres {
+            // SAFETY: the argument list matches `pair_contacts` of cuda/contact.cu; `args`
+            // points into buffers alive for the whole call.
+            unsafe {
+                st.launch_builder(self.k.get("pair_contacts"))
+                    .arg(&fi)
+                    .arg(&li)
+                    .arg(args)
+                    .launch(cfg_with(last - first, SPHERE_PAIR_BLOCK))?;
+            }
+            return Ok(());
+        }
+        st.memset_zeros(&mut pairs.bucket_count)?;
+        st.memset_zeros(&mut pairs.bucket_fill)?;
+        // SAFETY: the argument lists match `pair_planes`, `bucket_pairs` and `pair_faces` of
+        // cuda/contact.cu; `deferred`, `bucket` and `order` hold one slot per pair, `staged`
+        // one StagedPlanes record per pair (sizes checked by static_assert), the bucket counts
+        // and fill cursors PLANE_BUCKETS values.
         unsafe {
-            st.launch_builder(self.k.get("pair_contacts"))
+            st.launch_builder(self.k.get("pair_planes"))
                 .arg(&fi)
                 .arg(&li)
                 .arg(args)
+                .arg(&mut pairs.deferred)
+                .arg(&mut pairs.deferred_count)
+                .arg(&mut pairs.staged)
+                .arg(&mut pairs.bucket)
+                .arg(&mut pairs.bucket_count)
+                .launch(cfg(last - first))?;
+            st.launch_builder(self.k.get("bucket_pairs"))
+                .arg(&fi)
+                .arg(&li)
+                .arg(&pairs.bucket)
+                .arg(&pairs.bucket_count)
+                .arg(&mut pairs.bucket_fill)
+                .arg(&mut pairs.order)
+                .launch(cfg(last - first))?;
+            st.launch_builder(self.k.get("pair_faces"))
+                .arg(args)
+                .arg(&pairs.order)
+                .arg(&pairs.bucket_count)
+                .arg(&pairs.staged)
                 .arg(&mut pairs.deferred)
                 .arg(&mut pairs.deferred_count)
                 .launch(cfg(last - first))?;
@@ -124,7 +163,10 @@ impl CudaSimulation {
         Ok(())
     }
 
-    pub(super) fn forces(&mut self, dt: f64) -> Result<(), CudaError> {
+    /// Stages 2–8: the list (rebuilt when due), the pair and wall contacts and the reduction
+    /// into the particles' forces and torques, followed by the second half kick of the step
+    /// when `kick` (fused into the reduction's pass over the particles).
+    pub(super) fn forces(&mut self, dt: f64, kick: bool) -> Result<(), CudaError> {
         let t0 = Instant::now();
         if self.rebuild || self.pairs.is_none() {
             self.build_pairs()?;
@@ -251,25 +293,41 @@ impl CudaSimulation {
         self.host.timers.walls += t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
         let pairs = self.pairs.as_mut().expect("built above");
+        // Without walls the wall sums are not read (PD_WALLS 0): null pointers.
         let (wf, wt) = match &self.walls {
-            Some(w) => (&w.force, &w.torque),
-            None => (&self.p.force, &self.p.torque), // not read without walls
+            Some(w) => (ptr(&w.force, &st), ptr(&w.torque, &st)),
+            None => (0u64, 0u64),
         };
-        let (mut force, mut torque) = (zeros::<f64>(&st, 3 * n)?, zeros::<f64>(&st, 3 * n)?);
+        let g = self.host.scene.gravity;
+        let kick = i32::from(kick);
+        let p = &mut self.p;
+        // SAFETY: `reduce_and_kick` of cuda/integrate.cu; `ref_offset` holds n + 1 offsets
+        // into `refs`, whose pair slots index `forces` (nine values each); the wall sums hold
+        // 3n values when walls exist; the particle buffers 3n (4n) values. Each thread writes
+        // only its own particle's slots.
         unsafe {
-            st.launch_builder(self.k.get("reduce_forces"))
+            st.launch_builder(self.k.get("reduce_and_kick"))
                 .arg(&ni)
                 .arg(&pairs.ref_offset)
                 .arg(&pairs.refs)
                 .arg(&pairs.forces)
-                .arg(wf)
-                .arg(wt)
-                .arg(&mut force)
-                .arg(&mut torque)
+                .arg(&wf)
+                .arg(&wt)
+                .arg(&mut p.force)
+                .arg(&mut p.torque)
+                .arg(&kick)
+                .arg(&p.ghost)
+                .arg(&mut p.velocity)
+                .arg(&mut p.angular_velocity)
+                .arg(&p.mass)
+                .arg(&p.inertia)
+                .arg(&p.orientation)
+                .arg(&g.x)
+                .arg(&g.y)
+                .arg(&g.z)
+                .arg(&dt)
                 .launch(cfg(n))?;
         }
-        self.p.force = force;
-        self.p.torque = torque;
         // The springs just computed are the history of the next evaluation.
         std::mem::swap(&mut pairs.spring_in, &mut pairs.spring_out);
         if let Some(w) = &mut self.walls {

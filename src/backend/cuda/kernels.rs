@@ -156,6 +156,10 @@ impl KernelConfig {
             d.push("-DPD_PHASE_CLOCKS=1".into());
         }
         d.extend(layout::size_defines());
+        d.push(format!(
+            "-DPD_SIZEOF_STAGED_PLANES={}",
+            layout::staged_planes_bytes(self.precision)
+        ));
         d
     }
 }

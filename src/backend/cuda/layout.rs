@@ -2,6 +2,8 @@
 //! `PD_SIZEOF_*` defines, and the `.cu`/`.cuh` side `static_assert`s them (DESIGN.md §3), so a
 //! layout drift fails the kernel compile check in CI.
 
+use super::kernels::Precision;
+use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
 use crate::neighbor::Bounds;
 use cudarc::driver::DeviceRepr;
 
@@ -51,6 +53,16 @@ pub struct PairMaterial {
 
 // SAFETY: plain old data of f64.
 unsafe impl DeviceRepr for PairMaterial {}
+
+/// Bytes of one `StagedPlanes` record of cuda/contact.cu: ENUM_MAX_PLANES planes (normal and
+/// offset in the geometry's arithmetic), the frame origin in f64, two plane counts.
+pub fn staged_planes_bytes(precision: Precision) -> usize {
+    let real = match precision {
+        Precision::Double => 8,
+        Precision::Mixed => 4,
+    };
+    ENUM_MAX_PLANES * 4 * real + 3 * 8 + 2 * 4
+}
 
 /// The `-DPD_SIZEOF_…` options for every shared struct.
 pub fn size_defines() -> Vec<String> {

@@ -2,8 +2,10 @@
 //! particle arrays, the int2 pair list and the per-particle references, and the contact
 //! history carried over a rebuild (kernels in `cuda/scan.cu` and `cuda/neighbor.cu`).
 
+use super::layout::staged_planes_bytes;
 use super::simulation::{
-    CudaError, CudaSimulation, DevicePairs, HistorySource, ParticleView, cfg, ptr, zeros,
+    CudaError, CudaSimulation, DevicePairs, HistorySource, PLANE_BUCKETS, ParticleView, cfg, ptr,
+    zeros,
 };
 use cudarc::driver::{CudaSlice, LaunchConfig, PushKernelArg};
 
@@ -243,6 +245,8 @@ impl CudaSimulation {
                 .arg(&mut spring_in)
                 .launch(cfg(np))?;
         }
+        let spheres = self.config.spheres;
+        let staged_bytes = staged_planes_bytes(self.config.precision);
         self.pairs = Some(DevicePairs {
             n: np,
             n_interior,
@@ -258,6 +262,12 @@ impl CudaSimulation {
             refs,
             deferred: zeros::<u32>(&st, np)?,
             deferred_count: zeros::<u32>(&st, 1)?,
+            // The two lean passes of polyhedral pairs stage planes per pair (spheres: none).
+            staged: zeros::<u8>(&st, if spheres { 1 } else { np * staged_bytes })?,
+            bucket: zeros::<u8>(&st, if spheres { 1 } else { np })?,
+            order: zeros::<u32>(&st, if spheres { 1 } else { np })?,
+            bucket_count: zeros::<u32>(&st, PLANE_BUCKETS)?,
+            bucket_fill: zeros::<u32>(&st, PLANE_BUCKETS)?,
         });
         self.reference = st.clone_dtod(&self.p.position)?;
         self.rebuild = false;

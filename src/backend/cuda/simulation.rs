@@ -6,8 +6,11 @@
 //! copies nothing but a 16-byte status word back.
 
 use super::kernels::{KernelConfig, Precision, compile};
+#[cfg(doc)]
+use super::layout::staged_planes_bytes;
 use super::layout::{GridParams, PairMaterial};
 use crate::contact::DampingTable;
+use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
 use crate::neighbor::Bounds;
 use crate::pipeline::{Simulation, SimulationError};
 use cudarc::driver::{
@@ -20,6 +23,14 @@ use std::time::Instant;
 
 /// Threads per block of the per-particle and per-pair kernels.
 const BLOCK: u32 = 256;
+
+/// Threads per block of the sphere pair kernel. Its 94 registers per thread allow two blocks of
+/// 256 per multiprocessor (16 warps) but five of 128 (20 warps), and the kernel waits on memory:
+/// on an H200, 1e6 dense spheres took 0.50 ms per step in the pair stage with 128, 0.61 ms with
+/// 256 (docs/performance.md). The polyhedral passes keep [`BLOCK`]: their per-thread workspace
+/// lives in local memory, and with one pass for the whole pair, 128 was 40 % slower than 256
+/// (the two passes now are about equal either way).
+pub(super) const SPHERE_PAIR_BLOCK: u32 = 128;
 
 /// Errors of the CUDA backend, each saying what failed.
 #[derive(Debug, thiserror::Error)]
@@ -34,10 +45,16 @@ pub enum CudaError {
     Halo(String),
 }
 
-/// Launch configuration for `n` threads. Small launches get smaller blocks, so that they still
-/// spread over the GPU's multiprocessors (a 2000-particle scene in blocks of 128 would occupy
-/// 16 of an H100's 132); `POLYDEM_CUDA_BLOCK` fixes the block size instead (for tuning).
+/// Launch configuration for `n` threads in blocks of [`BLOCK`] (see [`cfg_with`]).
 pub(super) fn cfg(n: usize) -> LaunchConfig {
+    cfg_with(n, BLOCK)
+}
+
+/// Launch configuration for `n` threads in blocks of `preferred`. Small launches get smaller
+/// blocks, so that they still spread over the GPU's multiprocessors (a 2000-particle scene in
+/// blocks of 128 would occupy 16 of an H100's 132); `POLYDEM_CUDA_BLOCK` fixes the block size
+/// of every kernel instead (for tuning).
+pub(super) fn cfg_with(n: usize, preferred: u32) -> LaunchConfig {
     static FIXED: std::sync::OnceLock<Option<u32>> = std::sync::OnceLock::new();
     let fixed = *FIXED.get_or_init(|| {
         std::env::var("POLYDEM_CUDA_BLOCK")
@@ -46,8 +63,8 @@ pub(super) fn cfg(n: usize) -> LaunchConfig {
             .filter(|b| (32..=1024).contains(b) && b % 32 == 0)
     });
     // Enough blocks for two per multiprocessor of the largest current GPUs (132 SMs).
-    let block = fixed.unwrap_or(if n >= 264 * BLOCK as usize {
-        BLOCK
+    let block = fixed.unwrap_or(if n >= 264 * preferred as usize {
+        preferred
     } else if n >= 264 * 64 {
         64
     } else {
@@ -190,10 +207,23 @@ pub(super) struct DevicePairs {
     pub(super) contact: CudaSlice<u32>,
     pub(super) ref_offset: CudaSlice<u32>,
     pub(super) refs: CudaSlice<u32>,
-    /// The pairs the pair pass leaves to the full evaluation (GJK), and their count.
+    /// The pairs the lean passes leave to the full evaluation (GJK, the dual hull), and their
+    /// count.
     pub(super) deferred: CudaSlice<u32>,
     pub(super) deferred_count: CudaSlice<u32>,
+    /// Between the two lean passes of polyhedral pairs (`pair_planes`, `pair_faces`): each
+    /// staged pair's planes (`StagedPlanes` of cuda/contact.cu, [`staged_planes_bytes`] each),
+    /// its plane-count bucket, the staged pairs listed bucket by bucket, and per bucket the
+    /// count and the fill cursor ([`PLANE_BUCKETS`] values each).
+    pub(super) staged: CudaSlice<u8>,
+    pub(super) bucket: CudaSlice<u8>,
+    pub(super) order: CudaSlice<u32>,
+    pub(super) bucket_count: CudaSlice<u32>,
+    pub(super) bucket_fill: CudaSlice<u32>,
 }
+
+/// Plane-count buckets of the lean pair passes: counts 0..=ENUM_MAX_PLANES (`PD_PLANE_BUCKETS`).
+pub(super) const PLANE_BUCKETS: usize = ENUM_MAX_PLANES + 1;
 
 /// Wall meshes and per-particle wall outputs.
 pub(super) struct DeviceWalls {
@@ -267,10 +297,7 @@ impl CudaSimulation {
         let mut contact = None;
         let names: &[(&str, &[&'static str])] = &[
             ("scan.cu", &["scan_blocks", "scan_add"]),
-            (
-                "integrate.cu",
-                &["half_kick", "drift", "step_checks", "wrap_periodic"],
-            ),
+            ("integrate.cu", &["kick_drift", "reduce_and_kick"]),
             (
                 "neighbor.cu",
                 &[
@@ -293,11 +320,13 @@ impl CudaSimulation {
                 "contact.cu",
                 &[
                     "pair_contacts",
+                    "pair_planes",
+                    "bucket_pairs",
+                    "pair_faces",
                     "pair_contacts_deferred",
                     "wall_candidates",
                     "wall_facet_overlaps",
                     "wall_contacts",
-                    "reduce_forces",
                 ],
             ),
             ("halo.cu", &["pack_motion", "unpack_motion"]),
@@ -401,7 +430,7 @@ impl CudaSimulation {
     /// The first force evaluation of a new simulation (see [`CudaSimulation::from_scene`]).
     pub fn evaluate_first_forces(&mut self) -> Result<(), CudaError> {
         let dt = self.host.dt;
-        self.forces(dt)
+        self.forces(dt, false)
     }
 
     /// Bytes of device memory held by this simulation's buffers (particles, pair list and
@@ -434,6 +463,11 @@ impl CudaSimulation {
                 + b(&q.pairs)
                 + b(&q.deferred)
                 + b(&q.deferred_count)
+                + b(&q.staged)
+                + b(&q.bucket)
+                + b(&q.order)
+                + b(&q.bucket_count)
+                + b(&q.bucket_fill)
                 + b(&q.axes)
                 + b(&q.spring_in)
                 + b(&q.spring_out)
@@ -497,94 +531,64 @@ pub(super) fn zeros<T: DeviceRepr + ValidAsZeroBits>(
 }
 
 impl CudaSimulation {
-    fn half_kick(&mut self) -> Result<(), CudaError> {
-        let g = self.host.scene.gravity;
-        let (dt, ni) = (self.host.dt, self.n as i32);
-        let p = &mut self.p;
-        // SAFETY: `half_kick` of cuda/integrate.cu; every buffer holds 3n (4n) values.
-        unsafe {
-            self.stream
-                .launch_builder(self.k.get("half_kick"))
-                .arg(&ni)
-                .arg(&p.ghost)
-                .arg(&mut p.velocity)
-                .arg(&mut p.angular_velocity)
-                .arg(&p.force)
-                .arg(&p.torque)
-                .arg(&p.mass)
-                .arg(&p.inertia)
-                .arg(&p.orientation)
-                .arg(&g.x)
-                .arg(&g.y)
-                .arg(&g.z)
-                .arg(&dt)
-                .launch(cfg(self.n))?;
-        }
-        Ok(())
-    }
-
-    /// Advances one time step: the stage order of [`Simulation::step`].
+    /// Advances one time step: the stage order of [`Simulation::step`], in two passes over the
+    /// particle state (`kick_drift` and, after the contacts, `reduce_and_kick` of
+    /// cuda/integrate.cu).
     pub fn step(&mut self) -> Result<(), CudaError> {
         let t0 = Instant::now();
         // The device state changes from here on: the host copy is stale until synced again.
         self.host_current = false;
-        self.half_kick()?;
+        let g = self.host.scene.gravity;
         let (dt, ni) = (self.host.dt, self.n as i32);
+        let grid = self.grid;
+        let wrap = i32::from(self.config.periodic);
+        // The checks need the list's reference positions; before the first build there are none.
+        let checks = i32::from(self.n > 0 && self.pairs.is_some());
+        let half_skin = 0.5 * self.skin;
+        let mut flags = [0u32, 0, 0, u32::MAX];
+        if checks != 0 {
+            self.stream.memcpy_htod(&flags, &mut self.flags)?;
+        }
         {
             let p = &mut self.p;
-            // SAFETY: `drift` of cuda/integrate.cu.
+            // SAFETY: `kick_drift` of cuda/integrate.cu; every state buffer holds 3n (4n)
+            // values, `reference` 3n since the last list build (read only when `checks`).
             unsafe {
                 self.stream
-                    .launch_builder(self.k.get("drift"))
+                    .launch_builder(self.k.get("kick_drift"))
                     .arg(&ni)
                     .arg(&p.ghost)
                     .arg(&mut p.position)
-                    .arg(&p.velocity)
+                    .arg(&mut p.velocity)
                     .arg(&mut p.orientation)
                     .arg(&mut p.angular_velocity)
+                    .arg(&p.force)
+                    .arg(&p.torque)
+                    .arg(&p.mass)
                     .arg(&p.inertia)
+                    .arg(&g.x)
+                    .arg(&g.y)
+                    .arg(&g.z)
                     .arg(&dt)
+                    .arg(&wrap)
+                    .arg(&grid)
+                    .arg(&checks)
+                    .arg(&self.reference)
+                    .arg(&half_skin)
+                    .arg(&mut self.flags)
                     .launch(cfg(self.n))?;
             }
         }
         self.host.time += dt;
         self.host.step += 1;
-        self.stream.synchronize()?;
-        self.host.timers.integrate += t0.elapsed().as_secs_f64();
-        // Stage 1: periodic wrap and the per-step checks on the device; insertion and removal
-        // on the host (rare steps).
-        let t0 = Instant::now();
-        let g = self.grid;
-        if self.config.periodic {
-            // SAFETY: `wrap_periodic`.
-            unsafe {
-                self.stream
-                    .launch_builder(self.k.get("wrap_periodic"))
-                    .arg(&ni)
-                    .arg(&mut self.p.position)
-                    .arg(&g)
-                    .launch(cfg(self.n))?;
-            }
-        }
-        let mut flags = [0u32, 0, 0, u32::MAX];
-        self.stream.memcpy_htod(&flags, &mut self.flags)?;
-        if self.n > 0 && self.pairs.is_some() {
-            let half_skin = 0.5 * self.skin;
-            // SAFETY: `step_checks`; `reference` holds 3n values since the last list build.
-            unsafe {
-                self.stream
-                    .launch_builder(self.k.get("step_checks"))
-                    .arg(&ni)
-                    .arg(&self.p.position)
-                    .arg(&self.p.velocity)
-                    .arg(&self.reference)
-                    .arg(&g)
-                    .arg(&half_skin)
-                    .arg(&mut self.flags)
-                    .launch(cfg(self.n))?;
-            }
+        if checks != 0 {
             self.stream.memcpy_dtoh(&self.flags, &mut flags)?;
         }
+        self.stream.synchronize()?;
+        self.host.timers.integrate += t0.elapsed().as_secs_f64();
+        // Stage 1: the periodic wrap and the per-step checks ran on the device with the drift;
+        // insertion and removal on the host (rare steps).
+        let t0 = Instant::now();
         if flags[2] != 0 {
             self.sync_host()?;
             let i = flags[3] as usize;
@@ -626,11 +630,8 @@ impl CudaSimulation {
             }
         }
         self.host.timers.exchange += t0.elapsed().as_secs_f64();
-        self.forces(dt)?;
-        let t0 = Instant::now();
-        self.half_kick()?;
-        self.stream.synchronize()?;
-        self.host.timers.integrate += t0.elapsed().as_secs_f64();
+        // The contacts, then the reduction with the second half kick.
+        self.forces(dt, true)?;
         Ok(())
     }
 }
