@@ -132,8 +132,9 @@ impl KernelConfig {
         {
             d.push(format!("-DPD_MAX_WALL_CANDIDATES={n}"));
         }
-        // Register cap of the lean pair kernel: DEFAULT_PAIR_MAX_REGISTERS unless
-        // POLYDEM_PAIR_MAX_REGISTERS gives another (24–255), or 0 for none (a tuning knob).
+        // Register cap of the lean pair kernels: DEFAULT_PAIR_MAX_REGISTERS (for spheres
+        // DEFAULT_SPHERE_PAIR_MAX_REGISTERS) unless POLYDEM_PAIR_MAX_REGISTERS gives another
+        // (24–255), or 0 for none (a tuning knob).
         let cap = match std::env::var("POLYDEM_PAIR_MAX_REGISTERS") {
             Ok(v) => {
                 let n = v
@@ -147,7 +148,11 @@ impl KernelConfig {
                 }
                 n
             }
-            Err(_) => Some(DEFAULT_PAIR_MAX_REGISTERS),
+            Err(_) => Some(if self.spheres {
+                DEFAULT_SPHERE_PAIR_MAX_REGISTERS
+            } else {
+                DEFAULT_PAIR_MAX_REGISTERS
+            }),
         };
         if let Some(n) = cap.filter(|&n| n > 0) {
             d.push(format!("-DPD_PAIR_MAX_REGISTERS={n}"));
@@ -164,12 +169,20 @@ impl KernelConfig {
     }
 }
 
-/// Register cap of the lean pair kernel (`pair_contacts`; the deferred pass has none). Measured
-/// on an H200 for 1e6 dense dodecahedra (docs/performance.md): 124 registers uncapped, and a cap
-/// of 96 is 6 % faster in mixed precision and 25 % in double, 88 about the same, 104–112 no
-/// better than none. The occupancy is two blocks of 256 either way; the cap changes how the
-/// compiler schedules the geometry's memory accesses.
-pub const DEFAULT_PAIR_MAX_REGISTERS: u32 = 96;
+/// Register cap of the lean polyhedral pair kernels (`pair_planes` and `pair_faces`; the
+/// deferred pass has none), 0 for none. Measured on an H200 for 1e6 dense dodecahedra
+/// (docs/performance.md): uncapped the two passes use 124–126 registers (two blocks of 256 per
+/// SM) and run 4 % faster than with a cap of 96 in mixed precision and 2 % in double; 128 is the
+/// same as none. With one lean pass the cap of 96 had been 6 % and 25 % faster. A cap changes
+/// only the register allocation, never the arithmetic (no FMA contraction, IEEE division and
+/// square root), so results are the same bits with any cap.
+pub const DEFAULT_PAIR_MAX_REGISTERS: u32 = 0;
+
+/// Register cap of the sphere pair kernel (`pair_contacts`): at most 96 registers let five
+/// blocks of 128 threads (`SPHERE_PAIR_BLOCK`) share an SM (20 warps; the kernel waits on
+/// memory and needs them). It needs 94 today, with or without the cap; the cap keeps it there
+/// (under a cap of 128 the compiler takes 106, and the SM fits four blocks).
+pub const DEFAULT_SPHERE_PAIR_MAX_REGISTERS: u32 = 96;
 
 /// Whether the pair kernels are built to time their phases (`POLYDEM_PHASE_CLOCKS` set, a
 /// profiling build: `clock64()` sums per phase, printed after every pair stage).
