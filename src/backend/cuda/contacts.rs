@@ -336,6 +336,8 @@ impl CudaSimulation {
         let mut error = [0u32; 2];
         st.memcpy_dtoh(&self.error, &mut error)?;
         self.host.timers.reduce += t0.elapsed().as_secs_f64();
+        // A geometry error fails the step; the fused kick has already applied this step's
+        // forces to the velocities on the device (the run stops with the error: `engine.step()?`).
         if error[0] != 0 {
             return Err(SimulationError::Geometry {
                 step: self.host.step,
