@@ -71,12 +71,6 @@ struct PairOutputs {
     unsigned int* contact; // 1 when the pair is in contact (its spring is live history)
 };
 
-PD_DEVICE void clear_pair(const PairOutputs& out, size_t k) {
-    for (int c = 0; c < 9; ++c) out.forces[9 * k + c] = 0.0;
-    out.energy[k] = 0.0;
-    out.contact[k] = 0u;
-}
-
 // Records the first geometry error (status code and the pair or particle index) for the host.
 PD_DEVICE void report_error(unsigned int* error, int status, unsigned int where) {
     if (atomicCAS(&error[0], 0u, (unsigned int)status) == 0u) {
@@ -100,7 +94,19 @@ struct PairArgs {
 };
 static_assert(sizeof(PairArgs) == PD_SIZEOF_PAIR_ARGS, "PairArgs differs from Rust's simulation::PairArgs");
 
-// Stage 3 for pair k of the list (Simulation::pair_contacts): its outputs cleared, the centroids
+// The slots of pair k with no contact: no force, no energy, no spring. Every pair's slots are
+// written once per step, by whichever kernel settles the pair: these zeros, or the contact
+// law's results (pair_contact_law). The force slots are 72 bytes apart, so a warp's store to
+// them touches a sector per lane: clearing every pair first and then writing the contacts
+// doubled the pair kernels' L2 write traffic.
+PD_DEVICE void clear_pair(const PairArgs& q, size_t k) {
+    for (int c = 0; c < 9; ++c) q.out.forces[9 * k + c] = 0.0;
+    q.out.energy[k] = 0.0;
+    q.out.contact[k] = 0u;
+    store3(q.spring_out, k, zero3<double>());
+}
+
+// Stage 3 for pair k of the list (Simulation::pair_contacts): the centroids
 // (the periodic image of B taken from the current centroids by the minimum-image rule, `grid`,
 // as the list build does, not from the build's shift: a particle wrapped across a periodic face
 // since the build keeps its contacts), and whether the bounding spheres meet.
@@ -115,12 +121,11 @@ PD_DEVICE bool pair_broad_phase(const PairArgs& q, size_t k, int* a, int* b, V3<
 #endif
     V3<double> d = *xb - *xa;
     double reach = p.radius[*a] + p.radius[*b];
-    clear_pair(q.out, k);
-    store3(q.spring_out, k, zero3<double>());
     if (norm2(d) >= reach * reach) {
 #if !PD_SPHERES
         store3(q.axes, k, zero3<double>());
 #endif
+        clear_pair(q, k);
         return false;
     }
     return true;
@@ -171,7 +176,7 @@ PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const
 #if PD_FRICTION
     spring = load3(q.spring_in, k);
 #endif
-    ContactForces f = contact_forces(params, pm.damping, ov, kin, &spring, q.dt);
+    ContactForces f = contact_forces(params, pm, ov, kin, &spring, q.dt);
     store3(out.forces, 3 * k, f.force_b);
     store3(out.forces, 3 * k + 1, f.torque_a);
     store3(out.forces, 3 * k + 2, f.torque_b);
@@ -204,15 +209,17 @@ PD_DEVICE bool cached_axis_separates(const PairArgs& q, size_t k, const BodyRef&
 
 // Stages 4–5 finished: the geometry status of pair k and its overlap. Returns whether the pair
 // goes on to the contact law (errors are reported, the separating axis or its absence kept for
-// the next step).
+// the next step, the slots of a pair without contact cleared).
 PD_DEVICE bool pair_geometry_outcome(const PairArgs& q, size_t k, int status, const PairGeometry& g) {
     if (status != STATUS_OK) {
         report_error(q.error, status, (unsigned int)k);
         store3(q.axes, k, zero3<double>());
+        clear_pair(q, k);
         return false;
     }
     if (g.overlap.volume <= 0.0) {
         store3(q.axes, k, g.separating_axis);
+        clear_pair(q, k);
         return false;
     }
     store3(q.axes, k, zero3<double>());
@@ -222,8 +229,8 @@ PD_DEVICE bool pair_geometry_outcome(const PairArgs& q, size_t k, int status, co
 
 // Stages 3–7 for pair k of the list (Simulation::pair_contacts), in one pass. With kFull false
 // a polyhedral pair whose intersection the Chebyshev centre does not prove, or whose overlap
-// needs the dual hull, is left for the deferred pass (returns true, its outputs cleared); with
-// kFull true every pair is evaluated in full.
+// needs the dual hull, is left for the deferred pass (returns true, its slots not written);
+// with kFull true every pair is evaluated in full.
 template <bool kFull> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) {
     PD_CLK_START
     int a, b;
@@ -235,6 +242,7 @@ template <bool kFull> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) 
     // Stages 4–5 for spheres: the lens in closed form (Simulation::pair_contacts).
     Overlap<double> ov = sphere_lens(q.p.radius[a], q.p.radius[b], xb - xa);
     if (!(ov.volume > 0.0)) {
+        clear_pair(q, k);
         return false;
     }
     ov.centroid = ov.centroid + xa;
@@ -242,6 +250,7 @@ template <bool kFull> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) 
     BodyRef A, B;
     pair_bodies(q, a, b, xa, xb, &A, &B);
     if (cached_axis_separates(q, k, A, B, a, b)) {
+        clear_pair(q, k);
         return false;
     }
     // Stages 4–5: the overlap, with GJK where the Chebyshev centre proves nothing.
@@ -337,7 +346,9 @@ extern "C" __global__ void PD_PAIR_BOUNDS pair_planes(int first, int n_pairs, Pa
     if (pair_broad_phase(args, k, &a, &b, &xa, &xb)) {
         BodyRef A, B;
         pair_bodies(args, a, b, xa, xb, &A, &B);
-        if (!cached_axis_separates(args, k, A, B, a, b)) {
+        if (cached_axis_separates(args, k, A, B, a, b)) {
+            clear_pair(args, k);
+        } else {
             PairWorkspace<GeomReal> ws;
             PairGeometry g;
             V3<double> frame;
@@ -820,7 +831,7 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
 #if PD_FRICTION
         spring = load3(spring_in, slot);
 #endif
-        ContactForces f = contact_forces(params, pm.damping, world, kin, &spring, dt);
+        ContactForces f = contact_forces(params, pm, world, kin, &spring, dt);
         force -= f.force_b;
         torque += f.torque_a;
         energy += f.elastic_energy;

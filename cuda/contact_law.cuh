@@ -19,6 +19,8 @@ struct PairMaterial {
     double restitution;
     double friction;
     double damping[PD_DAMPING_TABLE_SIZE]; // γ(e, p) at p evenly spaced over [1/3, 3]
+    double log_restitution;                // ln e, computed on the host
+    double log_norm;                       // sqrt((ln e)² + π²), computed on the host
 };
 #ifdef PD_SIZEOF_PAIR_MATERIAL
 static_assert(sizeof(PairMaterial) == PD_SIZEOF_PAIR_MATERIAL, "PairMaterial differs from Rust's layout::PairMaterial");
@@ -78,10 +80,13 @@ PD_HD ContactForces no_contact_forces() {
 }
 
 // Evaluates the contact law for an overlap, updating the tangential spring `spring` over `dt`
-// (law.rs `contact_forces`; the comments there give the derivation of every term).
-PD_HD ContactForces contact_forces(const ContactParameters& params, const double* damping,
+// (law.rs `contact_forces`; the comments there give the derivation of every term). The pair's
+// damping table and the logarithms of its restitution come from `pm`: ln e computed once on
+// the host, with the same function as the CPU backend's, rather than per contact here.
+PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMaterial& pm,
                                    const Overlap<double>& o, const ContactKinematics& kin,
                                    V3<double>* spring, double dt) {
+    const double* damping = pm.damping;
     double area = norm(o.dv_dxb);
     double volume = o.volume;
     if (volume <= 0.0 || area <= 0.0) {
@@ -122,9 +127,7 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const double
         double e = params.restitution;
         double c_t = 0.0;
         if (e < 1.0) {
-            double l = log(e);
-            c_t = 2.0 * abs_(l) * sqrt_(k_t * kin.effective_mass) /
-                  sqrt_(l * l + 3.141592653589793 * 3.141592653589793);
+            c_t = 2.0 * abs_(pm.log_restitution) * sqrt_(k_t * kin.effective_mass) / pm.log_norm;
         }
         V3<double> f_t = (-xi) * k_t - v_t * c_t;
         double cap = params.friction * f_normal;
@@ -146,7 +149,8 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const double
     out.torque_b = torque_b_el + cross(c - kin.x_b, f_other);
     out.torque_a = torque_a_el + cross(c - kin.x_a, -f_other);
     double k_t = params.tangential_stiffness * area;
-    out.elastic_energy = 0.75 * params.normal_stiffness * pow(volume, 4.0 / 3.0) + 0.5 * k_t * norm2(*spring);
+    // U(V) = (3/4) c V^{4/3} = (3/4) U'(V) V: no second root.
+    out.elastic_energy = 0.75 * u_prime * volume + 0.5 * k_t * norm2(*spring);
     return out;
 }
 

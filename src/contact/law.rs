@@ -168,7 +168,7 @@ pub fn contact_forces(
         force_b,
         torque_a,
         torque_b,
-        elastic_energy: 0.75 * params.normal_stiffness * volume.powf(4.0 / 3.0)
-            + 0.5 * k_t * state.spring.norm_squared(),
+        // U(V) = (3/4) c V^{4/3} = (3/4) U'(V) V: no second root.
+        elastic_energy: 0.75 * u_prime * volume + 0.5 * k_t * state.spring.norm_squared(),
     }
 }

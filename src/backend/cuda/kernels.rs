@@ -180,8 +180,8 @@ pub const DEFAULT_PAIR_MAX_REGISTERS: u32 = 0;
 
 /// Register cap of the sphere pair kernel (`pair_contacts`): at most 96 registers let five
 /// blocks of 128 threads (`SPHERE_PAIR_BLOCK`) share an SM (20 warps; the kernel waits on
-/// memory and needs them). It needs 94 today, with or without the cap; the cap keeps it there
-/// (under a cap of 128 the compiler takes 106, and the SM fits four blocks).
+/// memory and needs them), where its 100 uncapped registers allow four (the cap costs it one
+/// 8-byte spill).
 pub const DEFAULT_SPHERE_PAIR_MAX_REGISTERS: u32 = 96;
 
 /// Whether the pair kernels are built to time their phases (`POLYDEM_PHASE_CLOCKS` set, a

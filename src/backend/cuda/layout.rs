@@ -42,13 +42,38 @@ impl GridParams {
 }
 
 /// Contact parameters of one pair of materials (`cuda/contact_law.cuh: PairMaterial`): the
-/// restitution, friction and the damping table γ(e, p).
+/// restitution, friction and the damping table γ(e, p), with ln e and sqrt((ln e)² + π²) of the
+/// tangential dashpot (`contact::law`), computed here so that the kernels take no logarithm per
+/// contact and round as the CPU backend does.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PairMaterial {
     pub restitution: f64,
     pub friction: f64,
     pub damping: [f64; crate::contact::restitution::TABLE_SIZE],
+    pub log_restitution: f64,
+    pub log_norm: f64,
+}
+
+impl PairMaterial {
+    /// The parameters of a pair with restitution `e` (which also selects the damping table
+    /// `damping`) and friction coefficient `friction`.
+    pub fn new(
+        restitution: f64,
+        friction: f64,
+        damping: [f64; crate::contact::restitution::TABLE_SIZE],
+    ) -> Self {
+        // The same expressions as contact::law (`e.ln()`, `powi(2)`), for the same bits.
+        let log_restitution = restitution.ln();
+        let log_norm = (log_restitution.powi(2) + std::f64::consts::PI.powi(2)).sqrt();
+        PairMaterial {
+            restitution,
+            friction,
+            damping,
+            log_restitution,
+            log_norm,
+        }
+    }
 }
 
 // SAFETY: plain old data of f64.

@@ -360,11 +360,11 @@ impl CudaSimulation {
             for b in 0..n_mat {
                 let pp = s.pairs.get(a, b);
                 let e = s.pairs.try_get(a, b).map_or(1.0, |p| p.restitution);
-                materials.push(PairMaterial {
-                    restitution: pp.restitution,
-                    friction: pp.friction,
-                    damping: *DampingTable::new(e).values(),
-                });
+                materials.push(PairMaterial::new(
+                    pp.restitution,
+                    pp.friction,
+                    *DampingTable::new(e).values(),
+                ));
             }
         }
         let materials = stream.clone_htod(&materials)?;
