@@ -435,9 +435,9 @@ extern "C" __global__ void PD_PAIR_BOUNDS pair_faces(PairArgs args, const unsign
     PD_CLK_START
     size_t k = order[i];
     const StagedPlanes& s = staged[k];
-    Plane<GeomReal> planes[PD_ENUM_MAX_PLANES];
+    // The planes are read where they were staged (the overlap reads each once).
+    const Plane<GeomReal>* planes = s.planes;
     int na = s.na, nb = s.nb;
-    for (int j = 0; j < na + nb; ++j) planes[j] = s.planes[j];
     V3<double> frame = v3(s.frame[0], s.frame[1], s.frame[2]);
     OverlapWorkspace<GeomReal> ws;
     PairGeometry g;
