@@ -227,23 +227,22 @@ PD_DEVICE bool pair_geometry_outcome(const PairArgs& q, size_t k, int status, co
 }
 #endif
 
-// Stages 3–7 for pair k of the list (Simulation::pair_contacts), in one pass. With kFull false
-// a polyhedral pair whose intersection the Chebyshev centre does not prove, or whose overlap
-// needs the dual hull, is left for the deferred pass (returns true, its slots not written);
-// with kFull true every pair is evaluated in full.
-template <bool kFull> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) {
+// Stages 3–7 for pair k of the list (Simulation::pair_contacts) in one pass and in full (GJK
+// and the dual hull included): the sphere kernel, and the polyhedral pairs the lean passes
+// deferred.
+PD_DEVICE void evaluate_pair(const PairArgs& q, size_t k) {
     PD_CLK_START
     int a, b;
     V3<double> xa, xb;
     if (!pair_broad_phase(q, k, &a, &b, &xa, &xb)) {
-        return false;
+        return;
     }
 #if PD_SPHERES
     // Stages 4–5 for spheres: the lens in closed form (Simulation::pair_contacts).
     Overlap<double> ov = sphere_lens(q.p.radius[a], q.p.radius[b], xb - xa);
     if (!(ov.volume > 0.0)) {
         clear_pair(q, k);
-        return false;
+        return;
     }
     ov.centroid = ov.centroid + xa;
 #else
@@ -251,28 +250,24 @@ template <bool kFull> PD_DEVICE bool evaluate_pair(const PairArgs& q, size_t k) 
     pair_bodies(q, a, b, xa, xb, &A, &B);
     if (cached_axis_separates(q, k, A, B, a, b)) {
         clear_pair(q, k);
-        return false;
+        return;
     }
     // Stages 4–5: the overlap, with GJK where the Chebyshev centre proves nothing.
     PairWorkspace<GeomReal> ws;
     PairGeometry g;
     PD_CLK(0)
     PD_CLK_COUNT(11)
-    int status = overlap_pair_t<GeomReal, kFull>(ws, A, B, &g);
+    int status = overlap_pair_t<GeomReal, true>(ws, A, B, &g);
 #if defined(PD_PHASE_CLOCKS)
     pd_t = clock64();
 #endif
-    if (status == STATUS_DEFERRED) {
-        return true;
-    }
     if (!pair_geometry_outcome(q, k, status, g)) {
-        return false;
+        return;
     }
     Overlap<double> ov = g.overlap;
 #endif
     pair_contact_law(q, k, a, b, ov);
     PD_CLK(8)
-    return false;
 }
 
 #ifdef PD_PAIR_MAX_REGISTERS
@@ -291,7 +286,7 @@ extern "C" __global__ void PD_PAIR_BOUNDS pair_contacts(int first, int n_pairs, 
         return;
     }
 #if PD_SPHERES
-    evaluate_pair<true>(args, (size_t)kk);
+    evaluate_pair(args, (size_t)kk);
 #else
     (void)args;
 #endif
@@ -474,7 +469,7 @@ extern "C" __global__ void pair_contacts_deferred(PairArgs args, const unsigned 
 #else
     const unsigned int n = deferred_count[0];
     for (unsigned int i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
-        evaluate_pair<true>(args, (size_t)deferred[i]);
+        evaluate_pair(args, (size_t)deferred[i]);
     }
 #endif
 }
