@@ -475,8 +475,11 @@ extern "C" __global__ void pair_contacts_deferred(PairArgs args, const unsigned 
 }
 
 #if PD_WALLS
-#ifndef PD_MAX_WALL_CANDIDATES
-#define PD_MAX_WALL_CANDIDATES 512
+// Most grid cells a particle's box may span for the merge of their facet lists in
+// `wall_candidates` (27: a box at most one cell wide, plus a skin narrower than the particles,
+// spans at most three cells per axis; past it, the walk in id order).
+#ifndef PD_WALL_MERGE_CELLS
+#define PD_WALL_MERGE_CELLS 27
 #endif
 
 // One wall mesh in its own frame (src/contact/wall.rs `WallMesh`): facets
@@ -541,9 +544,9 @@ PD_DEVICE int grid_coord(const WallInfo& w, double x, int k) {
 }
 
 // The smallest facet id >= `from` listed in grid cells [ca, cb] of a wall (UINT_MAX: none).
-// The walk over a particle's facets when they outnumber the candidate buffer: one scan of the
-// cells per facet, so the facets still come in increasing id order (WallMesh::facets_near's
-// order, which fixes the order of the sums) with no bound on their number.
+// The walk over a particle's facets when its box spans more cells than the merge of
+// `wall_candidates` takes: one scan of the cells per facet, so the facets still come in
+// increasing id order (WallMesh::facets_near's order, which fixes the order of the sums).
 PD_DEVICE unsigned int next_facet_in_box(const unsigned int* cs, const unsigned int* cell_items, const WallInfo& w,
                                          const int ca[3], const int cb[3], unsigned int from) {
     unsigned int best = 0xffffffffu;
@@ -559,28 +562,6 @@ PD_DEVICE unsigned int next_facet_in_box(const unsigned int* cs, const unsigned 
         }
     }
     return best;
-}
-
-// Sorts ids[0..n) ascending in place (heapsort: no recursion, no extra memory).
-PD_DEVICE void sort_ids(unsigned int* ids, int n) {
-    auto sift = [&](int root, int end) {
-        while (2 * root + 1 < end) {
-            int child = 2 * root + 1;
-            if (child + 1 < end && ids[child] < ids[child + 1]) ++child;
-            if (ids[root] >= ids[child]) return;
-            unsigned int t = ids[root];
-            ids[root] = ids[child];
-            ids[child] = t;
-            root = child;
-        }
-    };
-    for (int start = n / 2 - 1; start >= 0; --start) sift(start, n);
-    for (int end = n - 1; end > 0; --end) {
-        unsigned int t = ids[0];
-        ids[0] = ids[end];
-        ids[end] = t;
-        sift(0, end);
-    }
 }
 
 // A wall's rotation and translation at the current time.
@@ -614,15 +595,19 @@ PD_DEVICE void wall_local_pose(const WallState& s, V3<double> xp, Quat<double> q
     local_q->z = qc.w * qp.z + qc.x * qp.y - qc.y * qp.x + qc.z * qp.w;
 }
 
-// Stage 6, first part, per particle (WallMesh::facets_near + the distance test of
-// WallMesh::contact): for every wall in order, the facets within the bounding radius in
+// The wall list (built when due, not every step): per particle, for every wall in order, the
+// facets within the bounding radius plus `skin` (WallMesh::facets_near with that reach) in
 // increasing id order. With `items` null it only counts them into counts[i]; otherwise it writes
-// them from items[offset[i]] as (particle · n_walls + wall, facet), the order in which the
-// third part sums them.
+// them from items[offset[i]] as (particle · n_walls + wall, facet), the order in which
+// `wall_contacts` sums them. While every particle stays within half the skin of where it was,
+// in each wall's frame (`kick_drift`'s wall check and the host's bound on the walls' motion),
+// the list holds every facet within the bounding radius, which `wall_facet_overlaps` then picks
+// by the same distance test as the CPU's per-step query: the same facets in the same order.
 extern "C" __global__ void wall_candidates(int n, ParticleView p, int n_walls, const WallInfo* walls,
                                            const WallState* states, const double* triangles,
                                            const unsigned int* cell_start, const unsigned int* cell_items,
-                                           unsigned int* counts, const unsigned int* offset, uint2* items) {
+                                           double skin, unsigned int* counts, const unsigned int* offset,
+                                           uint2* items) {
     int ii = blockIdx.x * blockDim.x + threadIdx.x;
     if (ii >= n) {
         return;
@@ -630,15 +615,15 @@ extern "C" __global__ void wall_candidates(int n, ParticleView p, int n_walls, c
     size_t i = (size_t)ii;
     V3<double> xp = load3(p.position, i);
     Quat<double> qp = load_quat(p.orientation, i);
-    double radius = p.radius[i];
+    double radius = p.radius[i] + skin;
     unsigned int found = 0;
-    unsigned int cand[PD_MAX_WALL_CANDIDATES];
     for (int k = 0; k < n_walls; ++k) {
         const WallInfo& w = walls[k];
         V3<double> local_t;
         Quat<double> local_q;
         wall_local_pose(states[k], xp, qp, &local_t, &local_q);
-        // Facets near (WallMesh::facets_near): grid candidates, sorted, unique, within reach.
+        // Facets near (WallMesh::facets_near): grid candidates in id order, each once, within
+        // reach.
         V3<double> lo = local_t - v3(radius, radius, radius), hi = local_t + v3(radius, radius, radius);
         double top[3];
         for (int c = 0; c < 3; ++c) top[c] = w.grid_min[c] + (double)w.dims[c] * w.grid_size;
@@ -648,34 +633,36 @@ extern "C" __global__ void wall_candidates(int n, ParticleView p, int n_walls, c
         }
         int ca[3] = {grid_coord(w, lo.x, 0), grid_coord(w, lo.y, 1), grid_coord(w, lo.z, 2)};
         int cb[3] = {grid_coord(w, hi.x, 0), grid_coord(w, hi.y, 1), grid_coord(w, hi.z, 2)};
-        int nc = 0;
-        bool overflow = false;
         const unsigned int* cs = cell_start + w.cell_offset;
-        for (int z = ca[2]; z <= cb[2] && !overflow; ++z) {
-            for (int y = ca[1]; y <= cb[1] && !overflow; ++y) {
-                for (int x = ca[0]; x <= cb[0] && !overflow; ++x) {
-                    int cell = (z * w.dims[1] + y) * w.dims[0] + x;
-                    for (unsigned int m = cs[cell]; m < cs[cell + 1]; ++m) {
-                        if (nc == PD_MAX_WALL_CANDIDATES) {
-                            overflow = true;
-                            break;
-                        }
-                        cand[nc++] = cell_items[m];
-                    }
-                }
+        // The box's cells list their facets in increasing id order (FacetGrid), so a merge of
+        // the cells' lists gives the increasing id order of WallMesh::facets_near, each facet
+        // once, with no buffer and no sort: per facet, the smallest head among the cells, then
+        // every cell whose head it is moves on. A box of more than PD_WALL_MERGE_CELLS cells (a
+        // skin wider than the particles) walks the grid in id order instead.
+        int spans[3] = {cb[0] - ca[0] + 1, cb[1] - ca[1] + 1, cb[2] - ca[2] + 1};
+        int n_cells = spans[0] * spans[1] * spans[2];
+        bool merge = n_cells <= PD_WALL_MERGE_CELLS;
+        unsigned int at[PD_WALL_MERGE_CELLS > 0 ? PD_WALL_MERGE_CELLS : 1];
+        unsigned int end[PD_WALL_MERGE_CELLS > 0 ? PD_WALL_MERGE_CELLS : 1];
+        if (merge) {
+            for (int c = 0; c < n_cells; ++c) {
+                int x = ca[0] + c % spans[0], y = ca[1] + (c / spans[0]) % spans[1], z = ca[2] + c / (spans[0] * spans[1]);
+                int cell = (z * w.dims[1] + y) * w.dims[0] + x;
+                at[c] = cs[cell];
+                end[c] = cs[cell + 1];
             }
         }
-        // Sorted (heapsort: O(k log k) for the k ids with repeats the cells list) and then
-        // walked skipping repeats: the increasing id order of WallMesh::facets_near.
-        if (!overflow) sort_ids(cand, nc);
-        int next = 0;
         unsigned int from = 0;
         while (true) {
-            unsigned int id;
-            if (!overflow) {
-                while (next < nc && next > 0 && cand[next] == cand[next - 1]) ++next;
-                if (next == nc) break;
-                id = cand[next++];
+            unsigned int id = 0xffffffffu;
+            if (merge) {
+                for (int c = 0; c < n_cells; ++c) {
+                    if (at[c] < end[c]) id = min(id, cell_items[at[c]]);
+                }
+                if (id == 0xffffffffu) break;
+                for (int c = 0; c < n_cells; ++c) {
+                    if (at[c] < end[c] && cell_items[at[c]] == id) ++at[c];
+                }
             } else {
                 id = next_facet_in_box(cs, cell_items, w, ca, cb, from);
                 if (id == 0xffffffffu) break;
@@ -692,9 +679,11 @@ extern "C" __global__ void wall_candidates(int n, ParticleView p, int n_walls, c
     if (!items) counts[i] = found;
 }
 
-// Stage 6, second part, per particle–facet item (WallMesh::contact's prism overlap): the
-// particle placed in the wall's frame, clipped by the facet's prism. overlaps[12 m ...] =
-// volume, centroid (3), S (3), M (3), depth, thickness, in the wall's frame.
+// Stage 6, first part, per item of the wall list (WallMesh::facets_near's distance test and
+// WallMesh::contact's prism overlap): the particle placed in the wall's frame; a facet beyond
+// its bounding radius is out of reach (zero volume, which the sum skips, as the CPU never lists
+// it); otherwise the particle is clipped by the facet's prism. overlaps[12 m ...] = volume,
+// centroid (3), S (3), M (3), depth, thickness, in the wall's frame.
 extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, int n_walls, ParticleView p,
                                                const WallState* states, const double* triangles,
                                                const double* prisms, double* overlaps, unsigned int* error) {
@@ -710,6 +699,11 @@ extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, 
     V3<double> local_t;
     Quat<double> local_q;
     wall_local_pose(states[k], load3(p.position, i), load_quat(p.orientation, i), &local_t, &local_q);
+    double* out = overlaps + 12 * m;
+    if (point_triangle_distance(local_t, triangles + 9 * f) > p.radius[i]) {
+        out[0] = 0.0;
+        return;
+    }
 #if PD_SPHERES
     // The sphere's share of its cap behind the facet (WallMesh::sphere_contact).
     V3<double> tri[3];
@@ -732,7 +726,6 @@ extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, 
         o = overlap_zero<double>();
     }
 #endif
-    double* out = overlaps + 12 * m;
     out[0] = o.volume;
     store3(out + 1, 0, o.centroid);
     store3(out + 4, 0, o.dv_dxb);
@@ -741,7 +734,7 @@ extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, 
     out[11] = o.thickness;
 }
 
-// Stage 6, third part, per particle (Simulation::wall_contacts): for every wall, the facet
+// Stage 6, second part, per particle (Simulation::wall_contacts): for every wall, the facet
 // overlaps summed in facet-id order into the total penetrating volume (WallMesh::contact) and
 // the contact law applied once to the total; the wall's spring per particle and wall.
 extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, const WallState* states,

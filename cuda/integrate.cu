@@ -75,7 +75,10 @@ PD_DEVICE double wrap_coordinate(double x, double lo, double hi) {
 // moved more than half the skin since the last list build (PairList::needs_rebuild), flags[1] =
 // number of particles outside a closed domain box, flags[2] = 1 when a position or velocity is
 // not finite (Simulation::check_finite), flags[3] = smallest local index with a non-finite value
-// (for the error message). Ghosts of a decomposed run are neither kicked nor drifted (their
+// (for the error message), flags[4] = 1 when, with `wall_reference` not null, some particle is
+// farther than `wall_half_reach` from where the wall list was built (the plain difference: a
+// periodic wrap moves a particle against the walls; the host has already taken the walls' own
+// motion off the half skin). Ghosts of a decomposed run are neither kicked nor drifted (their
 // owners' motion arrives through the halo) but are wrapped and checked, as on the CPU. Each
 // value takes the same operations as the separate stages of the CPU backend, in the same
 // order, so that fusing them changes no bit.
@@ -83,7 +86,9 @@ extern "C" __global__ void kick_drift(int n, const unsigned int* ghost, double* 
                                       double* orientation, double* angular_velocity, const double* force,
                                       const double* torque, const double* mass, const double* inertia, double gx,
                                       double gy, double gz, double dt, int wrap, GridParams grid, int checks,
-                                      const double* reference, double half_skin, unsigned int* flags) {
+                                      const double* reference, double half_skin,
+                                      const double* wall_reference, double wall_half_reach,
+                                      unsigned int* flags) {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) {
         return;
@@ -145,6 +150,9 @@ extern "C" __global__ void kick_drift(int n, const unsigned int* ghost, double* 
     V3<double> dx = displacement(grid, load3(reference, i), x);
     if (norm2(dx) > half_skin * half_skin) {
         flags[0] = 1u;
+    }
+    if (wall_reference != nullptr && norm2(x - load3(wall_reference, i)) > wall_half_reach * wall_half_reach) {
+        flags[4] = 1u;
     }
     double c[3] = {x.x, x.y, x.z};
     bool outside = false;

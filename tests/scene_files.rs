@@ -154,6 +154,39 @@ fn base_and_example_scenes_load() {
     }
 }
 
+/// Every example, quickstart, validation and MPI scene starts: its count insertions fit (a
+/// scene can parse and still fail there: "only 277 of 300 particles fit"), and the first forces
+/// are evaluated. The benchmark packings are lattices, whose fit the parser checks.
+#[test]
+fn launch_scenes_start() {
+    let root = repo_root().join("launch");
+    let mut started = 0;
+    for sub in ["examples", "quickstart", "validation", "mpi"] {
+        let mut files: Vec<_> = std::fs::read_dir(root.join(sub))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        files.sort();
+        for f in files {
+            let scene = load_scene(&f).unwrap_or_else(|e| panic!("{e}"));
+            let to_place: u64 = scene
+                .insertions
+                .iter()
+                .map(|i| match i.mode {
+                    InsertionMode::Count(n) => n,
+                    _ => 0,
+                })
+                .sum();
+            let sim = polydem::pipeline::Simulation::new(scene)
+                .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            assert_eq!(sim.particles.len() as u64, to_place, "{}", f.display());
+            started += 1;
+        }
+    }
+    assert!(started >= 7, "{started} scenes");
+}
+
 #[test]
 fn unknown_keys_are_errors_naming_the_full_key() {
     let msg = error_naming(&format!("colour = 1\n{BASE}"), "colour");

@@ -3,8 +3,8 @@
 //! (kernels in `cuda/contact.cu` and `cuda/integrate.cu`).
 
 use super::simulation::{
-    CudaError, CudaSimulation, PairArgs, PairOutputs, ParticleView, SPHERE_PAIR_BLOCK, WallState,
-    cfg, cfg_with, ptr, zeros,
+    CudaError, CudaSimulation, DeviceWalls, PairArgs, PairOutputs, ParticleView, SPHERE_PAIR_BLOCK,
+    WallList, WallState, cfg, cfg_with, ptr, zeros,
 };
 use crate::pipeline::SimulationError;
 use crate::scene::WallMotion;
@@ -220,51 +220,30 @@ impl CudaSimulation {
                 .collect();
             st.memcpy_htod(&states, &mut w.states)?;
             let nw = w.n as i32;
-            // Three kernels: the facets within reach per particle (counted, scanned, listed in
-            // the order they are summed), one thread per particle–facet for the prism overlaps
-            // (the costly part: a particle on a finely meshed wall meets tens of facets), and
-            // per particle the sums and the contact law.
-            let mut counts = zeros::<u32>(&st, n)?;
-            // `wall_candidates` counts (null offset and item pointers) or lists.
-            let candidates = |counts: &mut CudaSlice<u32>, offset: u64, items: u64| {
-                // SAFETY: as below; `offset` and `items` are null or point to n + 1 offsets
-                // and 2 × (their total) ids.
-                unsafe {
-                    st.launch_builder(self.k.get("wall_candidates"))
-                        .arg(&ni)
-                        .arg(&view)
-                        .arg(&nw)
-                        .arg(&w.info)
-                        .arg(&w.states)
-                        .arg(&w.triangles)
-                        .arg(&w.cell_start)
-                        .arg(&w.cell_items)
-                        .arg(counts)
-                        .arg(&offset)
-                        .arg(&items)
-                        .launch(cfg(n))
-                }
-            };
-            candidates(&mut counts, 0, 0)?;
-            let mut item_offset = zeros::<u32>(&st, n + 1)?;
-            let n_items = self.scan(&counts, n, &mut item_offset)? as usize;
-            let items = zeros::<u32>(&st, 2 * n_items)?;
-            let mut overlaps = zeros::<f64>(&st, 12 * n_items)?;
-            let n_items_i = n_items as i32;
-            candidates(&mut counts, ptr(&item_offset, &st), ptr(&items, &st))?;
+            if w.list.is_none() {
+                self.build_wall_list(w, &view)?;
+            }
+            let list = w.list.as_mut().expect("built above");
+            // Two kernels per step: one thread per listed particle–facet for the distance test
+            // and the prism overlap (the costly part: a particle on a finely meshed wall meets
+            // tens of facets), then per particle the sums and the contact law.
+            let n_items_i = list.n_items as i32;
+            // SAFETY: the argument lists match `wall_facet_overlaps` and `wall_contacts` of
+            // cuda/contact.cu; the list holds n + 1 offsets, 2 × n_items ids and 12 × n_items
+            // overlaps, the wall outputs n × walls slots (n values for the sums).
             unsafe {
-                if n_items > 0 {
+                if list.n_items > 0 {
                     st.launch_builder(self.k.get("wall_facet_overlaps"))
                         .arg(&n_items_i)
-                        .arg(&items)
+                        .arg(&list.items)
                         .arg(&nw)
                         .arg(&view)
                         .arg(&w.states)
                         .arg(&w.triangles)
                         .arg(&w.prisms)
-                        .arg(&mut overlaps)
+                        .arg(&mut list.overlaps)
                         .arg(&mut self.error)
-                        .launch(cfg(n_items))?;
+                        .launch(cfg(list.n_items))?;
                 }
                 st.launch_builder(self.k.get("wall_contacts"))
                     .arg(&ni)
@@ -272,9 +251,9 @@ impl CudaSimulation {
                     .arg(&nw)
                     .arg(&w.states)
                     .arg(&w.info)
-                    .arg(&item_offset)
-                    .arg(&items)
-                    .arg(&overlaps)
+                    .arg(&list.offset)
+                    .arg(&list.items)
+                    .arg(&list.overlaps)
                     .arg(&self.materials)
                     .arg(&n_mat)
                     .arg(&w.spring_in)
@@ -351,6 +330,107 @@ impl CudaSimulation {
         }
         self.host_current = false;
         Ok(())
+    }
+}
+
+impl CudaSimulation {
+    /// Builds the wall list of `w` ([`WallList`]): the facets within each particle's bounding
+    /// radius plus the skin, counted, scanned and listed by `wall_candidates` at the walls'
+    /// poses now (`w.states`, uploaded for this step).
+    fn build_wall_list(&self, w: &mut DeviceWalls, view: &ParticleView) -> Result<(), CudaError> {
+        let st = self.stream.clone();
+        let n = self.n;
+        let ni = n as i32;
+        let nw = w.n as i32;
+        let skin = self.skin;
+        let mut counts = zeros::<u32>(&st, n)?;
+        // `wall_candidates` counts (null offset and item pointers) or lists.
+        let candidates = |counts: &mut CudaSlice<u32>, offset: u64, items: u64| {
+            // SAFETY: the argument list matches `wall_candidates` of cuda/contact.cu; `offset`
+            // and `items` are null or point to n + 1 offsets and 2 × (their total) ids.
+            unsafe {
+                st.launch_builder(self.k.get("wall_candidates"))
+                    .arg(&ni)
+                    .arg(view)
+                    .arg(&nw)
+                    .arg(&w.info)
+                    .arg(&w.states)
+                    .arg(&w.triangles)
+                    .arg(&w.cell_start)
+                    .arg(&w.cell_items)
+                    .arg(&skin)
+                    .arg(counts)
+                    .arg(&offset)
+                    .arg(&items)
+                    .launch(cfg(n))
+            }
+        };
+        candidates(&mut counts, 0, 0)?;
+        let mut offset = zeros::<u32>(&st, n + 1)?;
+        let n_items = self.scan(&counts, n, &mut offset)? as usize;
+        let items = zeros::<u32>(&st, 2 * n_items)?;
+        candidates(&mut counts, ptr(&offset, &st), ptr(&items, &st))?;
+        let t = self.host.time;
+        w.list = Some(WallList {
+            offset,
+            items,
+            n_items,
+            overlaps: zeros::<f64>(&st, 12 * n_items)?,
+            reference: st.clone_dtod(&self.p.position)?,
+            poses: self
+                .host
+                .scene
+                .walls
+                .iter()
+                .map(|wall| wall.motion.transform(t))
+                .collect(),
+        });
+        w.list_builds += 1;
+        Ok(())
+    }
+
+    /// Before the drift to time `t`: the wall list's reference positions and how far a
+    /// particle may move from them, half the skin less the most any point near the domain
+    /// moved in any wall's frame since the list's build. In a wall's frame a particle at `x`
+    /// sits at `P⁻¹ x`, so between poses `P₀` and `P` it moved by at most |x − x₀| +
+    /// |P⁻¹ x − P₀⁻¹ x|; the second term is convex in `x`, so its largest value over the domain
+    /// box (grown by the cutoff) is at a corner. With no list, or walls that moved half the
+    /// skin, the list is due and nothing is checked (a null reference).
+    pub(super) fn wall_check(&mut self, t: f64) -> (u64, f64) {
+        let half_skin = 0.5 * self.skin;
+        let g = self.grid;
+        let grow = 2.0 * self.host.scene.max_bounding_radius() + self.skin;
+        let Some(w) = &mut self.walls else {
+            return (0, 0.0);
+        };
+        let Some(list) = &w.list else {
+            return (0, 0.0);
+        };
+        let mut moved = 0.0f64;
+        for (wall, pose) in self.host.scene.walls.iter().zip(&list.poses) {
+            let now = wall.motion.transform(t);
+            if now == *pose {
+                continue;
+            }
+            for c in 0..8 {
+                let corner = nalgebra::Point3::from(Vector3::from_fn(|k, _| {
+                    if c >> k & 1 == 0 {
+                        g.min[k] - grow
+                    } else {
+                        g.max[k] + grow
+                    }
+                }));
+                let d =
+                    now.inverse_transform_point(&corner) - pose.inverse_transform_point(&corner);
+                moved = moved.max(d.norm());
+            }
+        }
+        let reach = half_skin - moved;
+        if reach <= 0.0 && moved > 0.0 {
+            w.list = None;
+            return (0, 0.0);
+        }
+        (ptr(&list.reference, &self.stream), reach)
     }
 }
 

@@ -122,15 +122,16 @@ impl KernelConfig {
             format!("-DPD_MATERIALS={}", self.materials),
             format!("-DPD_GHOSTS={}", flag(self.ghosts)),
         ];
-        // A particle's wall-candidate buffer (default 512 facet ids; past it the facet grid is
-        // walked in id order instead): POLYDEM_MAX_WALL_CANDIDATES sets it, so that tests can
-        // drive every particle down the fallback walk.
-        if let Some(n) = std::env::var("POLYDEM_MAX_WALL_CANDIDATES")
+        // Most grid cells merged per particle and wall when the wall list is built (default
+        // 27; a box spanning more walks the facet grid in id order instead):
+        // POLYDEM_WALL_MERGE_CELLS sets it (0–64), so that tests can drive every particle down
+        // the walk.
+        if let Some(n) = std::env::var("POLYDEM_WALL_MERGE_CELLS")
             .ok()
             .and_then(|v| v.parse::<u32>().ok())
-            .filter(|&n| n >= 1)
+            .filter(|&n| n <= 64)
         {
-            d.push(format!("-DPD_MAX_WALL_CANDIDATES={n}"));
+            d.push(format!("-DPD_WALL_MERGE_CELLS={n}"));
         }
         // Register cap of the lean pair kernels: DEFAULT_PAIR_MAX_REGISTERS (for spheres
         // DEFAULT_SPHERE_PAIR_MAX_REGISTERS) unless POLYDEM_PAIR_MAX_REGISTERS gives another

@@ -178,8 +178,12 @@ impl CudaSimulation {
                 .arg(&self.p.id)
                 .launch(cfg(cells))?;
         }
-        // Reorder every particle array (and the wall springs) by `order`.
+        // Reorder every particle array (and the wall springs) by `order`; the wall list names
+        // particles by index, so it is built again too.
         self.gather_all(&order)?;
+        if let Some(w) = &mut self.walls {
+            w.list = None;
+        }
         // Pairs: count, exclusive prefix sum, fill. A decomposed run lists the pairs of two
         // owned particles first and those with a ghost after them, so the first part can be
         // evaluated while the halo is in flight.
@@ -271,6 +275,7 @@ impl CudaSimulation {
         });
         self.reference = st.clone_dtod(&self.p.position)?;
         self.rebuild = false;
+        self.list_builds += 1;
         if self.host.parallel.is_some() {
             self.setup_halo(&order)?;
         }

@@ -3,7 +3,7 @@
 //! the order of DESIGN.md §1 (the GPU twin of [`Simulation`], as HOOMD-blue pairs a GPU class
 //! with each expensive CPU class). The host copy in [`CudaSimulation::host`] is refreshed only
 //! when it is read (output, checkpoint) or changed (insertion, removal), so an ordinary step
-//! copies nothing but a 16-byte status word back.
+//! copies nothing back but its status flags and error word (28 bytes).
 
 use super::kernels::{KernelConfig, Precision, compile};
 #[cfg(doc)]
@@ -241,6 +241,31 @@ pub(super) struct DeviceWalls {
     pub(super) energy: CudaSlice<f64>,
     pub(super) per_wall_force: CudaSlice<f64>,
     pub(super) contact: CudaSlice<u32>,
+    /// The particles' candidate facets, built when due ([`WallList`]); `None` when due.
+    pub(super) list: Option<WallList>,
+    /// Wall lists built so far.
+    pub(super) list_builds: u64,
+}
+
+/// The wall list: per particle and wall, the facets within its bounding radius plus the skin
+/// when it was built, in the order of their sums (`wall_candidates` of cuda/contact.cu), with
+/// room for their overlaps. It stays valid while every particle is within half the skin of
+/// where it was in every wall's frame: its own motion (`kick_drift`'s check against
+/// `reference`) plus the walls' motion since `poses` (bounded on the host,
+/// [`CudaSimulation::wall_check`]). The CPU queries the facet grid every step instead; both
+/// evaluate the same facets in the same order.
+pub(super) struct WallList {
+    /// Per particle, its items `offset[i]..offset[i + 1]`.
+    pub(super) offset: CudaSlice<u32>,
+    /// (particle · walls + wall, facet) per item, in summation order.
+    pub(super) items: CudaSlice<u32>,
+    pub(super) n_items: usize,
+    /// Twelve values per item, written each step by `wall_facet_overlaps`.
+    pub(super) overlaps: CudaSlice<f64>,
+    /// The particles' positions at the build.
+    pub(super) reference: CudaSlice<f64>,
+    /// The walls' poses at the build.
+    pub(super) poses: Vec<nalgebra::Isometry3<f64>>,
 }
 
 /// The contact history handed to the next list build: for each particle in the numbering
@@ -276,6 +301,8 @@ pub struct CudaSimulation {
     pub(super) pending_history: Option<HistorySource>,
     pub(super) host_current: bool,
     pub(super) rebuild: bool,
+    /// Pair lists built so far.
+    pub(super) list_builds: u64,
     /// A decomposed run's device halo ([`super::halo`]).
     pub(super) halo: Option<super::halo::DeviceHalo>,
     /// The ghosts await this step's halo refresh (set by the exchange, done by the forces).
@@ -386,7 +413,7 @@ impl CudaSimulation {
         let mut sim = CudaSimulation {
             device,
             precision,
-            flags: stream.alloc_zeros::<u32>(4)?,
+            flags: stream.alloc_zeros::<u32>(5)?,
             error: stream.alloc_zeros::<u32>(2)?,
             reference: stream.alloc_zeros::<f64>(1)?,
             _ctx: ctx,
@@ -402,6 +429,7 @@ impl CudaSimulation {
             pending_history: None,
             host_current: true,
             rebuild: true,
+            list_builds: 0,
             halo: None,
             halo_due: false,
             stream,
@@ -489,6 +517,9 @@ impl CudaSimulation {
                 + b(&w.energy)
                 + b(&w.per_wall_force)
                 + b(&w.contact);
+            if let Some(l) = &w.list {
+                total += b(&l.offset) + b(&l.items) + b(&l.overlaps) + b(&l.reference);
+            }
         }
         total
     }
@@ -496,6 +527,17 @@ impl CudaSimulation {
     /// Pairs in the current candidate list.
     pub fn candidate_pairs(&self) -> usize {
         self.pairs.as_ref().map_or(0, |p| p.n)
+    }
+
+    /// Pair lists built so far (the first one included).
+    pub fn pair_list_builds(&self) -> u64 {
+        self.list_builds
+    }
+
+    /// Wall lists built so far (at each pair-list build, and when a particle or a wall moved
+    /// half the skin since the last one); 0 without walls.
+    pub fn wall_list_builds(&self) -> u64 {
+        self.walls.as_ref().map_or(0, |w| w.list_builds)
     }
 }
 
@@ -545,14 +587,20 @@ impl CudaSimulation {
         // The checks need the list's reference positions; before the first build there are none.
         let checks = i32::from(self.n > 0 && self.pairs.is_some());
         let half_skin = 0.5 * self.skin;
-        let mut flags = [0u32, 0, 0, u32::MAX];
+        let (wall_reference, wall_half_reach) = if checks != 0 {
+            self.wall_check(self.host.time + dt)
+        } else {
+            (0u64, 0.0)
+        };
+        let mut flags = [0u32, 0, 0, u32::MAX, 0];
         if checks != 0 {
             self.stream.memcpy_htod(&flags, &mut self.flags)?;
         }
         {
             let p = &mut self.p;
             // SAFETY: `kick_drift` of cuda/integrate.cu; every state buffer holds 3n (4n)
-            // values, `reference` 3n since the last list build (read only when `checks`).
+            // values, `reference` 3n since the last list build (read only when `checks`), and
+            // `wall_reference` is null or the wall list's 3n positions; `flags` holds five.
             unsafe {
                 self.stream
                     .launch_builder(self.k.get("kick_drift"))
@@ -575,6 +623,8 @@ impl CudaSimulation {
                     .arg(&checks)
                     .arg(&self.reference)
                     .arg(&half_skin)
+                    .arg(&wall_reference)
+                    .arg(&wall_half_reach)
                     .arg(&mut self.flags)
                     .launch(cfg(self.n))?;
             }
@@ -628,6 +678,11 @@ impl CudaSimulation {
             if flags[0] != 0 {
                 self.rebuild = true;
             }
+        }
+        if flags[4] != 0
+            && let Some(w) = &mut self.walls
+        {
+            w.list = None;
         }
         self.host.timers.exchange += t0.elapsed().as_secs_f64();
         // The contacts, then the reduction with the second half kick.

@@ -135,6 +135,8 @@ impl CudaSimulation {
             energy: st.alloc_zeros::<f64>(1)?,
             per_wall_force: st.alloc_zeros::<f64>(1)?,
             contact: st.alloc_zeros::<u32>(1)?,
+            list: None,
+            list_builds: 0,
         });
         Ok(())
     }
@@ -256,6 +258,7 @@ impl CudaSimulation {
             w.energy = st.alloc_zeros::<f64>(n.max(1))?;
             w.per_wall_force = st.alloc_zeros::<f64>(3 * nw)?;
             w.contact = st.alloc_zeros::<u32>(nw)?;
+            w.list = None;
         }
         self.pairs = None;
         self.halo = None;
