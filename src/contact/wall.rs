@@ -16,7 +16,7 @@ use crate::geometry::clip::{facet_prism, prism_overlap};
 use crate::geometry::overlap::{OverlapError, OverlapWorkspace};
 use crate::geometry::sphere::sphere_facet;
 use crate::geometry::{Overlap, Plane, PosedPolytope};
-use nalgebra::Vector3;
+use nalgebra::{Isometry3, Point3, Vector3};
 use std::collections::HashMap;
 
 /// A vertex's coordinates as bits, to find shared edges exactly.
@@ -214,6 +214,31 @@ pub struct FacetGridParts<'a> {
     pub items: &'a [u32],
 }
 
+/// The most any point of the box `lo..hi` (world frame) moved in a wall's own frame between the
+/// wall's poses `from` and `to`: max over the box of |to⁻¹ x − from⁻¹ x|. The displacement is
+/// an affine function of x and its norm is convex, so the maximum is at one of the box's eight
+/// corners. A list of facets near each particle, built with a skin at pose `from`, stays
+/// complete while a particle's own motion plus this stays within the skin's margin (the GPU's
+/// wall list).
+pub fn frame_drift(
+    from: &Isometry3<f64>,
+    to: &Isometry3<f64>,
+    lo: &Vector3<f64>,
+    hi: &Vector3<f64>,
+) -> f64 {
+    if from == to {
+        return 0.0;
+    }
+    (0..8)
+        .map(|c: usize| {
+            let corner = Point3::from(Vector3::from_fn(|k, _| {
+                if c >> k & 1 == 0 { lo[k] } else { hi[k] }
+            }));
+            (to.inverse_transform_point(&corner) - from.inverse_transform_point(&corner)).norm()
+        })
+        .fold(0.0, f64::max)
+}
+
 /// Distance from `x` to triangle `t` (Ericson, "Real-Time Collision Detection" §5.1.5).
 pub fn point_triangle_distance(x: &Vector3<f64>, t: &[Vector3<f64>; 3]) -> f64 {
     let (a, b, c) = (t[0], t[1], t[2]);
@@ -375,7 +400,45 @@ impl FacetGrid {
 mod tests {
     use super::*;
     use crate::shape::Generator;
-    use nalgebra::{Isometry3, UnitQuaternion};
+    use nalgebra::UnitQuaternion;
+
+    /// `frame_drift` bounds the displacement in the wall's frame of every point of the box
+    /// (10 000 random points per pose pair, random rotations and translations) and is reached
+    /// at a corner (its value is a corner's displacement, so no smaller bound holds).
+    #[test]
+    fn frame_drift_bounds_every_point_of_the_box() {
+        let mut rng = crate::rng::Rng::new(5);
+        let (lo, hi) = (Vector3::new(-0.2, -0.1, 0.0), Vector3::new(0.3, 0.1, 0.4));
+        let pose = |rng: &mut crate::rng::Rng, size: f64| {
+            let axis = nalgebra::Unit::new_normalize(Vector3::from_fn(|_, _| rng.uniform() - 0.5));
+            Isometry3::from_parts(
+                Vector3::from_fn(|_, _| size * (rng.uniform() - 0.5)).into(),
+                UnitQuaternion::from_axis_angle(&axis, size * (rng.uniform() - 0.5)),
+            )
+        };
+        assert_eq!(
+            frame_drift(&pose(&mut rng, 0.0), &pose(&mut rng, 0.0), &lo, &hi),
+            0.0
+        );
+        for size in [1e-4, 1e-2, 1.0] {
+            for _ in 0..20 {
+                let (a, b) = (pose(&mut rng, size), pose(&mut rng, size));
+                let bound = frame_drift(&a, &b, &lo, &hi);
+                assert!(bound > 0.0);
+                let mut worst = 0.0f64;
+                for _ in 0..10_000 {
+                    let x = Point3::from(Vector3::from_fn(|k, _| {
+                        lo[k] + (hi[k] - lo[k]) * rng.uniform()
+                    }));
+                    let d = (b.inverse_transform_point(&x) - a.inverse_transform_point(&x)).norm();
+                    worst = worst.max(d);
+                }
+                assert!(worst <= bound * (1.0 + 1e-12), "{worst} > {bound}");
+                // Random points come within a few per cent of the corners' value.
+                assert!(worst > 0.8 * bound, "{worst} vs {bound}");
+            }
+        }
+    }
 
     /// The facets the grid finds near a point are exactly those within reach (brute force over
     /// every facet), on a cone of long slanted slivers (a hopper) where the triangle–cell test

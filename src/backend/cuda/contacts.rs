@@ -6,6 +6,7 @@ use super::simulation::{
     CudaError, CudaSimulation, DeviceWalls, PairArgs, PairOutputs, ParticleView, SPHERE_PAIR_BLOCK,
     WallList, WallState, cfg, cfg_with, ptr, zeros,
 };
+use crate::contact::wall::frame_drift;
 use crate::pipeline::SimulationError;
 use crate::scene::WallMotion;
 use cudarc::driver::{CudaSlice, PushKernelArg};
@@ -393,9 +394,9 @@ impl CudaSimulation {
     /// particle may move from them, half the skin less the most any point near the domain
     /// moved in any wall's frame since the list's build. In a wall's frame a particle at `x`
     /// sits at `P⁻¹ x`, so between poses `P₀` and `P` it moved by at most |x − x₀| +
-    /// |P⁻¹ x − P₀⁻¹ x|; the second term is convex in `x`, so its largest value over the domain
-    /// box (grown by the cutoff) is at a corner. With no list, or walls that moved half the
-    /// skin, the list is due and nothing is checked (a null reference).
+    /// |P⁻¹ x − P₀⁻¹ x|, the second term bounded over the domain box grown by the cutoff by
+    /// [`frame_drift`]. With no list, or walls that moved half the skin, the list is due and
+    /// nothing is checked (a null reference).
     pub(super) fn wall_check(&mut self, t: f64) -> (u64, f64) {
         let half_skin = 0.5 * self.skin;
         let g = self.grid;
@@ -406,25 +407,16 @@ impl CudaSimulation {
         let Some(list) = &w.list else {
             return (0, 0.0);
         };
-        let mut moved = 0.0f64;
-        for (wall, pose) in self.host.scene.walls.iter().zip(&list.poses) {
-            let now = wall.motion.transform(t);
-            if now == *pose {
-                continue;
-            }
-            for c in 0..8 {
-                let corner = nalgebra::Point3::from(Vector3::from_fn(|k, _| {
-                    if c >> k & 1 == 0 {
-                        g.min[k] - grow
-                    } else {
-                        g.max[k] + grow
-                    }
-                }));
-                let d =
-                    now.inverse_transform_point(&corner) - pose.inverse_transform_point(&corner);
-                moved = moved.max(d.norm());
-            }
-        }
+        let lo = Vector3::from(g.min).add_scalar(-grow);
+        let hi = Vector3::from(g.max).add_scalar(grow);
+        let moved = self
+            .host
+            .scene
+            .walls
+            .iter()
+            .zip(&list.poses)
+            .map(|(wall, pose)| frame_drift(pose, &wall.motion.transform(t), &lo, &hi))
+            .fold(0.0, f64::max);
         let reach = half_skin - moved;
         if reach <= 0.0 && moved > 0.0 {
             w.list = None;
