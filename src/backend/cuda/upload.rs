@@ -120,6 +120,8 @@ impl CudaSimulation {
             }
         };
         one(&mut items);
+        // A decomposed run uploads its walls again at each rebuild: the count goes on.
+        let list_builds = self.walls.as_ref().map_or(0, |w| w.list_builds);
         self.walls = Some(DeviceWalls {
             n: n_walls,
             info: st.clone_htod(&info)?,
@@ -136,7 +138,7 @@ impl CudaSimulation {
             per_wall_force: st.alloc_zeros::<f64>(1)?,
             contact: st.alloc_zeros::<u32>(1)?,
             list: None,
-            list_builds: 0,
+            list_builds,
         });
         Ok(())
     }
