@@ -126,12 +126,13 @@ impl KernelConfig {
         // 27; a box spanning more walks the facet grid in id order instead):
         // POLYDEM_WALL_MERGE_CELLS sets it (0–64), so that tests can drive every particle down
         // the walk.
-        if let Some(n) = std::env::var("POLYDEM_WALL_MERGE_CELLS")
-            .ok()
-            .and_then(|v| v.parse::<u32>().ok())
-            .filter(|&n| n <= 64)
-        {
-            d.push(format!("-DPD_WALL_MERGE_CELLS={n}"));
+        if let Ok(v) = std::env::var("POLYDEM_WALL_MERGE_CELLS") {
+            match v.parse::<u32>().ok().filter(|&n| n <= 64) {
+                Some(n) => d.push(format!("-DPD_WALL_MERGE_CELLS={n}")),
+                None => eprintln!(
+                    "warning: POLYDEM_WALL_MERGE_CELLS={v:?} is not 0-64; the default (27) is used"
+                ),
+            }
         }
         // Register cap of the lean pair kernels: DEFAULT_PAIR_MAX_REGISTERS (for spheres
         // DEFAULT_SPHERE_PAIR_MAX_REGISTERS) unless POLYDEM_PAIR_MAX_REGISTERS gives another
