@@ -86,6 +86,21 @@ fn simulation() -> Simulation {
     Simulation::new(scene()).unwrap()
 }
 
+/// A simulation of `scene` restored from the state of `s` (particles, contact history,
+/// inserter, time), as a checkpoint restores it.
+fn restored(scene: polydem::scene::Scene, s: &Simulation) -> Simulation {
+    Simulation::restore(
+        scene,
+        s.particles.clone(),
+        s.history.clone(),
+        s.inserter.clone(),
+        s.time,
+        s.step,
+        s.next_id,
+    )
+    .unwrap()
+}
+
 /// Largest differences, by global id, of position (relative to the particle size), velocity
 /// (relative to the largest speed) and force (relative to the largest force).
 fn compare(cpu: &Simulation, gpu: &Simulation) -> (f64, f64, f64) {
@@ -129,18 +144,7 @@ fn three_steps_from_a_cpu_state_match_contact_by_contact() {
         "a dense state: {} contacts",
         start.history.len()
     );
-    let copy = |s: &Simulation| {
-        Simulation::restore(
-            scene(),
-            s.particles.clone(),
-            s.history.clone(),
-            s.inserter.clone(),
-            s.time,
-            s.step,
-            s.next_id,
-        )
-        .unwrap()
-    };
+    let copy = |s: &Simulation| restored(scene(), s);
     for precision in [Precision::Double, Precision::Mixed] {
         // Both start from a restored copy, so both build their list at the first step.
         let mut cpu = copy(&start);
@@ -384,18 +388,7 @@ fn moving_walls_on_the_gpu_match_the_cpu() {
         for _ in 0..6000 {
             start.step().unwrap();
         }
-        let copy = |s: &Simulation| {
-            Simulation::restore(
-                scene(),
-                s.particles.clone(),
-                s.history.clone(),
-                s.inserter.clone(),
-                s.time,
-                s.step,
-                s.next_id,
-            )
-            .unwrap()
-        };
+        let copy = |s: &Simulation| restored(scene(), s);
         let mut cpu = copy(&start);
         let mut gpu = CudaSimulation::new(copy(&start), 0, Precision::Double).unwrap();
         let mut worst = (0.0f64, 0.0f64, 0.0f64);
