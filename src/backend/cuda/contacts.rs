@@ -192,83 +192,32 @@ impl CudaSimulation {
             let pairs = self.pairs.as_mut().expect("built above");
             st.memset_zeros(&mut pairs.deferred_count)?;
         }
+        // The walls' facet overlaps read only the particles' poses, final for this step once
+        // the ghosts' have arrived: they run on the wall stream alongside the pairs.
+        let mut wall_host = 0.0;
+        if !overlap {
+            wall_host += self.start_wall_overlaps(&view)?;
+        }
         if overlap {
             self.start_halo()?;
         }
         self.launch_pair_contacts(0, n_interior, &args)?;
         if overlap {
             self.finish_halo()?;
+            wall_host += self.start_wall_overlaps(&view)?;
             self.launch_pair_contacts(n_interior, np, &args)?;
         }
         self.launch_deferred_pairs(&args)?;
         // Kernels run asynchronously: wait for the stage so that its timer measures it (a few
         // microseconds per stage, negligible against the step).
         st.synchronize()?;
-        self.host.timers.pairs += t0.elapsed().as_secs_f64();
+        self.host.timers.pairs += t0.elapsed().as_secs_f64() - wall_host;
+        self.host.timers.walls += wall_host;
         if super::kernels::phase_clocks() {
             self.report_phase_clocks()?;
         }
         let t0 = Instant::now();
-        // Taken out while the stage runs, so that the scan helper can borrow `self`.
-        let mut walls = self.walls.take();
-        if let Some(w) = &mut walls {
-            let states: Vec<WallState> = self
-                .host
-                .scene
-                .walls
-                .iter()
-                .map(|wall| wall_state(&wall.motion, self.host.time))
-                .collect();
-            st.memcpy_htod(&states, &mut w.states)?;
-            let nw = w.n as i32;
-            if w.list.is_none() {
-                self.build_wall_list(w, &view)?;
-            }
-            let list = w.list.as_mut().expect("built above");
-            // Two kernels per step: one thread per listed particle–facet for the distance test
-            // and the prism overlap (the costly part: a particle on a finely meshed wall meets
-            // tens of facets), then per particle the sums and the contact law.
-            let n_items_i = list.n_items as i32;
-            // SAFETY: the argument lists match `wall_facet_overlaps` and `wall_contacts` of
-            // cuda/contact.cu; the list holds n + 1 offsets, 2 × n_items ids and 12 × n_items
-            // overlaps, the wall outputs n × walls slots (n values for the sums).
-            unsafe {
-                if list.n_items > 0 {
-                    st.launch_builder(self.k.get("wall_facet_overlaps"))
-                        .arg(&n_items_i)
-                        .arg(&list.items)
-                        .arg(&nw)
-                        .arg(&view)
-                        .arg(&w.states)
-                        .arg(&w.triangles)
-                        .arg(&w.prisms)
-                        .arg(&mut list.overlaps)
-                        .arg(&mut self.error)
-                        .launch(cfg(list.n_items))?;
-                }
-                st.launch_builder(self.k.get("wall_contacts"))
-                    .arg(&ni)
-                    .arg(&view)
-                    .arg(&nw)
-                    .arg(&w.states)
-                    .arg(&w.info)
-                    .arg(&list.offset)
-                    .arg(&list.items)
-                    .arg(&list.overlaps)
-                    .arg(&self.materials)
-                    .arg(&n_mat)
-                    .arg(&w.spring_in)
-                    .arg(&mut w.spring_out)
-                    .arg(&mut w.force)
-                    .arg(&mut w.torque)
-                    .arg(&mut w.energy)
-                    .arg(&mut w.per_wall_force)
-                    .arg(&mut w.contact)
-                    .arg(&dt)
-                    .launch(cfg(n))?;
-            }
-        }
-        self.walls = walls;
+        self.finish_walls(&view, n_mat, dt)?;
         st.synchronize()?;
         self.host.timers.walls += t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
@@ -335,6 +284,102 @@ impl CudaSimulation {
 }
 
 impl CudaSimulation {
+    /// Stage 6, first part: the walls' poses at the current time uploaded, the wall list built
+    /// when due, then `wall_facet_overlaps` queued on the wall stream after everything queued
+    /// so far on the main one (the particles' poses of this step): one thread per listed
+    /// particle–facet for the distance test and the prism overlap. A dense bed against a wall
+    /// has too few items to fill the GPU with that serial work per thread, so they share it
+    /// with the pair kernels rather than run after them. Returns the host seconds spent (a list
+    /// build waits for its count).
+    fn start_wall_overlaps(&mut self, view: &ParticleView) -> Result<f64, CudaError> {
+        let t0 = Instant::now();
+        // Taken out while the stage runs, so that the scan helper can borrow `self`.
+        let Some(mut w) = self.walls.take() else {
+            return Ok(0.0);
+        };
+        let st = self.stream.clone();
+        let states: Vec<WallState> = self
+            .host
+            .scene
+            .walls
+            .iter()
+            .map(|wall| wall_state(&wall.motion, self.host.time))
+            .collect();
+        st.memcpy_htod(&states, &mut w.states)?;
+        if w.list.is_none() {
+            self.build_wall_list(&mut w, view)?;
+        }
+        let list = w.list.as_mut().expect("built above");
+        let nw = w.n as i32;
+        let n_items_i = list.n_items as i32;
+        let side = &self.wall_stream;
+        side.poses_ready.record(&st)?;
+        side.stream.wait(&side.poses_ready)?;
+        if list.n_items > 0 {
+            // SAFETY: the argument list matches `wall_facet_overlaps` of cuda/contact.cu; the
+            // list holds 2 × n_items ids and 12 × n_items overlaps. The wall stream runs it after
+            // the main stream's work so far (the poses, the walls' states, the list); the main
+            // stream waits for it before reading the overlaps (`finish_walls`), and nothing
+            // else writes what it reads meanwhile. `error` is shared with the pair kernels,
+            // which report into it by the same atomic compare-and-swap.
+            unsafe {
+                side.stream
+                    .launch_builder(self.k.get("wall_facet_overlaps"))
+                    .arg(&n_items_i)
+                    .arg(&list.items)
+                    .arg(&nw)
+                    .arg(view)
+                    .arg(&w.states)
+                    .arg(&w.triangles)
+                    .arg(&w.prisms)
+                    .arg(&mut list.overlaps)
+                    .arg(&mut self.error)
+                    .launch(cfg(list.n_items))?;
+            }
+        }
+        side.overlaps_done.record(&side.stream)?;
+        self.walls = Some(w);
+        Ok(t0.elapsed().as_secs_f64())
+    }
+
+    /// Stage 6, second part, on the main stream once the facet overlaps are done: per particle
+    /// the sums and the contact law (`wall_contacts`).
+    fn finish_walls(&mut self, view: &ParticleView, n_mat: i32, dt: f64) -> Result<(), CudaError> {
+        let Some(w) = self.walls.as_mut() else {
+            return Ok(());
+        };
+        let st = &self.stream;
+        st.wait(&self.wall_stream.overlaps_done)?;
+        let list = w.list.as_ref().expect("built by start_wall_overlaps");
+        let (ni, nw) = (self.n as i32, w.n as i32);
+        // SAFETY: the argument list matches `wall_contacts` of cuda/contact.cu; the list holds
+        // n + 1 offsets, 2 × n_items ids and 12 × n_items overlaps, the wall outputs n × walls
+        // slots (n values for the sums).
+        unsafe {
+            st.launch_builder(self.k.get("wall_contacts"))
+                .arg(&ni)
+                .arg(view)
+                .arg(&nw)
+                .arg(&w.states)
+                .arg(&w.info)
+                .arg(&list.offset)
+                .arg(&list.items)
+                .arg(&list.overlaps)
+                .arg(&self.materials)
+                .arg(&n_mat)
+                .arg(&w.spring_in)
+                .arg(&mut w.spring_out)
+                .arg(&mut w.force)
+                .arg(&mut w.torque)
+                .arg(&mut w.energy)
+                .arg(&mut w.per_wall_force)
+                .arg(&mut w.contact)
+                .arg(&dt)
+                .launch(cfg(self.n))?;
+        }
+        Ok(())
+    }
+
     /// Builds the wall list of `w` ([`WallList`]): the facets within each particle's bounding
     /// radius plus the skin, counted, scanned and listed by `wall_candidates` at the walls'
     /// poses now (`w.states`, uploaded for this step).

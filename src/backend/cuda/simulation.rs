@@ -14,8 +14,8 @@ use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
 use crate::neighbor::Bounds;
 use crate::pipeline::{Simulation, SimulationError};
 use cudarc::driver::{
-    CudaContext, CudaFunction, CudaModule, CudaSlice, CudaStream, DeviceRepr, LaunchConfig,
-    PushKernelArg, ValidAsZeroBits,
+    CudaContext, CudaEvent, CudaFunction, CudaModule, CudaSlice, CudaStream, DeviceRepr,
+    LaunchConfig, PushKernelArg, ValidAsZeroBits,
 };
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -247,6 +247,17 @@ pub(super) struct DeviceWalls {
     pub(super) list_builds: u64,
 }
 
+/// The stream on which the walls' facet overlaps run alongside the pair kernels of the main
+/// stream, with the two events that order it: after the main stream's poses, before its wall
+/// sums ([`CudaSimulation::forces`]).
+pub(super) struct WallStream {
+    pub(super) stream: Arc<CudaStream>,
+    /// Recorded on the main stream once the walls' states and the list are queued.
+    pub(super) poses_ready: CudaEvent,
+    /// Recorded on the wall stream after the facet overlaps.
+    pub(super) overlaps_done: CudaEvent,
+}
+
 /// The wall list: per particle and wall, the facets within its bounding radius plus the skin
 /// when it was built, in the order of their sums (`wall_candidates` of cuda/contact.cu), with
 /// room for their overlaps. It stays valid while every particle is within half the skin of
@@ -286,6 +297,7 @@ pub struct CudaSimulation {
     pub precision: Precision,
     pub(super) _ctx: Arc<CudaContext>,
     pub(super) stream: Arc<CudaStream>,
+    pub(super) wall_stream: WallStream,
     pub(super) k: Kernels,
     pub(super) config: KernelConfig,
     pub(super) grid: GridParams,
@@ -314,7 +326,18 @@ impl CudaSimulation {
     /// `ordinal`, compiling the kernels for it with the scene's configuration.
     pub fn new(host: Simulation, ordinal: usize, precision: Precision) -> Result<Self, CudaError> {
         let ctx = CudaContext::new(ordinal)?;
+        // SAFETY: nothing has been allocated yet. Every buffer is used on the main stream but
+        // the wall list's, which the wall stream also uses between the two events of
+        // `WallStream`, which order it after the list's allocation and writes and before the
+        // main stream's next use or free (`CudaSimulation::forces`). Without event tracking a
+        // second stream adds no event per buffer use to every launch.
+        unsafe { ctx.disable_event_tracking() };
         let stream = ctx.default_stream();
+        let wall_stream = WallStream {
+            stream: ctx.new_stream()?,
+            poses_ready: ctx.new_event(None)?,
+            overlaps_done: ctx.new_event(None)?,
+        };
         let (major, minor) = ctx.compute_capability()?;
         let arch = (major * 10 + minor) as u32;
         let mut config = KernelConfig::for_scene(&host.scene, precision);
@@ -433,6 +456,7 @@ impl CudaSimulation {
             halo: None,
             halo_due: false,
             stream,
+            wall_stream,
             host,
         };
         sim.upload_templates()?;
