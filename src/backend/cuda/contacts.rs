@@ -193,7 +193,9 @@ impl CudaSimulation {
             st.memset_zeros(&mut pairs.deferred_count)?;
         }
         // The walls' facet overlaps read only the particles' poses, final for this step once
-        // the ghosts' have arrived: they run on the wall stream alongside the pairs.
+        // the ghosts' have arrived: they run on the wall stream alongside the pairs. In a
+        // decomposed run they are queued behind the interior pairs (the ghosts arrive while
+        // those run), so they overlap only the ghosts' and the deferred pairs.
         let mut wall_host = 0.0;
         if !overlap {
             wall_host += self.start_wall_overlaps(&view)?;

@@ -36,8 +36,8 @@ pub(super) struct DeviceHalo {
     send_host: PinnedHostSlice<f64>,
     recv_host: PinnedHostSlice<f64>,
     /// Recorded after the packed copy to `send_host`, and after the upload from `recv_host`:
-    /// with one stream cudarc records no events of its own on pinned buffers, so the host
-    /// waits on these before touching them.
+    /// cudarc's event tracking is off (`CudaSimulation::new`), so it records no events of its
+    /// own on pinned buffers, and the host waits on these before touching them.
     sent: Option<CudaEvent>,
     received: Option<CudaEvent>,
 }
