@@ -103,7 +103,7 @@ PD_DEVICE void clear_pair(const PairArgs& q, size_t k) {
     for (int c = 0; c < 9; ++c) q.out.forces[9 * k + c] = 0.0;
     q.out.energy[k] = 0.0;
     q.out.contact[k] = 0u;
-    store3(q.spring_out, k, zero3<double>());
+    store_history(q.spring_out, k, no_history());
 }
 
 // Stage 3 for pair k of the list (Simulation::pair_contacts): the centroids
@@ -149,6 +149,7 @@ PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const
     params.tangential_stiffness = p.ct[a] + p.ct[b];
     params.restitution = pm.restitution;
     params.friction = pm.friction;
+    params.damping = pm.damping;
     ContactKinematics kin;
     kin.x_a = xa;
     kin.x_b = xb;
@@ -161,28 +162,28 @@ PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const
     kin.effective_mass = 1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b]);
 #else
     Quat<double> qa = load_quat(p.orientation, a), qb = load_quat(p.orientation, b);
+    V3<double> ia = load3(p.inertia, a), ib = load3(p.inertia, b);
     double area = norm(ov.dv_dxb);
     if (area > 0.0) {
         V3<double> nrm = (-ov.dv_dxb) / area;
         double inverse = 0.0;
-        inverse += inverse_mass_term(p.mass[a], load3(p.inertia, a), qa, xa, ov.centroid, nrm);
-        inverse += inverse_mass_term(p.mass[b], load3(p.inertia, b), qb, xb, ov.centroid, nrm);
+        inverse += inverse_mass_term(p.mass[a], ia, qa, xa, ov.centroid, nrm);
+        inverse += inverse_mass_term(p.mass[b], ib, qb, xb, ov.centroid, nrm);
         kin.effective_mass = 1.0 / inverse;
     } else {
         kin.effective_mass = min_(p.mass[a], p.mass[b]);
     }
 #endif
-    V3<double> spring = zero3<double>();
-#if PD_FRICTION
-    spring = load3(q.spring_in, k);
-#endif
-    ContactForces f = contact_forces(params, pm, ov, kin, &spring, q.dt);
+    // The whole history is read with or without friction: the damping's reference speed is
+    // part of it.
+    ContactHistoryRecord history = load_history(q.spring_in, k);
+    ContactForces f = contact_forces(params, pm, ov, kin, &history, q.dt);
     store3(out.forces, 3 * k, f.force_b);
     store3(out.forces, 3 * k + 1, f.torque_a);
     store3(out.forces, 3 * k + 2, f.torque_b);
     out.energy[k] = f.elastic_energy;
     out.contact[k] = 1u;
-    store3(q.spring_out, k, spring);
+    store_history(q.spring_out, k, history);
 }
 
 #if !PD_SPHERES
@@ -755,7 +756,7 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
     unsigned int m = item_offset[i], m_end = item_offset[i + 1];
     for (int k = 0; k < n_walls; ++k) {
         size_t slot = i * (size_t)n_walls + (size_t)k;
-        store3(spring_out, slot, zero3<double>());
+        store_history(spring_out, slot, no_history());
         store3(per_wall_force, slot, zero3<double>());
         wall_contact[slot] = 0u;
         const WallInfo& w = walls[k];
@@ -797,7 +798,8 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
         params.tangential_stiffness = p.ct[i] + 0.0;
         params.restitution = pm.restitution;
         params.friction = pm.friction;
-        V3<double> c = world.centroid;
+        params.damping = pm.damping;
+            V3<double> c = world.centroid;
         ContactKinematics kin;
         kin.x_a = xp;
         kin.x_b = c;
@@ -806,25 +808,23 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
         kin.v_b = v3(s.v0[0], s.v0[1], s.v0[2]) + cross(omega, c - v3(s.origin[0], s.origin[1], s.origin[2]));
         kin.w_a = load3(p.angular_velocity, i);
         kin.w_b = omega;
+        V3<double> ip = load3(p.inertia, i);
         double area = norm(world.dv_dxb);
         if (area > 0.0) {
             V3<double> nrm = (-world.dv_dxb) / area;
             double inverse = 0.0;
-            inverse += inverse_mass_term(p.mass[i], load3(p.inertia, i), qp, xp, c, nrm);
+            inverse += inverse_mass_term(p.mass[i], ip, qp, xp, c, nrm);
             kin.effective_mass = 1.0 / inverse;
         } else {
             kin.effective_mass = p.mass[i];
         }
-        V3<double> spring = zero3<double>();
-#if PD_FRICTION
-        spring = load3(spring_in, slot);
-#endif
-        ContactForces f = contact_forces(params, pm, world, kin, &spring, dt);
+        ContactHistoryRecord history = load_history(spring_in, slot);
+        ContactForces f = contact_forces(params, pm, world, kin, &history, dt);
         force -= f.force_b;
         torque += f.torque_a;
         energy += f.elastic_energy;
         store3(per_wall_force, slot, f.force_b);
-        store3(spring_out, slot, spring);
+        store_history(spring_out, slot, history);
         wall_contact[slot] = 1u;
     }
     store3(wall_force, i, force);

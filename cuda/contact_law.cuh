@@ -1,7 +1,6 @@
 // The volume-based contact law, in its energy-conserving form: the GPU twin of
-// src/contact/law.rs `contact_forces` (seed paper Eq. 12–22), of the damping table lookup
-// `DampingTable::gamma` (src/contact/restitution.rs) and of the pipeline's
-// `normal_effective_mass`. Always double precision: it runs once per contact on world-frame
+// src/contact/law.rs `contact_forces` (seed paper Eq. 12–22, docs/contact.md) and of the
+// pipeline's `normal_effective_mass`. Always double precision: it runs once per contact on world-frame
 // quantities, after the pair geometry (which may be float) has been widened.
 #pragma once
 #include "common.cuh"
@@ -9,18 +8,13 @@
 
 namespace pd {
 
-// Exponent range and size of a damping table (restitution.rs: P_MIN, P_MAX, TABLE_SIZE).
-#define PD_DAMPING_TABLE_SIZE 25
-#define PD_DAMPING_P_MIN (1.0 / 3.0)
-#define PD_DAMPING_P_MAX 3.0
-
 // Contact parameters of one pair of materials (shared with Rust: layout.rs `PairMaterial`).
 struct PairMaterial {
     double restitution;
     double friction;
-    double damping[PD_DAMPING_TABLE_SIZE]; // γ(e, p) at p evenly spaced over [1/3, 3]
-    double log_restitution;                // ln e, computed on the host
-    double log_norm;                       // sqrt((ln e)² + π²), computed on the host
+    double damping;         // Hunt–Crossley ᾱ(e), computed on the host
+    double log_restitution; // ln e, computed on the host
+    double log_norm;        // sqrt((ln e)² + π²), computed on the host
 };
 #ifdef PD_SIZEOF_PAIR_MATERIAL
 static_assert(sizeof(PairMaterial) == PD_SIZEOF_PAIR_MATERIAL, "PairMaterial differs from Rust's layout::PairMaterial");
@@ -32,6 +26,7 @@ struct ContactParameters {
     double tangential_stiffness; // E1/(2(1+ν1)R1) + E2/(2(1+ν2)R2) (Pa/m)
     double restitution;
     double friction;
+    double damping; // ᾱ(e)
 };
 
 // Kinematics of a contact (law.rs `ContactKinematics`).
@@ -40,6 +35,39 @@ struct ContactKinematics {
     double effective_mass;
 };
 
+// The history of one contact (history.rs `ContactState`), PD_HISTORY_WIDTH doubles in memory.
+struct ContactHistoryRecord {
+    V3<double> spring;
+    double approach_speed; // 0: not evaluated yet
+    double twist;
+};
+
+PD_HD ContactHistoryRecord load_history(const double* h, size_t k) {
+    const double* r = h + PD_HISTORY_WIDTH * k;
+    ContactHistoryRecord out;
+    out.spring = v3(r[0], r[1], r[2]);
+    out.approach_speed = r[3];
+    out.twist = r[4];
+    return out;
+}
+
+PD_HD void store_history(double* h, size_t k, const ContactHistoryRecord& s) {
+    double* r = h + PD_HISTORY_WIDTH * k;
+    r[0] = s.spring.x;
+    r[1] = s.spring.y;
+    r[2] = s.spring.z;
+    r[3] = s.approach_speed;
+    r[4] = s.twist;
+}
+
+PD_HD ContactHistoryRecord no_history() {
+    ContactHistoryRecord out;
+    out.spring = zero3<double>();
+    out.approach_speed = 0.0;
+    out.twist = 0.0;
+    return out;
+}
+
 // Forces of one contact (law.rs `ContactForces`).
 struct ContactForces {
     V3<double> force_b;
@@ -47,17 +75,6 @@ struct ContactForces {
     V3<double> torque_b;
     double elastic_energy;
 };
-
-// γ(e, p) by linear interpolation in a table of PD_DAMPING_TABLE_SIZE values over
-// p ∈ [1/3, 3] (DampingTable::gamma).
-PD_HD double damping_gamma(const double* table, double p) {
-    double clamped = min_(max_(p, PD_DAMPING_P_MIN), PD_DAMPING_P_MAX);
-    double u = ((clamped - PD_DAMPING_P_MIN) / (PD_DAMPING_P_MAX - PD_DAMPING_P_MIN)) *
-               (double)(PD_DAMPING_TABLE_SIZE - 1);
-    int k = min_((int)floor(u), PD_DAMPING_TABLE_SIZE - 2);
-    double w = u - (double)k;
-    return table[k] * (1.0 - w) + table[k + 1] * w;
-}
 
 // The mass a contact's normal impulse sees, 1/m* = Σ 1/m + (r × n)·I⁻¹(r × n), for one body
 // (pipeline.rs `normal_effective_mass`): returns its term of the sum. `inertia` holds the
@@ -79,56 +96,80 @@ PD_HD ContactForces no_contact_forces() {
     return f;
 }
 
-// Evaluates the contact law for an overlap, updating the tangential spring `spring` over `dt`
-// (law.rs `contact_forces`; the comments there give the derivation of every term). The pair's
-// damping table and the logarithms of its restitution come from `pm`: ln e computed once on
-// the host, with the same function as the CPU backend's, rather than per contact here.
+// U(V) = (3/4) c V^{4/3} for V > 0 (law.rs `potential`).
+PD_HD double contact_potential(double c, double v) { return v > 0.0 ? 0.75 * c * v * cbrt_(v) : 0.0; }
+
+// The mean slope of U over the volume window [lo, hi] (law.rs `mean_pressure`).
+PD_HD double mean_pressure(double c, double lo, double hi) {
+    if (hi <= lo) {
+        return c * cbrt_(max_(hi, 0.0));
+    }
+    if (lo <= 0.0) {
+        return contact_potential(c, hi) / (hi - lo);
+    }
+    double x = cbrt_(lo), y = cbrt_(hi);
+    return 0.75 * c * (x + y) * (x * x + y * y) / (x * x + x * y + y * y);
+}
+
+// Evaluates the contact law for an overlap, updating the contact's history over `dt`
+// (law.rs `contact_forces`; the comments there and docs/contact.md give every term). ln e
+// and its norm come from `pm`, computed once on the host with the CPU backend's expressions.
 PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMaterial& pm,
                                    const Overlap<double>& o, const ContactKinematics& kin,
-                                   V3<double>* spring, double dt) {
-    const double* damping = pm.damping;
+                                   ContactHistoryRecord* state, double dt) {
     double area = norm(o.dv_dxb);
     double volume = o.volume;
     if (volume <= 0.0 || area <= 0.0) {
         return no_contact_forces();
     }
-    V3<double> n = (-o.dv_dxb) / area;
+    V3<double> s_vec = o.dv_dxb;
+    V3<double> n = (-s_vec) / area;
     V3<double> c = o.centroid;
-    V3<double> v_rel = (kin.v_b + cross(kin.w_b, c - kin.x_b)) - (kin.v_a + cross(kin.w_a, c - kin.x_a));
+    V3<double> offset = cross(s_vec, o.moment_b) / (area * area);
+    // x − x is 0 exactly for finite x (Rust's is_finite), NaN otherwise.
+    bool finite = offset.x - offset.x == 0.0 && offset.y - offset.y == 0.0 && offset.z - offset.z == 0.0;
+    V3<double> r_e = finite ? c + offset : c;
+    V3<double> v_rel = (kin.v_b + cross(kin.w_b, r_e - kin.x_b)) - (kin.v_a + cross(kin.w_a, r_e - kin.x_a));
     double vn = dot(v_rel, n);
+    bool first_touch = state->approach_speed == 0.0;
 
-    double u_prime = params.normal_stiffness * cbrt_(volume);
-    double f_elastic = u_prime * area;
-    V3<double> torque_b_el = (-(o.moment_b + cross(c - kin.x_b, o.dv_dxb))) * u_prime;
-    V3<double> torque_a_el = (-((-o.moment_b) + cross(c - kin.x_a, -o.dv_dxb))) * u_prime;
+    double stiffness = params.normal_stiffness;
+    double sweep = 0.5 * abs_(vn) * dt * area;
+    double pressure = sweep > 0.5 * volume ? mean_pressure(stiffness, volume - sweep, volume + sweep)
+                                           : stiffness * cbrt_(volume); // law.rs WINDOW_FRACTION
+    if (first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0) {
+        pressure += contact_potential(stiffness, volume - sweep) / (2.0 * sweep);
+    }
+    double f_elastic = pressure * area;
+    V3<double> torque_b_el = (-(o.moment_b + cross(c - kin.x_b, s_vec))) * pressure;
+    V3<double> torque_a_el = (-((-o.moment_b) + cross(c - kin.x_a, -s_vec))) * pressure;
 
-    double delta = max_(o.thickness, volume / area);
-    double q = max_(area * delta / volume - 1.0, 0.0);
-    double p = (4.0 * q + 1.0) / 3.0;
-    double k_loc = p * f_elastic / delta;
-    double gamma = damping_gamma(damping, p);
-    double f_damp = -gamma * sqrt_(kin.effective_mass * k_loc) * vn;
+    if (first_touch) {
+        state->approach_speed = max_(abs_(vn), 2.2250738585072014e-308);
+    }
+    double energy = contact_potential(stiffness, volume);
+    double v_ref = max_(state->approach_speed, sqrt_(2.0 * energy / kin.effective_mass));
+    double c_n = params.damping * f_elastic / v_ref;
+    double f_damp = -c_n * vn;
     if (dt > 0.0) {
         double limit = kin.effective_mass * abs_(vn) / dt;
         f_damp = min_(max_(f_damp, -limit), limit);
     }
     double f_normal = max_(f_elastic + f_damp, 0.0);
-    V3<double> force_b = n * f_normal;
 
     V3<double> v_t = v_rel - n * vn;
+    double k_t = params.tangential_stiffness * area;
+    double c_t = 0.0;
+    if (params.restitution < 1.0 && params.friction > 0.0) {
+        c_t = 2.0 * abs_(pm.log_restitution) * sqrt_(k_t * kin.effective_mass) / pm.log_norm;
+    }
     V3<double> tangential = zero3<double>();
     if (params.friction > 0.0) {
-        V3<double> old = *spring;
+        V3<double> old = state->spring;
         V3<double> in_plane = old - n * dot(old, n);
         double len = norm(in_plane);
         V3<double> rotated = len > 0.0 ? in_plane * (norm(old) / len) : zero3<double>();
         V3<double> xi = rotated + v_t * dt;
-        double k_t = params.tangential_stiffness * area;
-        double e = params.restitution;
-        double c_t = 0.0;
-        if (e < 1.0) {
-            c_t = 2.0 * abs_(pm.log_restitution) * sqrt_(k_t * kin.effective_mass) / pm.log_norm;
-        }
         V3<double> f_t = (-xi) * k_t - v_t * c_t;
         double cap = params.friction * f_normal;
         double magnitude = norm(f_t);
@@ -136,21 +177,20 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
             f_t = f_t * (magnitude > 0.0 ? cap / magnitude : 0.0);
             xi = k_t > 0.0 ? (-f_t) / k_t : zero3<double>();
         }
-        *spring = xi;
+        state->spring = xi;
         tangential = f_t;
     } else {
-        *spring = zero3<double>();
+        state->spring = zero3<double>();
     }
-    force_b += tangential;
 
-    V3<double> f_other = force_b - n * f_elastic;
+    state->twist = 0.0; // twisting friction is not applied yet (law.rs)
+
+    V3<double> f_line = n * (f_normal - f_elastic) + tangential;
     ContactForces out;
-    out.force_b = force_b;
-    out.torque_b = torque_b_el + cross(c - kin.x_b, f_other);
-    out.torque_a = torque_a_el + cross(c - kin.x_a, -f_other);
-    double k_t = params.tangential_stiffness * area;
-    // U(V) = (3/4) c V^{4/3} = (3/4) U'(V) V: no second root.
-    out.elastic_energy = 0.75 * u_prime * volume + 0.5 * k_t * norm2(*spring);
+    out.force_b = n * f_normal + tangential;
+    out.torque_b = torque_b_el + cross(r_e - kin.x_b, f_line);
+    out.torque_a = torque_a_el + cross(r_e - kin.x_a, -f_line);
+    out.elastic_energy = energy + 0.5 * k_t * norm2(state->spring);
     return out;
 }
 

@@ -234,7 +234,8 @@ extern "C" __global__ void history_partners(int n_pairs, const int2* pairs, cons
     }
 }
 
-// After a rebuild: the tangential spring of each new pair (a, b) from the old list, where the
+// After a rebuild: the contact history (PD_HISTORY_WIDTH doubles: the tangential spring, the
+// approach speed, the twist) of each new pair (a, b) from the old list, where the
 // pairs of old particle order[a] are old_offset[order[a]] .. old_offset[order[a] + 1] with
 // partners old_partner[…] (global ids). A pair not found starts with no spring, as on the CPU
 // (ContactHistory keeps only contacts that were live).
@@ -248,16 +249,13 @@ extern "C" __global__ void remap_history(int n_pairs, const int2* pairs, const p
     int2 p = pairs[k];
     unsigned int o = order[p.x];
     pd_u64 partner = id[p.y];
-    double s[3] = {0.0, 0.0, 0.0};
+    double s[PD_HISTORY_WIDTH];
+    for (int c = 0; c < PD_HISTORY_WIDTH; ++c) s[c] = 0.0;
     for (unsigned int m = old_offset[o]; m < old_offset[o + 1]; ++m) {
         if (old_partner[m] == partner) {
-            s[0] = old_spring[3 * (size_t)m];
-            s[1] = old_spring[3 * (size_t)m + 1];
-            s[2] = old_spring[3 * (size_t)m + 2];
+            for (int c = 0; c < PD_HISTORY_WIDTH; ++c) s[c] = old_spring[PD_HISTORY_WIDTH * (size_t)m + c];
             break;
         }
     }
-    spring[3 * (size_t)k] = s[0];
-    spring[3 * (size_t)k + 1] = s[1];
-    spring[3 * (size_t)k + 2] = s[2];
+    for (int c = 0; c < PD_HISTORY_WIDTH; ++c) spring[PD_HISTORY_WIDTH * (size_t)k + c] = s[c];
 }

@@ -18,7 +18,7 @@
 
 use crate::contact::{
     ContactForces, ContactHistory, ContactKey, ContactKinematics, ContactParameters, ContactState,
-    DampingTable, WallMesh, contact_forces,
+    WallMesh, contact_forces, hunt_crossley_alpha,
 };
 use crate::domain::halo::{build_ghosts, refresh_ghosts};
 use crate::domain::migration::{read_particle, write_particle};
@@ -139,7 +139,8 @@ pub struct Simulation {
     separating_axes: Vec<Vector3<f64>>,
     bounds: Bounds,
     radius: Vec<f64>,
-    damping: Vec<DampingTable>,
+    /// Hunt–Crossley `ᾱ(e)` per material pair (`a * materials + b`).
+    damping: Vec<f64>,
     dirty: bool,
 }
 
@@ -162,19 +163,15 @@ impl Simulation {
 
     fn new_in(scene: Scene, parallel: Option<Box<Parallel>>) -> Result<Self, SimulationError> {
         let n_mat = scene.materials.len();
-        let mut damping: Vec<DampingTable> = Vec::with_capacity(n_mat * n_mat);
-        for a in 0..n_mat {
-            for b in 0..n_mat {
-                let e = scene.pairs.try_get(a, b).map_or(1.0, |p| p.restitution);
-                // Tables are symmetric: reuse the (b, a) one when it exists.
-                if b < a {
-                    let t: DampingTable = damping[b * n_mat + a].clone();
-                    damping.push(t);
-                } else {
-                    damping.push(DampingTable::new(e));
-                }
-            }
-        }
+        let damping = (0..n_mat * n_mat)
+            .map(|k| {
+                let e = scene
+                    .pairs
+                    .try_get(k / n_mat, k % n_mat)
+                    .map_or(1.0, |p| p.restitution);
+                hunt_crossley_alpha(e)
+            })
+            .collect();
         let cell = 2.0 * scene.max_bounding_radius() + scene.simulation.neighbor.skin;
         let walls = scene
             .walls
@@ -717,7 +714,7 @@ impl Simulation {
         i: usize,
         other: Option<usize>,
         wall_material: usize,
-    ) -> (ContactParameters, usize) {
+    ) -> ContactParameters {
         let s = &self.scene;
         let p = &self.particles;
         let side = |k: usize| {
@@ -737,15 +734,13 @@ impl Simulation {
             None => (wall_material, 0.0, 0.0),
         };
         let pair = s.pairs.get(ma, mb);
-        (
-            ContactParameters {
-                normal_stiffness: cn_a + cn_b,
-                tangential_stiffness: ct_a + ct_b,
-                restitution: pair.restitution,
-                friction: pair.friction,
-            },
-            ma * s.materials.len() + mb,
-        )
+        ContactParameters {
+            normal_stiffness: cn_a + cn_b,
+            tangential_stiffness: ct_a + ct_b,
+            restitution: pair.restitution,
+            friction: pair.friction,
+            damping: self.damping[ma * s.materials.len() + mb],
+        }
     }
 
     fn pair_contacts(&self, dt: f64) -> Result<Vec<PairOutcome>, SimulationError> {
@@ -819,7 +814,7 @@ impl Simulation {
                     g.overlap
                 };
                 // Stage 7: contact law.
-                let (params, table) = self.contact_parameters(a, Some(b), 0);
+                let params = self.contact_parameters(a, Some(b), 0);
                 let key = ContactKey::particles(p.id[a], p.id[b]);
                 let mut state = self.history.get(&key).copied().unwrap_or_default();
                 let kin = ContactKinematics {
@@ -836,14 +831,7 @@ impl Simulation {
                         normal_effective_mass(p, &[(a, p.position[a]), (b, xb)], &overlap)
                     },
                 };
-                let forces = contact_forces(
-                    &params,
-                    &self.damping[table],
-                    &overlap,
-                    &kin,
-                    &mut state,
-                    dt,
-                );
+                let forces = contact_forces(&params, &overlap, &kin, &mut state, dt);
                 Ok(PairOutcome {
                     separating_axis: Vector3::zeros(),
                     forces,
@@ -903,7 +891,7 @@ impl Simulation {
                             depth: o.depth,
                             thickness: o.thickness,
                         };
-                        let (params, table) = self.contact_parameters(i, None, s.walls[k].material);
+                        let params = self.contact_parameters(i, None, s.walls[k].material);
                         let key = ContactKey::wall(p.id[i], k);
                         let mut state = self.history.get(&key).copied().unwrap_or_default();
                         let c = world.centroid;
@@ -916,14 +904,7 @@ impl Simulation {
                             w_b: s.walls[k].motion.angular_velocity(),
                             effective_mass: normal_effective_mass(p, &[(i, p.position[i])], &world),
                         };
-                        let f = contact_forces(
-                            &params,
-                            &self.damping[table],
-                            &world,
-                            &kin,
-                            &mut state,
-                            dt,
-                        );
+                        let f = contact_forces(&params, &world, &kin, &mut state, dt);
                         out.force -= f.force_b;
                         out.torque += f.torque_a;
                         out.energy += f.elastic_energy;

@@ -471,12 +471,16 @@ fn checkpoint() -> Checkpoint {
             ContactKey::particles(91, 77),
             ContactState {
                 spring: Vector3::new(1e-9, -2e-9, 1.0 / 3.0),
+                approach_speed: 0.25,
+                twist: -1e-310,
             },
         ),
         (
             ContactKey::wall(84, 3),
             ContactState {
                 spring: Vector3::new(0.0, -0.0, 1e-300),
+                approach_speed: f64::MIN_POSITIVE,
+                twist: 0.0,
             },
         ),
     ]);
@@ -507,6 +511,8 @@ fn checkpoint_with_many_contacts_round_trips() {
             .map(|k| {
                 let state = ContactState {
                     spring: Vector3::new(k as f64, -1e-7, 0.5),
+                    approach_speed: 1.0 + k as f64,
+                    twist: -(k as f64),
                 };
                 (ContactKey::particles(k, k + 1 + k % 7), state)
             })

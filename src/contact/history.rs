@@ -1,4 +1,5 @@
-//! Contact history: the per-contact state that outlives a step (the tangential spring), keyed by the pair of global ids so that it survives neighbour-list rebuilds,
+//! Contact history: the per-contact state that outlives a step (the tangential spring, the
+//! approach speed at first touch, the twist angle), keyed by the pair of global ids so that it survives neighbour-list rebuilds,
 //! reordering and migration (DESIGN.md §3).
 
 use nalgebra::Vector3;
@@ -43,6 +44,14 @@ impl ContactKey {
 pub struct ContactState {
     /// Tangential spring displacement ξ (Cundall–Strack), kept in the current tangent plane.
     pub spring: Vector3<f64>,
+    /// Normal approach speed at first touch, the Hunt–Crossley damping's reference speed
+    /// (docs/contact.md §2); 0 marks a contact that has not been evaluated yet.
+    #[serde(default)]
+    pub approach_speed: f64,
+    /// Relative twist angle about the normal for a torsional spring (radians); reserved for
+    /// twisting friction, which is not applied yet, so it is 0.
+    #[serde(default)]
+    pub twist: f64,
 }
 
 /// All live contacts, sorted by key: lookups are binary searches and iteration order is

@@ -1,28 +1,32 @@
-//! The volume-based contact law (seed paper Eq. 12–22), in its energy-conserving form.
+//! The volume-based contact law (seed paper Eq. 12–22): the seed's energy-conserving elastic
+//! part, with damping, friction and rolling resistance that behave for flat contacts. The
+//! equations and the reasoning behind each term are in docs/contact.md; in short:
 //!
-//! Normal, elastic: the potential `U(V) = (3/4) c V^{4/3}` with `c = E₁/R₁ + E₂/R₂` (R the
-//! volume-equivalent radii; for a wall `R₂ → ∞`) gives `F_B = −U'(V) S = c V^{1/3} A_n n`, the
-//! seed's Eq. 12–13 with `n = −S/|S|` and `A_n = |S|` taken from `S = dV/dx_B`, and the torque on
-//! B about its centre `−U'(V) (M_B + (c_V − x_B) × S)` (validation.md §1). With both taken from S
-//! and the surface moment, the elastic contact conserves energy exactly in the time-continuous
-//! limit, for any shapes.
+//! - Elastic: `U(V) = (3/4) c V^{4/3}`, `c = E₁/R₁ + E₂/R₂`, gives `F_B = −U'(V) S` and the
+//!   torque `−U'(V) (M_B + (c_V − x_B) × S)` (seed Eq. 12–13). Over a step, `U'` is taken as
+//!   the mean of the potential's slope over the volume the contact sweeps in the step's kick
+//!   window, `[V − A_n s, V + A_n s]` with `s = |v_n| Δt/2` (the secant of U, exact at rest). A
+//!   face contact's stiffness `F/(3δ)` is unbounded at first touch, so the slope at one point
+//!   of the step (seed Eq. 12 as written) makes a face impact's energy depend on where in a
+//!   step it starts; the secant is what the force does on average over the kick it drives, and
+//!   a contact's first step also carries the share of the kick before it that the contact
+//!   entered during.
+//! - Normal damping (Hunt–Crossley): `F_d = −ᾱ(e) F_e v_n / v_ref`, `v_ref` the normal speed
+//!   at first touch (contact history), at least `√(2U/m*)`. It is bounded wherever the
+//!   elastic force is, and gives restitution `e` for every exponent of `F_e(δ)`
+//!   ([`super::restitution::hunt_crossley_alpha`]).
+//! - The normal force acts on the elastic force's line of action, through
+//!   `r_e = c_V + (S × M_B)/|S|²`: a dashpot at the overlap centroid has the lever
+//!   `θ L²/(12 δ)` on a tilted face and pumps its rocking.
+//! - Tangential: Cundall–Strack spring (seed Eq. 17–20) at `r_e`, rotated into the current
+//!   tangent plane each step, capped at `μ |F_n|`.
+//! - Rocking damping of a face and twisting friction are not applied yet (docs/contact.md §5);
+//!   the history reserves the twist angle (always 0 for now).
 //!
-//! Normal, damping: `F_d = −γ(e, p) √(m_eff k_loc) (v_r · n) n` with `k_loc = p F_e / δ` the local
-//! stiffness of the power law `F_e ∝ δ^p`, where `δ` is the overlap's thickness along the normal
-//! and `p = (4q + 1)/3` follows from the area exponent `q` of `A_n ∝ δ^q`, measured as
-//! `q = A_n δ / V − 1` (since `dV/dδ = A_n`). `γ(e, p)` comes from [`super::restitution`]; this
-//! makes the restitution the prescribed `e` for vertex, edge and face impacts alike, where seed
-//! Eq. 15 (tuned for a linear spring) does not.
-//!
-//! Tangential: Cundall–Strack spring (seed Eq. 17–20): the displacement ξ is rotated into the
-//! current tangent plane each step (keeping its length), incremented by `v_t dt`, and
-//! `F_t = −k_t ξ − c_t v_t` with `k_t = (E₁/(2(1+ν₁)R₁) + E₂/(2(1+ν₂)R₂)) A_n` and `c_t` from
-//! Eq. 20; capped at `μ |F_n|`, in which case ξ is reset to the spring length that carries the
-//! capped force (sliding). The incremental, rotated form cannot create energy in elastic
-//! sticking impacts (validation.md §6).
+//! Every dissipative term is bounded by what one explicit step can remove: its impulse never
+//! reverses the relative velocity it acts on.
 
 use super::history::ContactState;
-use super::restitution::DampingTable;
 use crate::geometry::Overlap;
 use nalgebra::Vector3;
 
@@ -37,6 +41,8 @@ pub struct ContactParameters {
     pub restitution: f64,
     /// Friction coefficient μ.
     pub friction: f64,
+    /// Hunt–Crossley coefficient `ᾱ(e)` ([`super::restitution::hunt_crossley_alpha`]).
+    pub damping: f64,
 }
 
 /// The kinematics of a contact.
@@ -68,10 +74,38 @@ pub struct ContactForces {
     pub elastic_energy: f64,
 }
 
-/// Evaluates the contact law for an overlap, updating the contact's history `state` over `dt`.
+/// The elastic force takes the mean slope of U over its kick window when the window's half
+/// width is more than this fraction of the volume, and the slope at V otherwise.
+pub const WINDOW_FRACTION: f64 = 0.5;
+
+/// `U(V) = (3/4) c V^{4/3}` for `V > 0`, else 0.
+fn potential(c: f64, v: f64) -> f64 {
+    if v > 0.0 {
+        0.75 * c * v * v.cbrt()
+    } else {
+        0.0
+    }
+}
+
+/// The mean slope `(U(hi) − U(lo))/(hi − lo)` of `U = (3/4) c V^{4/3}` (zero below `V = 0`)
+/// over the volume window `[lo, hi]`, `hi > 0`, `hi ≥ lo`; `c V^{1/3}` = U'(V) for an empty
+/// window. With `x = lo^{1/3}`, `y = hi^{1/3}` the secant is `(3/4) c (x + y)(x² + y²) /
+/// (x² + x y + y²)`, which has no cancellation as the window closes.
+pub fn mean_pressure(c: f64, lo: f64, hi: f64) -> f64 {
+    if hi <= lo {
+        return c * hi.max(0.0).cbrt();
+    }
+    if lo <= 0.0 {
+        return potential(c, hi) / (hi - lo);
+    }
+    let (x, y) = (lo.cbrt(), hi.cbrt());
+    0.75 * c * (x + y) * (x * x + y * y) / (x * x + x * y + y * y)
+}
+
+/// Evaluates the contact law for an overlap, updating the contact's history `state` over `dt`
+/// (the module docs and docs/contact.md give every term).
 pub fn contact_forces(
     params: &ContactParameters,
-    damping: &DampingTable,
     overlap: &Overlap<f64>,
     kin: &ContactKinematics,
     state: &mut ContactState,
@@ -82,40 +116,69 @@ pub fn contact_forces(
     if volume <= 0.0 || area <= 0.0 {
         return ContactForces::default();
     }
-    let n = -overlap.dv_dxb / area; // from A to B
+    let s_vec = overlap.dv_dxb;
+    let n = -s_vec / area; // from A to B
     let c = overlap.centroid;
+    // The elastic force's line of action, at the centroid's depth: r_e − c = S × M_B / |S|².
+    let offset = s_vec.cross(&overlap.moment_b) / (area * area);
+    let r_e = if offset.iter().all(|x| x.is_finite()) {
+        c + offset
+    } else {
+        c
+    };
     let v_rel =
-        (kin.v_b + kin.w_b.cross(&(c - kin.x_b))) - (kin.v_a + kin.w_a.cross(&(c - kin.x_a)));
+        (kin.v_b + kin.w_b.cross(&(r_e - kin.x_b))) - (kin.v_a + kin.w_a.cross(&(r_e - kin.x_a)));
     let vn = v_rel.dot(&n); // > 0 when separating
+    let first_touch = state.approach_speed == 0.0;
 
-    // Elastic part: U'(V) = c V^{1/3}; F_B = −U' S.
-    let u_prime = params.normal_stiffness * volume.cbrt();
-    let f_elastic = u_prime * area;
-    let torque_b_el = -(overlap.moment_b + (c - kin.x_b).cross(&overlap.dv_dxb)) * u_prime;
-    let torque_a_el = -(-overlap.moment_b + (c - kin.x_a).cross(&(-overlap.dv_dxb))) * u_prime;
+    // Elastic part, U' as the mean slope over the volume swept in the kick window ±Δt/2.
+    let stiffness = params.normal_stiffness;
+    let sweep = 0.5 * vn.abs() * dt * area;
+    // Where the window is narrow against the volume the slope at V is as good (and keeps the
+    // step symplectic: a contact at rest or in slow motion is Eq. 12 exactly).
+    let mut pressure = if sweep > WINDOW_FRACTION * volume {
+        mean_pressure(stiffness, volume - sweep, volume + sweep)
+    } else {
+        stiffness * volume.cbrt()
+    };
+    // A contact that began during the last drift (the last position, V − 2 A s, was apart)
+    // missed the part of the last kick's window that lay in contact, [0, V − A s]: it is
+    // carried now.
+    if first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0 {
+        pressure += potential(stiffness, volume - sweep) / (2.0 * sweep);
+    }
+    let f_elastic = pressure * area;
+    let torque_b_el = -(overlap.moment_b + (c - kin.x_b).cross(&s_vec)) * pressure;
+    let torque_a_el = -(-overlap.moment_b + (c - kin.x_a).cross(&(-s_vec))) * pressure;
 
-    // Penetration δ and the exponent of F ∝ δ^p from the geometry: with V ∝ δ^{q+1} and
-    // A_n ∝ δ^q, q = A_n δ / V − 1 (0 face, 1 edge, 2 vertex) and p = (4q + 1)/3.
-    let delta = overlap.thickness.max(volume / area);
-    let q = (area * delta / volume - 1.0).max(0.0);
-    let p = (4.0 * q + 1.0) / 3.0;
-    let k_loc = p * f_elastic / delta;
-    let gamma = damping.gamma(p);
-    let mut f_damp = -gamma * (kin.effective_mass * k_loc).sqrt() * vn;
-    // The face–face stiffness, and with it the damping coefficient, grows without bound as
-    // δ → 0; an explicit step must not let the dashpot reverse the normal approach on its own
-    // (its impulse is at most the normal momentum m*|v_n|), or it over-damps the first steps of
-    // a flat impact.
+    // Hunt–Crossley damping, on the elastic force's line of action.
+    if first_touch {
+        state.approach_speed = vn.abs().max(f64::MIN_POSITIVE);
+    }
+    let energy = potential(stiffness, volume);
+    let v_ref = state
+        .approach_speed
+        .max((2.0 * energy / kin.effective_mass).sqrt());
+    let c_n = params.damping * f_elastic / v_ref;
+    let mut f_damp = -c_n * vn;
+    // An explicit step's dashpot impulse never reverses the normal approach on its own.
     if dt > 0.0 {
         let limit = kin.effective_mass * vn.abs() / dt;
         f_damp = f_damp.clamp(-limit, limit);
     }
     // The contact pushes, never pulls.
     let f_normal = (f_elastic + f_damp).max(0.0);
-    let mut force_b = n * f_normal;
 
-    // Tangential spring.
+    // Tangential spring, at r_e.
     let v_t = v_rel - n * vn;
+    let k_t = params.tangential_stiffness * area;
+    let e = params.restitution;
+    let c_t = if e < 1.0 && params.friction > 0.0 {
+        2.0 * e.ln().abs() * (k_t * kin.effective_mass).sqrt()
+            / (e.ln().powi(2) + std::f64::consts::PI.powi(2)).sqrt()
+    } else {
+        0.0
+    };
     let mut tangential = Vector3::zeros();
     if params.friction > 0.0 {
         let old = state.spring;
@@ -127,14 +190,6 @@ pub fn contact_forces(
             Vector3::zeros()
         };
         let mut xi = rotated + v_t * dt;
-        let k_t = params.tangential_stiffness * area;
-        let e = params.restitution;
-        let c_t = if e < 1.0 {
-            2.0 * e.ln().abs() * (k_t * kin.effective_mass).sqrt()
-                / (e.ln().powi(2) + std::f64::consts::PI.powi(2)).sqrt()
-        } else {
-            0.0
-        };
         // Force on B from the spring and dashpot, opposing B's slip relative to A.
         let mut f_t = -xi * k_t - v_t * c_t;
         let cap = params.friction * f_normal;
@@ -157,18 +212,20 @@ pub fn contact_forces(
     } else {
         state.spring = Vector3::zeros();
     }
-    force_b += tangential;
 
-    // Non-elastic forces act at the overlap centroid.
-    let f_other = force_b - n * f_elastic;
-    let torque_b = torque_b_el + (c - kin.x_b).cross(&f_other);
-    let torque_a = torque_a_el + (c - kin.x_a).cross(&(-f_other));
-    let k_t = params.tangential_stiffness * area;
+    // Twisting friction is not applied yet (docs/contact.md §5): its angle stays 0.
+    state.twist = 0.0;
+
+    // The elastic force and torque as the potential gives them; the damping and the friction
+    // at r_e.
+    let f_line = n * (f_normal - f_elastic) + tangential;
+    let force_b = n * f_normal + tangential;
+    let torque_b = torque_b_el + (r_e - kin.x_b).cross(&f_line);
+    let torque_a = torque_a_el + (r_e - kin.x_a).cross(&(-f_line));
     ContactForces {
         force_b,
         torque_a,
         torque_b,
-        // U(V) = (3/4) c V^{4/3} = (3/4) U'(V) V: no second root.
-        elastic_energy: 0.75 * u_prime * volume + 0.5 * k_t * state.spring.norm_squared(),
+        elastic_energy: energy + 0.5 * k_t * state.spring.norm_squared(),
     }
 }

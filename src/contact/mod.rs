@@ -7,5 +7,5 @@ pub mod wall;
 
 pub use history::{ContactHistory, ContactKey, ContactState, WALL_BIT};
 pub use law::{ContactForces, ContactKinematics, ContactParameters, contact_forces};
-pub use restitution::DampingTable;
+pub use restitution::hunt_crossley_alpha;
 pub use wall::WallMesh;

@@ -1,29 +1,18 @@
-//! Damping that gives the prescribed restitution for every contact type.
+//! Damping that gives the prescribed restitution for every contact type, and the impact
+//! durations the time step is chosen from.
 //!
 //! The volume-based normal force is a power of the approach δ whose exponent depends on what
 //! touches (validation.md §1): `F ∝ δ³` vertex–face, `δ^{5/3}` edge–face, `δ^{1/3}` face–face.
-//! A dashpot tuned from a linear spring (seed Eq. 15) gives a different restitution for each.
-//! For a spring `F = K δ^p` with the damping
+//! The contact law damps with Hunt and Crossley's form `F = F_e (1 + ᾱ δ̇ / v_ref)`
+//! ([`hunt_crossley_alpha`], docs/contact.md §2), whose restitution is the same for every
+//! exponent and which is bounded wherever the elastic force is, first touch of a face included.
 //!
-//! ```text
-//!   F_d = −γ √(m k_loc) δ̇,   k_loc = dF/dδ = p F/δ,
-//! ```
-//!
-//! the substitution `δ = a X`, `t = b T` with `b² = m a^{1−p} / K` and `a` chosen so that
-//! `X'(0) = 1` turns the impact into `X'' = −X^p − γ √p X^{(p−1)/2} X'` for every mass,
-//! stiffness and impact speed: the restitution depends on `γ` and `p` only. This module solves
-//! that dimensionless impact (RK4, the net force clamped at zero so the contact never pulls,
-//! as in the simulation) and inverts it for `γ(e, p)` by bisection, on a table of `p` between
-//! 1/3 and 3 that the contact law interpolates.
-
-use std::collections::HashMap;
-use std::sync::{Mutex, OnceLock};
-
-/// Exponents of the table: 1/3 … 3.
-const P_MIN: f64 = 1.0 / 3.0;
-const P_MAX: f64 = 3.0;
-/// Number of exponents tabulated in a [`DampingTable`] (`cuda/contact_law.cuh` has the same).
-pub const TABLE_SIZE: usize = 25;
+//! The viscous alternative `F_d = −γ √(m k_loc) δ̇`, `k_loc = dF/dδ = p F/δ`, also gives one
+//! restitution for every mass, stiffness and speed (the substitution `δ = a X`, `t = b T` turns
+//! the impact into `X'' = −X^p − γ √p X^{(p−1)/2} X'`), but `γ` depends on `p`, and for a face
+//! (`p = 1/3`) its coefficient is unbounded at first touch, so an explicit step's phase decides
+//! the restitution. [`restitution_of`] and [`damping_for`] solve that model; the tests keep it as
+//! the reference the time-step estimates were derived with.
 
 /// Restitution of the dimensionless impact `X'' = −X^p − γ √p X^{(p−1)/2} X'`, `X(0) = 0`,
 /// `X'(0) = 1`: minus the velocity when X returns to zero (or when the net force would turn
@@ -111,7 +100,10 @@ pub fn sphere_contact_time(m_eff: f64, c: f64, r_eff: f64, v: f64) -> f64 {
     dimensionless_duration(p) * (m_eff * v.powf(1.0 - p) / k).powf(1.0 / (1.0 + p))
 }
 
-/// `γ` such that [`restitution_of`]`(γ, p) = e`, by bisection (restitution decreases with γ).
+/// `γ` such that [`restitution_of`]`(γ, p) = e`, by bisection (restitution decreases with γ):
+/// the viscous damping of a power-law spring that gives restitution `e`. The contact law no
+/// longer uses it (its coefficient is unbounded at a face's first touch); it is kept as the
+/// reference the Hunt–Crossley damping is compared with in the tests.
 pub fn damping_for(e: f64, p: f64) -> f64 {
     if e >= 1.0 {
         return 0.0;
@@ -134,49 +126,77 @@ pub fn damping_for(e: f64, p: f64) -> f64 {
     0.5 * (lo + hi)
 }
 
-/// `γ(p)` for one restitution coefficient, tabulated for interpolation.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DampingTable {
-    gamma: [f64; TABLE_SIZE],
+/// The dimensionless Hunt–Crossley coefficient `ᾱ(e)` of the contact law's damping
+/// `F = F_e (1 + ᾱ δ̇ / v_ref)` (docs/contact.md §2): the root of
+///
+/// ```text
+///   ᾱ (1 + e) = ln((1 + ᾱ) / (1 − ᾱ e)),   0 ≤ ᾱ < 1/e.
+/// ```
+///
+/// For any elastic force `F_e(δ)` (any exponent, any shape), `v dv / (1 + ᾱ v/v₀) = −F_e dδ / m`
+/// separates in the potential `∫F_e dδ`, so an impact at `v₀` returns when
+/// `∫_{−e v₀}^{v₀} v dv / (1 + ᾱ v / v₀) = 0`, which is the equation above. The restitution
+/// therefore depends on `ᾱ` alone: vertex, edge and face contacts get the same `e` from one
+/// coefficient. Solved by bisection to 1 ulp of the bracket (the left side minus the right is
+/// negative below the root and positive above it).
+pub fn hunt_crossley_alpha(e: f64) -> f64 {
+    if e >= 1.0 {
+        return 0.0;
+    }
+    let e = e.max(1e-6);
+    let f = |a: f64| a * (1.0 + e) - ((1.0 + a) / (1.0 - a * e)).ln();
+    // f ≈ (1 − e²) a² / 2 > 0 near 0 and f → −∞ as a → 1/e, with one root between.
+    let (mut lo, mut hi) = (1e-12, (1.0 / e) * (1.0 - 1e-15));
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if f(mid) > 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if hi - lo <= f64::EPSILON * hi {
+            break;
+        }
+    }
+    0.5 * (lo + hi)
 }
 
-impl DampingTable {
-    /// Tabulates `γ(e, p)` for `p` in [1/3, 3]. Tables are cached per restitution value for the
-    /// life of the process (building one solves a few hundred impacts).
-    pub fn new(restitution: f64) -> Self {
-        static CACHE: OnceLock<Mutex<HashMap<u64, DampingTable>>> = OnceLock::new();
-        let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
-        let key = restitution.to_bits();
-        if let Some(t) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
-            return t;
+/// Restitution of the Hunt–Crossley impact `X'' = −X^p (1 + ᾱ X')`, `X(0) = 0`, `X'(0) = 1`,
+/// with the net force clamped at zero (the contact never pulls), by RK4: the independent check
+/// of [`hunt_crossley_alpha`] for several exponents.
+pub fn hunt_crossley_restitution(alpha: f64, p: f64) -> f64 {
+    let accel = |x: f64, v: f64| {
+        if x <= 0.0 {
+            0.0
+        } else {
+            -(x.powf(p) * (1.0 + alpha * v)).max(0.0)
         }
-        let mut gamma = [0.0; TABLE_SIZE];
-        for (k, g) in gamma.iter_mut().enumerate() {
-            *g = damping_for(restitution, Self::exponent(k));
+    };
+    let (mut x, mut v) = (1e-14f64, 1.0f64);
+    for _ in 0..50_000_000 {
+        let h = (0.05 * x).clamp(1e-12, 1e-3);
+        let (k1x, k1v) = (v, accel(x, v));
+        let (k2x, k2v) = (
+            v + 0.5 * h * k1v,
+            accel(x + 0.5 * h * k1x, v + 0.5 * h * k1v),
+        );
+        let (k3x, k3v) = (
+            v + 0.5 * h * k2v,
+            accel(x + 0.5 * h * k2x, v + 0.5 * h * k2v),
+        );
+        let (k4x, k4v) = (v + h * k3v, accel(x + h * k3x, v + h * k3v));
+        let xn = x + h / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x);
+        let vn = v + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+        if xn <= 0.0 && vn < 0.0 {
+            return -(v + (vn - v) * (x / (x - xn)));
         }
-        let table = DampingTable { gamma };
-        if let Ok(mut c) = cache.lock() {
-            c.insert(key, table.clone());
+        if vn < 0.0 && 1.0 + alpha * vn <= 0.0 {
+            return -vn;
         }
-        table
+        x = xn;
+        v = vn;
     }
-
-    fn exponent(k: usize) -> f64 {
-        P_MIN + (P_MAX - P_MIN) * k as f64 / (TABLE_SIZE - 1) as f64
-    }
-
-    /// The tabulated values, at exponents evenly spaced over [1/3, 3] (for the GPU tables).
-    pub fn values(&self) -> &[f64; TABLE_SIZE] {
-        &self.gamma
-    }
-
-    /// `γ` at exponent `p` (clamped to the table's range [1/3, 3], the range of convex contacts).
-    pub fn gamma(&self, p: f64) -> f64 {
-        let u = ((p.clamp(P_MIN, P_MAX) - P_MIN) / (P_MAX - P_MIN)) * (TABLE_SIZE - 1) as f64;
-        let k = (u.floor() as usize).min(TABLE_SIZE - 2);
-        let w = u - k as f64;
-        self.gamma[k] * (1.0 - w) + self.gamma[k + 1] * w
-    }
+    0.0
 }
 
 #[cfg(test)]
@@ -195,16 +215,23 @@ mod tests {
         assert!((dimensionless_duration(1.0) - std::f64::consts::PI).abs() < 1e-4);
     }
 
+    /// ᾱ(e) solves its closed form, and the RK4 impact with that ᾱ returns at e for the
+    /// exponents of vertex (3), edge (5/3), sphere (5/3), linear (1) and face (1/3) contacts.
     #[test]
-    fn interpolated_table_reproduces_restitution() {
-        let t0 = std::time::Instant::now();
-        let table = DampingTable::new(0.37);
-        println!("table built in {:?}", t0.elapsed());
-        // Interpolated values reproduce e to within the 3 % the validation asks for.
-        for p in [0.5, 1.2, 2.2] {
-            let e = restitution_of(table.gamma(p), p);
-            assert!((e - 0.37).abs() < 0.01 * 0.37, "p {p}: e {e}");
+    fn hunt_crossley_restitution_is_independent_of_the_exponent() {
+        for e in [0.1, 0.3, 0.5, 0.7, 0.9, 0.95] {
+            let a = hunt_crossley_alpha(e);
+            let residual = a * (1.0 + e) - ((1.0 + a) / (1.0 - a * e)).ln();
+            assert!(residual.abs() < 1e-12, "e {e}: residual {residual}");
+            for p in [1.0 / 3.0, 1.0, 5.0 / 3.0, 3.0] {
+                let out = hunt_crossley_restitution(a, p);
+                assert!((out - e).abs() < 2e-6, "e {e}, p {p}: {out}");
+            }
         }
+        assert_eq!(hunt_crossley_alpha(1.0), 0.0);
+        // Lankarani–Nikravesh's ᾱ = 3(1 − e²)/4 is its first-order expansion near e = 1.
+        let a = hunt_crossley_alpha(0.99);
+        assert!((a - 0.75 * (1.0 - 0.99f64.powi(2))).abs() < 0.02 * a, "{a}");
     }
 
     #[test]

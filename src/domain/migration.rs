@@ -46,11 +46,22 @@ fn write_entry(w: &mut Writer, (k, s): &(ContactKey, ContactState)) {
     w.u64(k.a);
     w.u64(k.b);
     w.v3(&s.spring);
+    w.f64(s.approach_speed);
+    w.f64(s.twist);
 }
 
 fn read_entry(r: &mut Reader) -> (ContactKey, ContactState) {
     let (a, b) = (r.u64(), r.u64());
-    (ContactKey { a, b }, ContactState { spring: r.v3() })
+    let spring = r.v3();
+    let (approach_speed, twist) = (r.f64(), r.f64());
+    (
+        ContactKey { a, b },
+        ContactState {
+            spring,
+            approach_speed,
+            twist,
+        },
+    )
 }
 
 /// Particles `which` of `p` and the history entries with a member among them, packed.

@@ -11,7 +11,8 @@
 //!   n u64; then per field, all particles: id u64, kind u32, scale f64, position 3×f64,
 //!     velocity 3×f64, orientation 4×f64 (nalgebra storage order i, j, k, w; not renormalised),
 //!     angular_velocity 3×f64, force 3×f64, torque 3×f64, mass f64, inertia 3×f64
-//!   contacts u64; per contact: a u64, b u64, spring 3×f64 (sorted by key)
+//!   contacts u64; per contact: a u64, b u64, spring 3×f64, approach_speed f64, twist f64
+//!     (sorted by key; version 1 has the spring only, read with the other two 0)
 //!   inserter: len u64, bytes
 //!   extra: count u64; per entry: name len u64, UTF-8 name, data len u64, bytes
 //! checksum: u64         FNV-1a 64 of everything before it
@@ -28,7 +29,9 @@ use std::path::{Path, PathBuf};
 /// First bytes of every checkpoint file.
 pub const MAGIC: &[u8; 8] = b"PDMCKPT1";
 /// Version of the layout above; bump it when the payload changes.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
+/// The oldest version this build still reads.
+pub const OLDEST_VERSION: u32 = 1;
 const HEADER_LEN: usize = 8 + 4 + 8;
 
 /// The complete restartable state of one rank.
@@ -65,7 +68,7 @@ pub enum CheckpointError {
     },
     #[error("checkpoint {path}: not a polydem checkpoint (the file does not start with PDMCKPT1)")]
     BadMagic { path: PathBuf },
-    #[error("checkpoint {path}: format version {found}, this build reads version {expected} only")]
+    #[error("checkpoint {path}: format version {found}, this build reads versions 1 to {expected}")]
     Version {
         path: PathBuf,
         found: u32,
@@ -168,6 +171,8 @@ pub fn encode_checkpoint(c: &Checkpoint, path: &Path) -> Result<Vec<u8>, Checkpo
         u(&mut b, k.a);
         u(&mut b, k.b);
         v3(&mut b, std::slice::from_ref(&s.spring));
+        f(&mut b, s.approach_speed);
+        f(&mut b, s.twist);
     }
     u(&mut b, c.inserter.len() as u64);
     b.extend_from_slice(&c.inserter);
@@ -220,7 +225,7 @@ pub fn decode_checkpoint(bytes: &[u8], path: &Path) -> Result<Checkpoint, Checkp
         )));
     }
     let found = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
-    if found != FORMAT_VERSION {
+    if !(OLDEST_VERSION..=FORMAT_VERSION).contains(&found) {
         return Err(CheckpointError::Version {
             path: path_buf(),
             found,
@@ -267,7 +272,7 @@ pub fn decode_checkpoint(bytes: &[u8], path: &Path) -> Result<Checkpoint, Checkp
         b: &bytes[HEADER_LEN..body_end],
         at: 0,
     };
-    decode_payload(&mut r).map_err(|what| match what {
+    decode_payload(&mut r, found).map_err(|what| match what {
         ReadFail::Short(what) => truncated(what),
         ReadFail::Bad(what) => CheckpointError::Corrupt {
             path: path_buf(),
@@ -345,7 +350,7 @@ impl<'a> Reader<'a> {
     }
 }
 
-fn decode_payload(r: &mut Reader) -> Result<Checkpoint, ReadFail> {
+fn decode_payload(r: &mut Reader, version: u32) -> Result<Checkpoint, ReadFail> {
     let step = r.u64("step")?;
     let time = r.f64("time")?;
     let next_id = r.u64("next_id")?;
@@ -374,13 +379,24 @@ fn decode_payload(r: &mut Reader) -> Result<Checkpoint, ReadFail> {
         mass: r.vec(n, "mass", |r, w| r.f64(w))?,
         inertia: r.vec(n, "inertia", v3)?,
     };
-    let m = r.count(40, "contact count")?;
+    let per_contact = if version >= 2 { 56 } else { 40 };
+    let m = r.count(per_contact, "contact count")?;
     let entries = r.vec(m, "contact", |r, w| {
         let key = ContactKey {
             a: r.u64(w)?,
             b: r.u64(w)?,
         };
-        let state = ContactState { spring: r.v3(w)? };
+        let spring = r.v3(w)?;
+        let (approach_speed, twist) = if version >= 2 {
+            (r.f64(w)?, r.f64(w)?)
+        } else {
+            (0.0, 0.0)
+        };
+        let state = ContactState {
+            spring,
+            approach_speed,
+            twist,
+        };
         Ok((key, state))
     })?;
     if entries.windows(2).any(|e| e[0].0 >= e[1].0) {

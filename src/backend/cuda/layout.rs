@@ -41,8 +41,28 @@ impl GridParams {
     }
 }
 
+/// Doubles per contact in the device's contact history: the tangential spring ξ (3), the
+/// approach speed at first touch and the twist angle (`contact::ContactState`, in that order;
+/// `cuda/contact_law.cuh: PD_HISTORY_WIDTH`).
+pub const HISTORY_WIDTH: usize = 5;
+
+/// The history record of `state`, in the device's layout.
+pub fn history_record(state: &crate::contact::ContactState) -> [f64; HISTORY_WIDTH] {
+    let s = &state.spring;
+    [s.x, s.y, s.z, state.approach_speed, state.twist]
+}
+
+/// The contact state of a device history record (`record` holds [`HISTORY_WIDTH`] doubles).
+pub fn history_state(record: &[f64]) -> crate::contact::ContactState {
+    crate::contact::ContactState {
+        spring: nalgebra::Vector3::new(record[0], record[1], record[2]),
+        approach_speed: record[3],
+        twist: record[4],
+    }
+}
+
 /// Contact parameters of one pair of materials (`cuda/contact_law.cuh: PairMaterial`): the
-/// restitution, friction and the damping table γ(e, p), with ln e and sqrt((ln e)² + π²) of the
+/// restitution, friction and the Hunt–Crossley coefficient ᾱ(e), with ln e and sqrt((ln e)² + π²) of the
 /// tangential dashpot (`contact::law`), computed here so that the kernels take no logarithm per
 /// contact and round as the CPU backend does.
 #[repr(C)]
@@ -50,19 +70,15 @@ impl GridParams {
 pub struct PairMaterial {
     pub restitution: f64,
     pub friction: f64,
-    pub damping: [f64; crate::contact::restitution::TABLE_SIZE],
+    pub damping: f64,
     pub log_restitution: f64,
     pub log_norm: f64,
 }
 
 impl PairMaterial {
-    /// The parameters of a pair with restitution `e` (which also selects the damping table
-    /// `damping`) and friction coefficient `friction`.
-    pub fn new(
-        restitution: f64,
-        friction: f64,
-        damping: [f64; crate::contact::restitution::TABLE_SIZE],
-    ) -> Self {
+    /// The parameters of a pair with restitution `e`, friction coefficient `friction` and
+    /// damping coefficient `damping` = ᾱ(e) (as `Simulation::new` computes it).
+    pub fn new(restitution: f64, friction: f64, damping: f64) -> Self {
         // The same expressions as contact::law (`e.ln()`, `powi(2)`), for the same bits.
         let log_restitution = restitution.ln();
         let log_norm = (log_restitution.powi(2) + std::f64::consts::PI.powi(2)).sqrt();

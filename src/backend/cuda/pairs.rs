@@ -2,7 +2,7 @@
 //! particle arrays, the int2 pair list and the per-particle references, and the contact
 //! history carried over a rebuild (kernels in `cuda/scan.cu` and `cuda/neighbor.cu`).
 
-use super::layout::staged_planes_bytes;
+use super::layout::{HISTORY_WIDTH, staged_planes_bytes};
 use super::simulation::{
     CudaError, CudaSimulation, DevicePairs, HistorySource, PLANE_BUCKETS, ParticleView, cfg, ptr,
     zeros,
@@ -139,7 +139,7 @@ impl CudaSimulation {
             (None, None) => HistorySource {
                 offset: zeros::<u32>(&st, n + 1)?,
                 partner: zeros::<u64>(&st, 1)?,
-                spring: zeros::<f64>(&st, 3)?,
+                spring: zeros::<f64>(&st, HISTORY_WIDTH)?,
             },
         };
         // Bin and sort by cell (global id within a cell).
@@ -236,7 +236,7 @@ impl CudaSimulation {
                 .launch(cfg(n))?;
         }
         // The springs of pairs that survive, found by (lower-id member, partner id).
-        let mut spring_in = zeros::<f64>(&st, 3 * np)?;
+        let mut spring_in = zeros::<f64>(&st, HISTORY_WIDTH * np)?;
         unsafe {
             st.launch_builder(self.k.get("remap_history"))
                 .arg(&npi)
@@ -258,7 +258,7 @@ impl CudaSimulation {
             pairs,
             axes: zeros::<f64>(&st, 3 * np)?,
             spring_in,
-            spring_out: zeros::<f64>(&st, 3 * np)?,
+            spring_out: zeros::<f64>(&st, HISTORY_WIDTH * np)?,
             forces: zeros::<f64>(&st, 9 * np)?,
             energy: zeros::<f64>(&st, np)?,
             contact: zeros::<u32>(&st, np)?,
@@ -372,7 +372,7 @@ impl CudaSimulation {
             gather(buf, w)?;
         }
         if let Some(w) = &mut self.walls {
-            let width = 3 * w.n;
+            let width = HISTORY_WIDTH * w.n;
             gather(&mut w.spring_in, width)?;
         }
         let g32 = self.k.get("gather_u32").clone();

@@ -9,7 +9,7 @@ use super::kernels::{KernelConfig, Precision, compile};
 #[cfg(doc)]
 use super::layout::staged_planes_bytes;
 use super::layout::{GridParams, PairMaterial};
-use crate::contact::DampingTable;
+use crate::contact::hunt_crossley_alpha;
 use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
 use crate::neighbor::Bounds;
 use crate::pipeline::{Simulation, SimulationError};
@@ -403,7 +403,7 @@ impl CudaSimulation {
         };
         let device = ctx.name().unwrap_or_else(|_| format!("GPU {ordinal}"));
         let s = &host.scene;
-        // Materials: restitution, friction and damping table per pair (as Simulation::new).
+        // Materials: restitution, friction and damping coefficient per pair (as Simulation::new).
         let n_mat = s.materials.len();
         let mut materials = Vec::with_capacity(n_mat * n_mat);
         for a in 0..n_mat {
@@ -413,7 +413,7 @@ impl CudaSimulation {
                 materials.push(PairMaterial::new(
                     pp.restitution,
                     pp.friction,
-                    *DampingTable::new(e).values(),
+                    hunt_crossley_alpha(e),
                 ));
             }
         }

@@ -2,9 +2,10 @@
 //! host-side insertion: particles in the device's order, the contact history rebuilt from the
 //! pair slots and per-particle wall slots, and the step statistics.
 
+use super::layout::{HISTORY_WIDTH, history_state};
 use super::simulation::{CudaError, CudaSimulation};
 use super::upload::{flat_quats, flat3};
-use crate::contact::{ContactHistory, ContactKey, ContactState};
+use crate::contact::{ContactHistory, ContactKey};
 use crate::pipeline::Simulation;
 use cudarc::driver::CudaSlice;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -81,13 +82,7 @@ impl CudaSimulation {
                     contacts += u64::from(counted);
                     entries.push((
                         ContactKey::particles(p.id[a], p.id[b]),
-                        ContactState {
-                            spring: Vector3::new(
-                                spring[3 * k],
-                                spring[3 * k + 1],
-                                spring[3 * k + 2],
-                            ),
-                        },
+                        history_state(&spring[HISTORY_WIDTH * k..HISTORY_WIDTH * (k + 1)]),
                     ));
                 }
             }
@@ -110,13 +105,7 @@ impl CudaSimulation {
                         *wf += Vector3::new(f[3 * s], f[3 * s + 1], f[3 * s + 2]);
                         entries.push((
                             ContactKey::wall(p.id[i], k),
-                            ContactState {
-                                spring: Vector3::new(
-                                    spring[3 * s],
-                                    spring[3 * s + 1],
-                                    spring[3 * s + 2],
-                                ),
-                            },
+                            history_state(&spring[HISTORY_WIDTH * s..HISTORY_WIDTH * (s + 1)]),
                         ));
                     }
                 }

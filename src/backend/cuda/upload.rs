@@ -2,7 +2,7 @@
 //! their facet grids, and the particles with their contact history (as a CSR over the upload
 //! order, which the next list build carries over).
 
-use super::layout::TemplateTables;
+use super::layout::{HISTORY_WIDTH, TemplateTables, history_record};
 use super::simulation::{
     CudaError, CudaSimulation, DeviceParticles, DeviceWalls, HistorySource, WallInfo, WallState,
 };
@@ -217,20 +217,20 @@ impl CudaSimulation {
         };
         // History, as a CSR over the uploaded order, for the coming list build.
         let index: HashMap<u64, usize> = p.id.iter().enumerate().map(|(i, &g)| (g, i)).collect();
-        let mut per: Vec<Vec<(u64, Vector3<f64>)>> = vec![Vec::new(); n];
+        let mut per: Vec<Vec<(u64, [f64; HISTORY_WIDTH])>> = vec![Vec::new(); n];
         let n_walls = self.walls.as_ref().map_or(0, |w| w.n);
-        let mut wall_spring = vec![0.0f64; (n * n_walls * 3).max(1)];
+        let mut wall_spring = vec![0.0f64; (n * n_walls * HISTORY_WIDTH).max(1)];
         for (key, state) in h.history.entries() {
             let Some(&i) = index.get(&key.a) else {
                 continue;
             };
             match key.wall_index() {
                 Some(k) if k < n_walls => {
-                    let slot = (i * n_walls + k) * 3;
-                    wall_spring[slot..slot + 3].copy_from_slice(state.spring.as_slice());
+                    let slot = (i * n_walls + k) * HISTORY_WIDTH;
+                    wall_spring[slot..slot + HISTORY_WIDTH].copy_from_slice(&history_record(state));
                 }
                 Some(_) => {}
-                None => per[i].push((key.b, state.spring)),
+                None => per[i].push((key.b, history_record(state))),
             }
         }
         let mut offset = vec![0u32; n + 1];
@@ -238,13 +238,13 @@ impl CudaSimulation {
         for i in 0..n {
             for (b, sp) in &per[i] {
                 partner.push(*b);
-                spring.extend_from_slice(sp.as_slice());
+                spring.extend_from_slice(sp);
             }
             offset[i + 1] = partner.len() as u32;
         }
         if partner.is_empty() {
             partner.push(u64::MAX);
-            spring.extend_from_slice(&[0.0; 3]);
+            spring.extend_from_slice(&[0.0; HISTORY_WIDTH]);
         }
         self.pending_history = Some(HistorySource {
             offset: st.clone_htod(&offset)?,
@@ -254,7 +254,7 @@ impl CudaSimulation {
         if let Some(w) = &mut self.walls {
             let nw = (n * n_walls).max(1);
             w.spring_in = st.clone_htod(&wall_spring)?;
-            w.spring_out = st.alloc_zeros::<f64>(3 * nw)?;
+            w.spring_out = st.alloc_zeros::<f64>(HISTORY_WIDTH * nw)?;
             w.force = st.alloc_zeros::<f64>(3 * n.max(1))?;
             w.torque = st.alloc_zeros::<f64>(3 * n.max(1))?;
             w.energy = st.alloc_zeros::<f64>(n.max(1))?;
