@@ -259,6 +259,15 @@ PD_DEVICE void evaluate_pair(const PairArgs& q, size_t k) {
     PD_CLK(0)
     PD_CLK_COUNT(11)
     int status = overlap_pair_t<GeomReal, true>(ws, A, B, &g);
+#if !PD_DOUBLE_GEOMETRY
+    // f32 cannot resolve every overlap's dual hull: a thin slab between two faces lying on each
+    // other (a stack of cubes, a cube landing flat) puts its two large faces' dual points at
+    // 1/δ and the others at ~1/L. Such a pair is evaluated again in f64, the CPU's precision.
+    if (status == STATUS_HULL_DEGENERATE || status == STATUS_HULL_TOPOLOGY || status == STATUS_HULL_CAPACITY) {
+        PairWorkspace<double> wide;
+        status = overlap_pair_t<double, true>(wide, A, B, &g);
+    }
+#endif
 #if defined(PD_PHASE_CLOCKS)
     pd_t = clock64();
 #endif

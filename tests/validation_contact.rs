@@ -164,9 +164,15 @@ fn elastic_collisions(device: Device) {
             errors[0]
         );
         // Velocity Verlet with the symmetric rotation splitting is second order; over a whole
-        // collision the error often converges faster still (it was 3.7–4 when this test was
-        // written), so the check is that it is at least second order.
-        for o in &orders {
+        // collision the error often converges faster still, so the check is that it is at
+        // least second order. In mixed mode the pair geometry's f32 rounding (relative 1e-7 on
+        // V and S per step, docs/validation.md §8) leaves an energy floor of about 1e-7: a
+        // halving whose errors are both below it says nothing about the order.
+        let floor = if device == GPU_MIXED { 1e-7 } else { 0.0 };
+        for (o, w) in orders.iter().zip(errors.windows(2)) {
+            if w[0] < floor && w[1] < floor {
+                continue;
+            }
             assert!(
                 *o > 1.8,
                 "{name}: convergence order {o:.2} (errors {errors:?})"
@@ -252,12 +258,10 @@ fn restitution(device: Device) {
                         }
                     }
                     assert!(touched, "no impact");
+                    // By id: a GPU backend sorts its particles.
                     let p = &s.synced().unwrap().particles;
-                    let rebound = if wall {
-                        p.velocity[0].z
-                    } else {
-                        p.velocity[0].z - p.velocity[1].z
-                    };
+                    let v = |id: u64| p.velocity[p.id.iter().position(|&i| i == id).unwrap()].z;
+                    let rebound = if wall { v(1) } else { v(1) - v(2) };
                     (steps, rebound)
                 };
                 // The contact time from a fine run, on the CPU (it only sets the time step).
