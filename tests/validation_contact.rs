@@ -183,10 +183,11 @@ fn elastic_collisions(device: Device) {
 
 /// A 1 cm cube hits the floor (particle–wall), or a resting cube's top face (particle–particle),
 /// at 1 m/s, frictionless, without gravity, with a vertex, an edge or a face first. For
-/// e = 0.1, 0.5 and 0.95, at each of 16 phases of first touch within a step, and at Δt = t_c/33
-/// and t_c/660 of each impact (the default step and 1/20 of it), the rebound speed over the
-/// impact speed must be the prescribed restitution within 2 % (docs/contact.md §2); each phase
-/// on its own, not their mean.
+/// e = 0.1, 0.5, 0.95 and 1, at each of 16 phases of first touch within a step, and at
+/// Δt = t_c/40 and t_c/800 of each impact (a step of 0.025 of the contact time and 1/20 of it),
+/// the rebound speed over the impact speed must be the prescribed restitution within 2 %
+/// (docs/contact.md §2), each phase on its own, not their mean; and no elastic impact may gain
+/// more than 1e-3 of its energy.
 #[test]
 fn restitution_is_prescribed_at_every_phase_and_step() {
     restitution(CPU);
@@ -219,7 +220,7 @@ fn restitution(device: Device) {
             ("edge", edge, 0.005 * 2f64.sqrt()),
             ("face", face, 0.005),
         ] {
-            for e in [0.1, 0.5, 0.95] {
+            for e in [0.1, 0.5, 0.95, 1.0] {
                 // Particle–wall: the floor at z = 0. Particle–particle: a free cube (face up)
                 // centred at z = −0.005, so that its top face is the floor's plane.
                 let build_at = |dt: f64, gap: f64| {
@@ -268,7 +269,7 @@ fn restitution(device: Device) {
                 let fine = 5e-8;
                 let (steps, _) = run(build_at(fine, 1e-6), CPU);
                 let tc = steps as f64 * fine;
-                for divisions in [33.0, 660.0] {
+                for divisions in [40.0, 800.0] {
                     let dt = tc / divisions;
                     let outs: Vec<f64> = (0..16)
                         .map(|k| run(build_at(dt, 1e-6 + dt * k as f64 / 16.0), device).1)
@@ -283,6 +284,14 @@ fn restitution(device: Device) {
                         if wall { "wall" } else { "pair" },
                         error
                     );
+                    // Elastic impacts: no single one may gain more than 1e-3 of its energy.
+                    let gain = hi * hi - 1.0;
+                    if e == 1.0 && gain > 1e-3 {
+                        failures.push(format!(
+                            "{} {name}, e = 1, t_c/{divisions}: energy gain {gain:.2e}",
+                            if wall { "wall" } else { "pair" }
+                        ));
+                    }
                     if error > 0.02 {
                         failures.push(format!(
                             "{} {name}, e_in {e}, t_c/{divisions}: e_out {lo:.4} … {hi:.4}",
@@ -411,4 +420,128 @@ fn rest(device: Device) {
             "{name}: lateral wall force {f:?}"
         );
     }
+}
+
+/// A periodic box of 27 aligned 1 cm cubes (a 3 × 3 × 3 lattice in a 3.3 cm box), e = 1,
+/// μ = 0, no gravity, random velocities of about 0.5 m/s: the relative change of the total
+/// energy over 40 ms (a dense box: about 20 contacts live at any time, most of them face on
+/// face) at Δt = t_c/20, t_c/40 and t_c/80 of a face impact at 1 m/s.
+fn aligned_cubes_energy(device: Device) -> Vec<f64> {
+    let side = 0.033;
+    let text = format!(
+        r#"gravity = [0.0, 0.0, 0.0]
+[simulation]
+dt = 1e-6
+end_time = 1.0
+seed = 1
+[domain]
+min = [0.0, 0.0, 0.0]
+max = [{side}, {side}, {side}]
+periodic = [true, true, true]
+[[materials]]
+name = "m"
+youngs_modulus = {E:e}
+poisson_ratio = 0.3
+density = {RHO:e}
+[[material_pairs]]
+materials = ["m", "m"]
+restitution = 1.0
+friction = 0.0
+[[particle_types]]
+name = "p"
+material = "m"
+generator = {{ kind = "cuboid", a = 0.01, b = 0.01, c = 0.01 }}
+scale = 1.0
+[output]
+dir = "{}"
+"#,
+        std::env::temp_dir().join("polydem-validation").display()
+    );
+    // Face contact time at 1 m/s between two of the cubes: m* = m/2, c = 2E/R, A = 1e-4 m².
+    let m = RHO * 1e-6;
+    let r = (3.0 * 1e-6 / (4.0 * std::f64::consts::PI)).cbrt();
+    let tc = polydem::contact::restitution::face_contact_time(0.5 * m, 2.0 * E / r, 1e-4, 1.0);
+    let mut errors = Vec::new();
+    for divisions in [20.0, 40.0, 80.0] {
+        let dt = tc / divisions;
+        let scene = parse_scene(
+            &text.replace("dt = 1e-6", &format!("dt = {dt:e}")),
+            &repo_root(),
+            "aligned.toml",
+        )
+        .unwrap();
+        let mut sim = Simulation::new(scene).unwrap();
+        let mut rng = polydem::rng::Rng::new(7);
+        let mut id = 0;
+        for i in 0..3 {
+            for j in 0..3 {
+                for k in 0..3 {
+                    let x = Vector3::new(i as f64, j as f64, k as f64) * (side / 3.0)
+                        + Vector3::repeat(side / 6.0);
+                    let v = Vector3::new(
+                        rng.uniform() - 0.5,
+                        rng.uniform() - 0.5,
+                        rng.uniform() - 0.5,
+                    );
+                    add(
+                        &mut sim,
+                        id,
+                        x,
+                        UnitQuaternion::identity(),
+                        v,
+                        Vector3::zeros(),
+                    );
+                    id += 1;
+                }
+            }
+        }
+        sim.refresh().unwrap();
+        let e0 = total_energy(&sim);
+        let steps = (0.04 / dt).round() as u64;
+        let mut e = engine(sim, device);
+        for _ in 0..steps {
+            e.step().unwrap();
+        }
+        let s = e.synced().unwrap();
+        errors.push((total_energy(s) - e0) / e0);
+        println!(
+            "{device:?} aligned cubes, dt = t_c/{divisions}: {} steps, {} contacts at the end, relative energy change {:.3e}",
+            steps,
+            s.stats.contacts,
+            errors.last().unwrap()
+        );
+    }
+    errors
+}
+
+/// The energy change must shrink at every halving of Δt and by at least 2^(2 × 1.8) over the
+/// two halvings (second order, observed 1.97; t_c/160 gave −1.5e-4, a flattening not yet
+/// explained: docs/validation.md §3).
+#[test]
+fn aligned_cubes_in_a_periodic_box_conserve_energy_to_second_order() {
+    aligned_cubes(CPU);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn aligned_cubes_on_gpu_double() {
+    aligned_cubes(GPU_DOUBLE);
+}
+
+fn aligned_cubes(device: Device) {
+    let errors = aligned_cubes_energy(device);
+    let orders: Vec<f64> = errors
+        .windows(2)
+        .map(|w| (w[0].abs() / w[1].abs()).log2())
+        .collect();
+    println!("{device:?} aligned cubes: orders {orders:.2?}");
+    assert!(
+        orders.iter().all(|&o| o > 0.0),
+        "the energy change does not shrink with dt: {errors:?}"
+    );
+    let overall = 0.5 * (errors[0].abs() / errors[2].abs()).log2();
+    assert!(
+        overall > 1.8,
+        "order {overall:.2} over t_c/20 … t_c/80 (errors {errors:?})"
+    );
 }
