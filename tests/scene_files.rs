@@ -882,3 +882,52 @@ fn regenerate_wall_meshes() {
     hopper().write_stl(&dir.join("hopper.stl")).unwrap();
     plane().write_stl(&dir.join("plane.stl")).unwrap();
 }
+
+/// `polydem check` warns only past the contact law's safe step: the example scenes at
+/// `dt_fraction = 0.05` of a face contact time get no warning (0.05 × t could round one ulp
+/// above t/20 and did), the same scene at 0.06 gets one naming the restitution band.
+#[test]
+fn check_warns_only_past_the_safe_face_step() {
+    let root = repo_root();
+    for name in [
+        "launch/quickstart/quickstart.toml",
+        "launch/examples/pour_box.toml",
+    ] {
+        let path = root.join(name);
+        let report = polydem::run::check(&path).unwrap();
+        let fraction = report["contact_time"]["dt_fraction_of_shortest"]
+            .as_f64()
+            .unwrap();
+        assert!(
+            report.get("warnings").is_none(),
+            "{name}: dt fraction {fraction}: {report}"
+        );
+        let text = std::fs::read_to_string(&path)
+            .unwrap()
+            .replace("dt_fraction = 0.05", "dt_fraction = 0.06");
+        let dir = std::env::temp_dir().join("polydem-check-test");
+        std::fs::create_dir_all(&dir).unwrap();
+        let copy = dir.join(path.file_name().unwrap());
+        // Relative paths in the scene resolve from its folder: keep the copy beside the original.
+        let copy = if text.contains("../") {
+            path.with_file_name(format!(
+                "check-test-{}",
+                path.file_name().unwrap().to_string_lossy()
+            ))
+        } else {
+            copy
+        };
+        std::fs::write(&copy, &text).unwrap();
+        let report = polydem::run::check(&copy);
+        let _ = std::fs::remove_file(&copy);
+        let report = report.unwrap();
+        let fraction_06 = report["contact_time"]["dt_fraction_of_shortest"]
+            .as_f64()
+            .unwrap();
+        if fraction_06 > 0.05 {
+            let warnings = report["warnings"].to_string();
+            assert!(warnings.contains("restitution"), "{name}: {report}");
+        }
+        println!("{name}: dt fraction {fraction} at 0.05, {fraction_06} at 0.06");
+    }
+}
