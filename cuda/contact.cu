@@ -150,6 +150,7 @@ PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const
     params.restitution = pm.restitution;
     params.friction = pm.friction;
     params.damping = pm.damping;
+    params.rocking = !PD_SPHERES;
     ContactKinematics kin;
     kin.x_a = xa;
     kin.x_b = xb;
@@ -157,12 +158,16 @@ PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const
     kin.v_b = load3(p.velocity, b);
     kin.w_a = load3(p.angular_velocity, a);
     kin.w_b = load3(p.angular_velocity, b);
+    Quat<double> qa = load_quat(p.orientation, a), qb = load_quat(p.orientation, b);
+    V3<double> ia = load3(p.inertia, a), ib = load3(p.inertia, b);
+    kin.q_a = qa;
+    kin.q_b = qb;
+    kin.inverse_inertia_a = v3(1.0 / ia.x, 1.0 / ia.y, 1.0 / ia.z);
+    kin.inverse_inertia_b = v3(1.0 / ib.x, 1.0 / ib.y, 1.0 / ib.z);
 #if PD_SPHERES
     // The lens's centroid is on the line of centres: no lever arm, no rotational term.
     kin.effective_mass = 1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b]);
 #else
-    Quat<double> qa = load_quat(p.orientation, a), qb = load_quat(p.orientation, b);
-    V3<double> ia = load3(p.inertia, a), ib = load3(p.inertia, b);
     double area = norm(ov.dv_dxb);
     if (area > 0.0) {
         V3<double> nrm = (-ov.dv_dxb) / area;
@@ -808,7 +813,8 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
         params.restitution = pm.restitution;
         params.friction = pm.friction;
         params.damping = pm.damping;
-            V3<double> c = world.centroid;
+        params.rocking = !PD_SPHERES;
+        V3<double> c = world.centroid;
         ContactKinematics kin;
         kin.x_a = xp;
         kin.x_b = c;
@@ -818,6 +824,15 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
         kin.w_a = load3(p.angular_velocity, i);
         kin.w_b = omega;
         V3<double> ip = load3(p.inertia, i);
+        Quat<double> identity;
+        identity.w = 1.0;
+        identity.x = 0.0;
+        identity.y = 0.0;
+        identity.z = 0.0;
+        kin.q_a = qp;
+        kin.q_b = identity;
+        kin.inverse_inertia_a = v3(1.0 / ip.x, 1.0 / ip.y, 1.0 / ip.z);
+        kin.inverse_inertia_b = zero3<double>();
         double area = norm(world.dv_dxb);
         if (area > 0.0) {
             V3<double> nrm = (-world.dv_dxb) / area;

@@ -27,12 +27,15 @@ struct ContactParameters {
     double restitution;
     double friction;
     double damping; // ᾱ(e)
+    bool rocking;   // the contact area resists rocking (polyhedra, not spheres)
 };
 
 // Kinematics of a contact (law.rs `ContactKinematics`).
 struct ContactKinematics {
     V3<double> x_a, x_b, v_a, v_b, w_a, w_b;
     double effective_mass;
+    Quat<double> q_a, q_b;
+    V3<double> inverse_inertia_a, inverse_inertia_b; // zero for a wall
 };
 
 // The history of one contact (history.rs `ContactState`), PD_HISTORY_WIDTH doubles in memory.
@@ -94,6 +97,15 @@ PD_HD ContactForces no_contact_forces() {
     f.torque_b = zero3<double>();
     f.elastic_energy = 0.0;
     return f;
+}
+
+// ContactKinematics::inverse_inertia_about: u·(I_A⁻¹ + I_B⁻¹)u for the unit axis u.
+PD_HD double inverse_inertia_about(const ContactKinematics& kin, V3<double> u) {
+    V3<double> ba = rotate_inverse(kin.q_a, u);
+    V3<double> bb = rotate_inverse(kin.q_b, u);
+    V3<double> sa = v3(ba.x * kin.inverse_inertia_a.x, ba.y * kin.inverse_inertia_a.y, ba.z * kin.inverse_inertia_a.z);
+    V3<double> sb = v3(bb.x * kin.inverse_inertia_b.x, bb.y * kin.inverse_inertia_b.y, bb.z * kin.inverse_inertia_b.z);
+    return dot(sa, ba) + dot(sb, bb);
 }
 
 // U(V) = (3/4) c V^{4/3} for V > 0 (law.rs `potential`).
@@ -183,14 +195,49 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
         state->spring = zero3<double>();
     }
 
-    state->twist = 0.0; // twisting friction is not applied yet (law.rs)
+    // Couples of the contact area: rocking damping and twisting friction.
+    const double pi = 3.141592653589793;
+    V3<double> w_rel = kin.w_b - kin.w_a;
+    double wn = dot(w_rel, n);
+    V3<double> w_perp = w_rel - n * wn;
+    V3<double> couple_b = zero3<double>();
+    double disk = area / pi;
+    double rocking = norm(w_perp);
+    if (params.rocking && c_n > 0.0 && rocking > 0.0) {
+        double c_roll = 0.25 * c_n * disk;
+        double inverse = inverse_inertia_about(kin, w_perp / rocking);
+        if (dt > 0.0 && inverse > 0.0) {
+            c_roll = min_(c_roll, 1.0 / (dt * inverse));
+        }
+        couple_b -= w_perp * c_roll;
+    }
+    if (params.friction > 0.0) {
+        double k_tw = 0.5 * k_t * disk;
+        double c_tw = 0.5 * c_t * disk;
+        double inverse = inverse_inertia_about(kin, n);
+        if (dt > 0.0 && inverse > 0.0) {
+            c_tw = min_(c_tw, 1.0 / (dt * inverse));
+        }
+        double phi = state->twist + wn * dt;
+        double m_tw = -k_tw * phi - c_tw * wn;
+        double cap = params.friction * f_normal * (2.0 / 3.0) * sqrt_(disk);
+        if (abs_(m_tw) > cap) {
+            m_tw = copysign(cap, m_tw);
+            phi = k_tw > 0.0 ? -m_tw / k_tw : 0.0;
+        }
+        state->twist = phi;
+        couple_b += n * m_tw;
+    } else {
+        state->twist = 0.0;
+    }
 
     V3<double> f_line = n * (f_normal - f_elastic) + tangential;
     ContactForces out;
     out.force_b = n * f_normal + tangential;
-    out.torque_b = torque_b_el + cross(r_e - kin.x_b, f_line);
-    out.torque_a = torque_a_el + cross(r_e - kin.x_a, -f_line);
-    out.elastic_energy = energy + 0.5 * k_t * norm2(state->spring);
+    out.torque_b = torque_b_el + cross(r_e - kin.x_b, f_line) + couple_b;
+    out.torque_a = torque_a_el + cross(r_e - kin.x_a, -f_line) - couple_b;
+    out.elastic_energy =
+        energy + 0.5 * k_t * norm2(state->spring) + 0.25 * k_t * disk * state->twist * state->twist;
     return out;
 }
 

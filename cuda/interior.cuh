@@ -87,6 +87,14 @@ PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<T>* a, int na, const Plane
     int active[4] = {first, 0, 0, 0};
     int n_active = 1;
 
+    // The best point met (interior.rs): its radius is its smallest slack over every plane.
+    V3<T> best_point = start;
+    T best_radius = tmax;
+    for (int i = 0; i < m; ++i) {
+        const Plane<T>& p = PD_CC_PLANE(i);
+        best_radius = min_(best_radius, p.offset - dot(p.normal, start));
+    }
+
     int steps = 0;
     while (steps < PD_CHEBYSHEV_MAX_STEPS) {
         steps += 1;
@@ -161,7 +169,47 @@ PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<T>* a, int na, const Plane
             }
         }
         if (enter < 0) break; // unbounded cannot happen for bounded polytopes; stop defensively
-        z = add4(z, scale4(d, step));
+        // A step along a direction made of round-off that breaks the active constraints it is
+        // meant to keep is not taken (interior.rs gives the case).
+        V4<T> shift = scale4(d, step);
+        V4<T> moved = add4(z, shift);
+        // A step that breaks the active constraints by more than rounding is put back on them
+        // (interior.rs gives the case): z += Σ y_k q_k with Rᵀ y equal to their slacks.
+        bool broken = false;
+        for (int k = 0; k < n_active; ++k) {
+            const Plane<T>& pk = PD_CC_PLANE(active[k]);
+            V4<T> row = v4(pk.normal.x, pk.normal.y, pk.normal.z, T(1));
+            V4<T> row_abs = v4(abs_(row.x), abs_(row.y), abs_(row.z), abs_(row.w));
+            V4<T> moved_abs = v4(abs_(moved.x), abs_(moved.y), abs_(moved.z), abs_(moved.w));
+            V4<T> shift_abs = v4(abs_(shift.x), abs_(shift.y), abs_(shift.z), abs_(shift.w));
+            // The rounding bound of the slack: the magnitudes of its terms and of the step.
+            T scale = abs_(pk.offset) + dot4(row_abs, moved_abs) + dot4(row_abs, shift_abs);
+            if (pk.offset - dot4(row, moved) < -T(1024.0) * Limits<T>::epsilon() * scale) broken = true;
+        }
+        if (broken) {
+            T y[4] = {T(0), T(0), T(0), T(0)};
+            for (int k = 0; k < n_active; ++k) {
+                const Plane<T>& pk = PD_CC_PLANE(active[k]);
+                V4<T> row = v4(pk.normal.x, pk.normal.y, pk.normal.z, T(1));
+                T s = pk.offset - dot4(row, moved);
+                for (int j = 0; j < k; ++j) s -= r[j][k] * y[j];
+                y[k] = s / r[k][k];
+            }
+            for (int k = 0; k < n_active; ++k) moved = add4(moved, scale4(q[k], y[k]));
+        }
+        z = moved;
+        {
+            V3<T> point = v3(z.x, z.y, z.z);
+            T radius = tmax;
+            for (int i = 0; i < m; ++i) {
+                const Plane<T>& p = PD_CC_PLANE(i);
+                radius = min_(radius, p.offset - dot(p.normal, point));
+            }
+            if (radius > best_radius) {
+                best_point = point;
+                best_radius = radius;
+            }
+        }
         if (n_active < 4) {
             active[n_active] = enter;
             n_active += 1;
@@ -174,6 +222,10 @@ PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<T>* a, int na, const Plane
     for (int i = 0; i < m; ++i) {
         const Plane<T>& p = PD_CC_PLANE(i);
         radius = min_(radius, p.offset - dot(p.normal, point));
+    }
+    if (best_radius > radius) {
+        point = best_point;
+        radius = best_radius;
     }
     out.point = point;
     out.radius = radius;

@@ -740,6 +740,7 @@ impl Simulation {
             restitution: pair.restitution,
             friction: pair.friction,
             damping: self.damping[ma * s.materials.len() + mb],
+            rocking: !s.templates[s.particle_types[p.kind[i] as usize].template].sphere,
         }
     }
 
@@ -830,6 +831,10 @@ impl Simulation {
                     } else {
                         normal_effective_mass(p, &[(a, p.position[a]), (b, xb)], &overlap)
                     },
+                    q_a: p.orientation[a],
+                    q_b: p.orientation[b],
+                    inverse_inertia_a: p.inertia[a].map(|x| 1.0 / x),
+                    inverse_inertia_b: p.inertia[b].map(|x| 1.0 / x),
                 };
                 let forces = contact_forces(&params, &overlap, &kin, &mut state, dt);
                 Ok(PairOutcome {
@@ -903,6 +908,10 @@ impl Simulation {
                             w_a: p.angular_velocity[i],
                             w_b: s.walls[k].motion.angular_velocity(),
                             effective_mass: normal_effective_mass(p, &[(i, p.position[i])], &world),
+                            q_a: p.orientation[i],
+                            q_b: nalgebra::UnitQuaternion::identity(),
+                            inverse_inertia_a: p.inertia[i].map(|x| 1.0 / x),
+                            inverse_inertia_b: Vector3::zeros(),
                         };
                         let f = contact_forces(&params, &world, &kin, &mut state, dt);
                         out.force -= f.force_b;

@@ -391,3 +391,61 @@ fn extreme_inputs_give_finite_answers() {
         }
     }
 }
+
+/// A 2 cm cube resting face-down 0.56 nm deep on a two-triangle wall, in the pose (to the last
+/// bit) a cube carried on a turntable had when its contact vanished for a step: tilted by
+/// 1e-12 rad, its overlap with the facet's prism is a slab whose thick end is 1e-14 m thicker.
+/// The inscribed-ball LP's projected objective then points along the slab with a norm of 1e-13
+/// and the ratio test asks for a step of 1e10, whose rounding carried the point 4e-6 m out of
+/// the slab: the contact was reported empty. The volume must be the slab's, A δ, within 1e-6.
+#[test]
+fn a_resting_face_tilted_by_round_off_keeps_its_wall_contact() {
+    use nalgebra::{Point3, Quaternion, Translation3};
+    use polydem::contact::WallMesh;
+    use polydem::geometry::OverlapWorkspace;
+    let template = ConvexTemplate::from_points(
+        "cube",
+        &[-0.01, 0.01]
+            .iter()
+            .flat_map(|&x| {
+                [-0.01, 0.01]
+                    .iter()
+                    .flat_map(move |&y| [-0.01, 0.01].map(move |z| Point3::new(x, y, z)))
+            })
+            .collect::<Vec<_>>(),
+    )
+    .unwrap();
+    let q = UnitQuaternion::new_unchecked(Quaternion::new(
+        1.0000000000000002,
+        6.129213575310238e-18,
+        5.065286064447026e-13,
+        -8.470329472543003e-21,
+    ));
+    let pose = Isometry3::from_parts(
+        Translation3::new(
+            0.050000000007180974,
+            -8.113622722630536e-17,
+            0.009999999436878541,
+        ),
+        q,
+    );
+    let a = Vector3::new(-0.25, -0.25, 0.0);
+    let b = Vector3::new(0.25, -0.25, 0.0);
+    let c = Vector3::new(0.25, 0.25, 0.0);
+    let d = Vector3::new(-0.25, 0.25, 0.0);
+    let wall = WallMesh::new(&[[a, b, c], [a, c, d]], 0.05);
+    let mut ws = PairWorkspace::<f64>::boxed();
+    ws.a.place(&template, 1.0, &pose, &Vector3::zeros());
+    let mut facets = Vec::new();
+    wall.facets_near(&pose.translation.vector, 0.0174, &mut facets);
+    let o = wall
+        .contact(&mut OverlapWorkspace::default(), &ws.a, &facets)
+        .unwrap();
+    let depth = 0.01 - pose.translation.vector.z;
+    let expect = 4e-4 * depth;
+    assert!(
+        (o.volume - expect).abs() < 1e-6 * expect,
+        "volume {:e} vs the slab's {expect:e}",
+        o.volume
+    );
+}

@@ -48,8 +48,8 @@ pub struct ContactState {
     /// (docs/contact.md §2); 0 marks a contact that has not been evaluated yet.
     #[serde(default)]
     pub approach_speed: f64,
-    /// Relative twist angle about the normal for a torsional spring (radians); reserved for
-    /// twisting friction, which is not applied yet, so it is 0.
+    /// Relative twist angle about the normal held by the torsional spring of twisting friction
+    /// (radians).
     #[serde(default)]
     pub twist: f64,
 }

@@ -20,15 +20,20 @@
 //!   `θ L²/(12 δ)` on a tilted face and pumps its rocking.
 //! - Tangential: Cundall–Strack spring (seed Eq. 17–20) at `r_e`, rotated into the current
 //!   tangent plane each step, capped at `μ |F_n|`.
-//! - Rocking damping of a face and twisting friction are not applied yet (docs/contact.md §5);
-//!   the history reserves the twist angle (always 0 for now).
+//! - Rocking damping of a polyhedron's contact area: the normal dashpot spread over the
+//!   contact disk of area `A_n` resists the relative rotation about tangent axes with the
+//!   couple `−c_n A_n/(4π) ω⊥` (`c_n = ᾱ F_e / v_ref`). Spheres have none: they have no face to
+//!   rock on, and it would brake their rolling.
+//! - Twisting friction: the tangential spring and dashpot spread over the same disk give a
+//!   torsional spring `k_t A_n/(2π)` on the relative twist angle (contact history) and dashpot
+//!   `c_t A_n/(2π)`, capped at `μ |F_n| (2/3) √(A_n/π)`, the Coulomb limit of a disk.
 //!
 //! Every dissipative term is bounded by what one explicit step can remove: its impulse never
 //! reverses the relative velocity it acts on.
 
 use super::history::ContactState;
 use crate::geometry::Overlap;
-use nalgebra::Vector3;
+use nalgebra::{UnitQuaternion, Vector3};
 
 /// Parameters of one pair of materials and particle sizes.
 #[derive(Clone, Debug)]
@@ -43,6 +48,9 @@ pub struct ContactParameters {
     pub friction: f64,
     /// Hunt–Crossley coefficient `ᾱ(e)` ([`super::restitution::hunt_crossley_alpha`]).
     pub damping: f64,
+    /// Whether the contact area resists rocking (polyhedra). A sphere's contact has no face
+    /// to rock on, and the couple would brake its rolling (viscous rolling resistance).
+    pub rocking: bool,
 }
 
 /// The kinematics of a contact.
@@ -59,6 +67,24 @@ pub struct ContactKinematics {
     pub w_b: Vector3<f64>,
     /// Effective mass `(1/m_A + 1/m_B)^{-1}` (m_A for a wall contact).
     pub effective_mass: f64,
+    /// Orientations (body → world) of A and B.
+    pub q_a: UnitQuaternion<f64>,
+    pub q_b: UnitQuaternion<f64>,
+    /// Inverse principal moments of inertia of A and B (zero for a wall).
+    pub inverse_inertia_a: Vector3<f64>,
+    pub inverse_inertia_b: Vector3<f64>,
+}
+
+impl ContactKinematics {
+    /// `u·(I_A⁻¹ + I_B⁻¹)u`: the inverse of the moment of inertia the relative rotation about
+    /// the unit axis `u` sees (world inverse inertia `R diag(1/I) Rᵀ` of each body).
+    pub fn inverse_inertia_about(&self, u: &Vector3<f64>) -> f64 {
+        let term = |q: &UnitQuaternion<f64>, inv: &Vector3<f64>| {
+            let b = q.inverse_transform_vector(u);
+            b.component_mul(inv).dot(&b)
+        };
+        term(&self.q_a, &self.inverse_inertia_a) + term(&self.q_b, &self.inverse_inertia_b)
+    }
 }
 
 /// Forces and torques of one contact.
@@ -70,7 +96,7 @@ pub struct ContactForces {
     pub torque_a: Vector3<f64>,
     /// Torque on B about its centre.
     pub torque_b: Vector3<f64>,
-    /// Elastic energy stored: `(3/4) c V^{4/3} + k_t |ξ|² / 2`.
+    /// Elastic energy stored: `(3/4) c V^{4/3} + k_t |ξ|² / 2 + k_tw φ² / 2`.
     pub elastic_energy: f64,
 }
 
@@ -213,19 +239,53 @@ pub fn contact_forces(
         state.spring = Vector3::zeros();
     }
 
-    // Twisting friction is not applied yet (docs/contact.md §5): its angle stays 0.
-    state.twist = 0.0;
+    // Couples of the contact area: rocking damping and twisting friction.
+    let w_rel = kin.w_b - kin.w_a;
+    let wn = w_rel.dot(&n);
+    let w_perp = w_rel - n * wn;
+    let mut couple_b = Vector3::zeros();
+    let disk = area / std::f64::consts::PI; // a² of the disk of area A_n
+    let rocking = w_perp.norm();
+    if params.rocking && c_n > 0.0 && rocking > 0.0 {
+        let mut c_roll = 0.25 * c_n * disk;
+        let inverse = kin.inverse_inertia_about(&(w_perp / rocking));
+        if dt > 0.0 && inverse > 0.0 {
+            c_roll = c_roll.min(1.0 / (dt * inverse));
+        }
+        couple_b -= w_perp * c_roll;
+    }
+    if params.friction > 0.0 {
+        let k_tw = 0.5 * k_t * disk;
+        let mut c_tw = 0.5 * c_t * disk;
+        let inverse = kin.inverse_inertia_about(&n);
+        if dt > 0.0 && inverse > 0.0 {
+            c_tw = c_tw.min(1.0 / (dt * inverse));
+        }
+        let mut phi = state.twist + wn * dt;
+        let mut m_tw = -k_tw * phi - c_tw * wn;
+        let cap = params.friction * f_normal * (2.0 / 3.0) * disk.sqrt();
+        if m_tw.abs() > cap {
+            m_tw = cap.copysign(m_tw);
+            phi = if k_tw > 0.0 { -m_tw / k_tw } else { 0.0 };
+        }
+        state.twist = phi;
+        couple_b += n * m_tw;
+    } else {
+        state.twist = 0.0;
+    }
 
     // The elastic force and torque as the potential gives them; the damping and the friction
     // at r_e.
     let f_line = n * (f_normal - f_elastic) + tangential;
     let force_b = n * f_normal + tangential;
-    let torque_b = torque_b_el + (r_e - kin.x_b).cross(&f_line);
-    let torque_a = torque_a_el + (r_e - kin.x_a).cross(&(-f_line));
+    let torque_b = torque_b_el + (r_e - kin.x_b).cross(&f_line) + couple_b;
+    let torque_a = torque_a_el + (r_e - kin.x_a).cross(&(-f_line)) - couple_b;
     ContactForces {
         force_b,
         torque_a,
         torque_b,
-        elastic_energy: energy + 0.5 * k_t * state.spring.norm_squared(),
+        elastic_energy: energy
+            + 0.5 * k_t * state.spring.norm_squared()
+            + 0.25 * k_t * disk * state.twist * state.twist,
     }
 }

@@ -80,6 +80,18 @@ pub fn chebyshev_centre<T: Real>(
     let mut n_active = 1;
     active[0] = first;
 
+    // The radius of a point: its smallest slack over every plane.
+    let radius_at = |x: &Vector3<T>| {
+        let mut radius = T::max_value().unwrap_or(T::one());
+        for i in 0..m {
+            radius = radius.min(plane(i).offset - plane(i).normal.dot(x));
+        }
+        radius
+    };
+    // The best point met: a step that rounding has spoilt cannot lose a better one.
+    let mut best_point = start;
+    let mut best_radius = radius_at(&start);
+
     let mut steps = 0;
     while steps < MAX_STEPS {
         steps += 1;
@@ -164,18 +176,54 @@ pub fn chebyshev_centre<T: Real>(
         let Some(i) = enter else {
             break; // unbounded cannot happen for bounded polytopes; stop defensively
         };
-        z += d * step;
+        // Two nearly opposite planes (a face lying on a face: a slab a few nanometres thick,
+        // tilted by 1e-12) leave a projected objective of 1e-13 that points along the slab, and
+        // a step of 1e10 along it: the rounding of d's other components, multiplied by that
+        // step, carried the point micrometres out of the slab, the radius came out negative
+        // and an overlap was reported as none. When a step breaks the active constraints by
+        // more than rounding, the point is put back on them: the least change z += Σ y_k q_k
+        // with Rᵀ y equal to their slacks.
+        let shift = d * step;
+        let mut moved = z + shift;
+        let broken = active[..n_active].iter().any(|&j| {
+            // The rounding bound of the slack: the magnitudes of its terms and of the step.
+            let r = row(j).abs();
+            let scale = plane(j).offset.abs() + r.dot(&moved.abs()) + r.dot(&shift.abs());
+            slack(j, &moved) < -T::of(1024.0) * T::EPSILON * scale
+        });
+        if broken {
+            let mut y = [T::zero(); 4];
+            for k in 0..n_active {
+                let mut s = slack(active[k], &moved);
+                for (j, yj) in y.iter().enumerate().take(k) {
+                    s -= r[j][k] * *yj;
+                }
+                y[k] = s / r[k][k];
+            }
+            for (qk, yk) in q.iter().zip(y.iter()).take(n_active) {
+                moved += qk * *yk;
+            }
+        }
+        z = moved;
+        let point = Vector3::new(z.x, z.y, z.z);
+        let radius = radius_at(&point);
+        if radius > best_radius {
+            best_point = point;
+            best_radius = radius;
+        }
         if n_active < 4 {
             active[n_active] = i;
             n_active += 1;
         }
     }
 
-    // The radius is recomputed from the final point so that it is exact for the point returned.
-    let point = Vector3::new(z.x, z.y, z.z);
-    let mut radius = T::max_value().unwrap_or(T::one());
-    for i in 0..m {
-        radius = radius.min(plane(i).offset - plane(i).normal.dot(&point));
+    // The radius is recomputed from the final point so that it is exact for the point returned;
+    // the best point met is returned if it is better.
+    let mut point = Vector3::new(z.x, z.y, z.z);
+    let mut radius = radius_at(&point);
+    if best_radius > radius {
+        point = best_point;
+        radius = best_radius;
     }
     ChebyshevCentre {
         point,
