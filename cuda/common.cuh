@@ -23,6 +23,7 @@ typedef unsigned int pd_u32;
 #else
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #define PD_HD inline
 #define PD_DEVICE inline
 typedef uint64_t pd_u64;
@@ -49,6 +50,51 @@ PD_HD float max_(float a, float b) { return a > b ? a : b; }
 PD_HD double cbrt_(double x) { return cbrt(x); }
 PD_HD float cbrt_(float x) { return cbrtf(x); }
 PD_HD int min_(int a, int b) { return a < b ? a : b; }
+
+// The bits of a double and back (Rust's f64::to_bits / from_bits).
+PD_HD pd_u64 double_bits(double x) {
+#if defined(__CUDACC_RTC__) || defined(__CUDACC__)
+    return (pd_u64)__double_as_longlong(x);
+#else
+    pd_u64 b;
+    std::memcpy(&b, &x, sizeof b);
+    return b;
+#endif
+}
+PD_HD double bits_double(pd_u64 b) {
+#if defined(__CUDACC_RTC__) || defined(__CUDACC__)
+    return __longlong_as_double((long long)b);
+#else
+    double x;
+    std::memcpy(&x, &b, sizeof x);
+    return x;
+#endif
+}
+
+// The cube root from + − × ÷ and bit operations only (Rust geometry::real::portable_cbrt, whose
+// docs give the method): the CPU and the GPU round it identically, where libm's cbrt and CUDA's
+// differ in the last bit for some arguments.
+PD_HD double portable_cbrt(double x) {
+    double sign = 1.0;
+    if (x < 0.0) {
+        x = -x;
+        sign = -1.0;
+    }
+    if (x == 0.0 || !(x - x == 0.0)) return sign * x;
+    pd_u64 bits = double_bits(x);
+    pd_i64 adjust = 0;
+    if ((bits >> 52) == 0) {
+        bits = double_bits(x * 18014398509481984.0); // 2^54
+        adjust = -18;
+    }
+    pd_i64 e = (pd_i64)((bits >> 52) & 0x7ff) - 1023;
+    pd_i64 k = e >= 0 ? e / 3 : -((2 - e) / 3);
+    pd_i64 r = e - 3 * k;
+    double m = bits_double((bits & 0x000fffffffffffffULL) | (((pd_u64)(1023 + r)) << 52));
+    double y = 0.5 + 0.25 * m;
+    for (int i = 0; i < 6; ++i) y -= (y * y * y - m) / (3.0 * y * y);
+    return sign * bits_double((pd_u64)((pd_i64)double_bits(y) + (k + adjust) * ((pd_i64)1 << 52)));
+}
 PD_HD int max_(int a, int b) { return a > b ? a : b; }
 
 // Machine epsilon and the largest finite value of T (Rust's f64::EPSILON / f32::EPSILON).

@@ -109,17 +109,17 @@ PD_HD double inverse_inertia_about(const ContactKinematics& kin, V3<double> u) {
 }
 
 // U(V) = (3/4) c V^{4/3} for V > 0 (law.rs `potential`).
-PD_HD double contact_potential(double c, double v) { return v > 0.0 ? 0.75 * c * v * cbrt_(v) : 0.0; }
+PD_HD double contact_potential(double c, double v) { return v > 0.0 ? 0.75 * c * v * portable_cbrt(v) : 0.0; }
 
 // The mean slope of U over the volume window [lo, hi] (law.rs `mean_pressure`).
 PD_HD double mean_pressure(double c, double lo, double hi) {
     if (hi <= lo) {
-        return c * cbrt_(max_(hi, 0.0));
+        return c * portable_cbrt(max_(hi, 0.0));
     }
     if (lo <= 0.0) {
         return contact_potential(c, hi) / (hi - lo);
     }
-    double x = cbrt_(lo), y = cbrt_(hi);
+    double x = portable_cbrt(lo), y = portable_cbrt(hi);
     return 0.75 * c * (x + y) * (x * x + y * y) / (x * x + x * y + y * y);
 }
 
@@ -148,7 +148,7 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     double stiffness = params.normal_stiffness;
     double sweep = 0.5 * abs_(vn) * dt * area;
     double pressure = sweep > 0.5 * volume ? mean_pressure(stiffness, volume - sweep, volume + sweep)
-                                           : stiffness * cbrt_(volume); // law.rs WINDOW_FRACTION
+                                           : stiffness * portable_cbrt(volume); // law.rs WINDOW_FRACTION
     if (first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0) {
         pressure += contact_potential(stiffness, volume - sweep) / (2.0 * sweep);
     }

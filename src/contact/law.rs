@@ -33,6 +33,7 @@
 
 use super::history::ContactState;
 use crate::geometry::Overlap;
+use crate::geometry::portable_cbrt;
 use nalgebra::{UnitQuaternion, Vector3};
 
 /// Parameters of one pair of materials and particle sizes.
@@ -107,7 +108,7 @@ pub const WINDOW_FRACTION: f64 = 0.5;
 /// `U(V) = (3/4) c V^{4/3}` for `V > 0`, else 0.
 fn potential(c: f64, v: f64) -> f64 {
     if v > 0.0 {
-        0.75 * c * v * v.cbrt()
+        0.75 * c * v * portable_cbrt(v)
     } else {
         0.0
     }
@@ -119,12 +120,12 @@ fn potential(c: f64, v: f64) -> f64 {
 /// (x² + x y + y²)`, which has no cancellation as the window closes.
 pub fn mean_pressure(c: f64, lo: f64, hi: f64) -> f64 {
     if hi <= lo {
-        return c * hi.max(0.0).cbrt();
+        return c * portable_cbrt(hi.max(0.0));
     }
     if lo <= 0.0 {
         return potential(c, hi) / (hi - lo);
     }
-    let (x, y) = (lo.cbrt(), hi.cbrt());
+    let (x, y) = (portable_cbrt(lo), portable_cbrt(hi));
     0.75 * c * (x + y) * (x * x + y * y) / (x * x + x * y + y * y)
 }
 
@@ -165,7 +166,7 @@ pub fn contact_forces(
     let mut pressure = if sweep > WINDOW_FRACTION * volume {
         mean_pressure(stiffness, volume - sweep, volume + sweep)
     } else {
-        stiffness * volume.cbrt()
+        stiffness * portable_cbrt(volume)
     };
     // A contact that began during the last drift (the last position, V − 2 A s, was apart)
     // missed the part of the last kick's window that lay in contact, [0, V − A s]: it is
