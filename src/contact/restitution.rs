@@ -7,56 +7,10 @@
 //! ([`hunt_crossley_alpha`], docs/contact.md §2), whose restitution is the same for every
 //! exponent and which is bounded wherever the elastic force is, first touch of a face included.
 //!
-//! The viscous alternative `F_d = −γ √(m k_loc) δ̇`, `k_loc = dF/dδ = p F/δ`, also gives one
-//! restitution for every mass, stiffness and speed (the substitution `δ = a X`, `t = b T` turns
-//! the impact into `X'' = −X^p − γ √p X^{(p−1)/2} X'`), but `γ` depends on `p`, and for a face
-//! (`p = 1/3`) its coefficient is unbounded at first touch, so an explicit step's phase decides
-//! the restitution. [`restitution_of`] and [`damping_for`] solve that model; the tests keep it as
-//! the reference the time-step estimates were derived with.
-
-/// Restitution of the dimensionless impact `X'' = −X^p − γ √p X^{(p−1)/2} X'`, `X(0) = 0`,
-/// `X'(0) = 1`: minus the velocity when X returns to zero (or when the net force would turn
-/// attractive, after which the bodies separate freely).
-pub fn restitution_of(gamma: f64, p: f64) -> f64 {
-    let rate = |x: f64| gamma * p.sqrt() * x.max(0.0).powf((p - 1.0) / 2.0);
-    let accel = |x: f64, v: f64| {
-        if x <= 0.0 {
-            return 0.0;
-        }
-        // No attraction: the net normal force is clamped at zero.
-        -(x.powf(p) + rate(x) * v).max(0.0)
-    };
-    // For p < 1 the damping rate grows without bound as X → 0 (the face–face spring is
-    // infinitely stiff at first touch), so the step follows it: rate·h ≤ 0.05 keeps RK4 stable
-    // and accurate there, and h ≤ 2e-3 resolves the rest of the impact (which lasts a few units).
-    // The impact starts at X = 1e-12 rather than 0, where the rate is infinite.
-    let (mut x, mut v) = (1e-12, 1.0);
-    for _ in 0..5_000_000 {
-        let h = (0.05 / (rate(x) + 1e-30)).min(2e-3);
-        let (k1x, k1v) = (v, accel(x, v));
-        let (k2x, k2v) = (
-            v + 0.5 * h * k1v,
-            accel(x + 0.5 * h * k1x, v + 0.5 * h * k1v),
-        );
-        let (k3x, k3v) = (
-            v + 0.5 * h * k2v,
-            accel(x + 0.5 * h * k2x, v + 0.5 * h * k2v),
-        );
-        let (k4x, k4v) = (v + h * k3v, accel(x + h * k3x, v + h * k3v));
-        let xn = x + h / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x);
-        let vn = v + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
-        if xn <= 0.0 && vn < 0.0 {
-            // Interpolate the crossing for the exit speed.
-            return -(v + (vn - v) * (x / (x - xn)));
-        }
-        if vn < 0.0 && accel(xn, vn) >= 0.0 {
-            return -vn; // force vanished while receding: the bodies part at this speed
-        }
-        x = xn;
-        v = vn;
-    }
-    0.0
-}
+//! The viscous alternative `F_d = −γ(e, p) √(m k_loc) δ̇`, `k_loc = dF/dδ = p F/δ`, which the law
+//! used before, also gives one restitution for every mass, stiffness and speed, but `γ` depends
+//! on `p`, and for a face (`p = 1/3`) its coefficient is unbounded at first touch, so an explicit
+//! step's phase decided the restitution.
 
 /// Duration of the undamped dimensionless impact `X'' = −X^p`, `X(0) = 0`, `X'(0) = 1`: the
 /// contact lasts `T = τ(p) · (m v^{1−p} / K)^{1/(1+p)}` for a spring `F = K δ^p`, mass `m` and
@@ -98,32 +52,6 @@ pub fn sphere_contact_time(m_eff: f64, c: f64, r_eff: f64, v: f64) -> f64 {
     let p = 5.0 / 3.0;
     let k = 2.0 * std::f64::consts::PI.powf(4.0 / 3.0) * c * r_eff.powf(4.0 / 3.0);
     dimensionless_duration(p) * (m_eff * v.powf(1.0 - p) / k).powf(1.0 / (1.0 + p))
-}
-
-/// `γ` such that [`restitution_of`]`(γ, p) = e`, by bisection (restitution decreases with γ):
-/// the viscous damping of a power-law spring that gives restitution `e`. The contact law no
-/// longer uses it (its coefficient is unbounded at a face's first touch); it is kept as the
-/// reference the Hunt–Crossley damping is compared with in the tests.
-pub fn damping_for(e: f64, p: f64) -> f64 {
-    if e >= 1.0 {
-        return 0.0;
-    }
-    let (mut lo, mut hi) = (0.0, 1.0);
-    while restitution_of(hi, p) > e && hi < 1e3 {
-        hi *= 2.0;
-    }
-    for _ in 0..50 {
-        let mid = 0.5 * (lo + hi);
-        if restitution_of(mid, p) > e {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-        if hi - lo < 1e-6 * hi {
-            break;
-        }
-    }
-    0.5 * (lo + hi)
 }
 
 /// The dimensionless Hunt–Crossley coefficient `ᾱ(e)` of the contact law's damping
@@ -232,38 +160,5 @@ mod tests {
         // Lankarani–Nikravesh's ᾱ = 3(1 − e²)/4 is its first-order expansion near e = 1.
         let a = hunt_crossley_alpha(0.99);
         assert!((a - 0.75 * (1.0 - 0.99f64.powi(2))).abs() < 0.02 * a, "{a}");
-    }
-
-    #[test]
-    fn undamped_impact_is_elastic_and_damping_inverts() {
-        for p in [1.0 / 3.0, 1.0, 5.0 / 3.0, 3.0] {
-            assert!((restitution_of(0.0, p) - 1.0).abs() < 1e-6, "p {p}");
-            for e in [0.1, 0.5, 0.85] {
-                let g = damping_for(e, p);
-                assert!((restitution_of(g, p) - e).abs() < 1e-5, "p {p}, e {e}");
-            }
-        }
-        // Linear spring, against the closed form of the damped oscillator: with ζ = γ/2,
-        // X = e^{−ζt} sin(ωt)/ω, ω = √(1 − ζ²); the contact ends when the net force X + γX'
-        // vanishes, and e = −X' there.
-        for gamma in [0.2f64, 0.6, 1.2] {
-            let zeta = gamma / 2.0;
-            let w = (1.0 - zeta * zeta).sqrt();
-            let x = |t: f64| (-zeta * t).exp() * (w * t).sin() / w;
-            let v = |t: f64| (-zeta * t).exp() * ((w * t).cos() - zeta * (w * t).sin() / w);
-            // x + γv > 0 at the start; its first zero by bisection on (0, π/ω].
-            let (mut lo, mut hi) = (1e-9, std::f64::consts::PI / w);
-            for _ in 0..200 {
-                let mid = 0.5 * (lo + hi);
-                if x(mid) + gamma * v(mid) > 0.0 {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-            let exact = -v(0.5 * (lo + hi));
-            let ours = restitution_of(gamma, 1.0);
-            assert!((ours - exact).abs() < 1e-6, "γ {gamma}: {ours} vs {exact}");
-        }
     }
 }
