@@ -54,6 +54,17 @@ template <class T> struct ChebyshevCentre {
     int steps;
 };
 
+// The radius of the point x: its smallest slack over the planes of a and b.
+template <class T>
+PD_HD T smallest_slack(const Plane<T>* a, int na, const Plane<T>* b, int nb, V3<T> x) {
+    T radius = Limits<T>::max();
+    for (int i = 0; i < na + nb; ++i) {
+        const Plane<T>& p = i < na ? a[i] : b[i - na];
+        radius = min_(radius, p.offset - dot(p.normal, x));
+    }
+    return radius;
+}
+
 // interior::chebyshev_centre: solves the inscribed-ball LP over the planes of a (na planes) and
 // b (nb planes), starting from `start`.
 template <class T>
@@ -89,11 +100,7 @@ PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<T>* a, int na, const Plane
 
     // The best point met (interior.rs): its radius is its smallest slack over every plane.
     V3<T> best_point = start;
-    T best_radius = tmax;
-    for (int i = 0; i < m; ++i) {
-        const Plane<T>& p = PD_CC_PLANE(i);
-        best_radius = min_(best_radius, p.offset - dot(p.normal, start));
-    }
+    T best_radius = smallest_slack(a, na, b, nb, start);
 
     int steps = 0;
     while (steps < PD_CHEBYSHEV_MAX_STEPS) {
@@ -200,11 +207,7 @@ PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<T>* a, int na, const Plane
         z = moved;
         {
             V3<T> point = v3(z.x, z.y, z.z);
-            T radius = tmax;
-            for (int i = 0; i < m; ++i) {
-                const Plane<T>& p = PD_CC_PLANE(i);
-                radius = min_(radius, p.offset - dot(p.normal, point));
-            }
+            T radius = smallest_slack(a, na, b, nb, point);
             if (radius > best_radius) {
                 best_point = point;
                 best_radius = radius;
@@ -216,13 +219,10 @@ PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<T>* a, int na, const Plane
         }
     }
 
-    // The radius is recomputed from the final point so that it is exact for the point returned.
+    // The radius is recomputed from the final point so that it is exact for the point returned;
+    // the best point met is returned if it is better.
     V3<T> point = v3(z.x, z.y, z.z);
-    T radius = tmax;
-    for (int i = 0; i < m; ++i) {
-        const Plane<T>& p = PD_CC_PLANE(i);
-        radius = min_(radius, p.offset - dot(p.normal, point));
-    }
+    T radius = smallest_slack(a, na, b, nb, point);
     if (best_radius > radius) {
         point = best_point;
         radius = best_radius;
