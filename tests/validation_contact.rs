@@ -62,16 +62,12 @@ fn in_contact(e: &mut Engine) -> bool {
     pairs + walls > 0
 }
 
-/// Runs until a contact has begun and ended on `device`; returns (steps in contact, relative
-/// energy change).
-fn collide(mut sim: Simulation, device: Device) -> (u64, f64) {
-    sim.refresh().unwrap();
-    let e0 = total_energy(&sim);
-    let mut e = engine(sim, device);
+/// Steps `e` until a contact has begun and ended; returns the steps in contact.
+fn impact(e: &mut Engine) -> u64 {
     let (mut touched, mut contact_steps) = (false, 0);
     for _ in 0..2_000_000 {
         e.step().unwrap();
-        if in_contact(&mut e) {
+        if in_contact(e) {
             touched = true;
             contact_steps += 1;
         } else if touched {
@@ -79,6 +75,16 @@ fn collide(mut sim: Simulation, device: Device) -> (u64, f64) {
         }
     }
     assert!(touched, "no collision");
+    contact_steps
+}
+
+/// Runs until a contact has begun and ended on `device`; returns (steps in contact, relative
+/// energy change).
+fn collide(mut sim: Simulation, device: Device) -> (u64, f64) {
+    sim.refresh().unwrap();
+    let e0 = total_energy(&sim);
+    let mut e = engine(sim, device);
+    let contact_steps = impact(&mut e);
     (
         contact_steps,
         (total_energy(e.synced().unwrap()) - e0).abs() / e0,
@@ -248,17 +254,7 @@ fn restitution(device: Device) {
                 };
                 let run = |s: Simulation, device: Device| {
                     let mut s = engine(s, device);
-                    let (mut touched, mut steps) = (false, 0u64);
-                    for _ in 0..2_000_000 {
-                        s.step().unwrap();
-                        if in_contact(&mut s) {
-                            touched = true;
-                            steps += 1;
-                        } else if touched {
-                            break;
-                        }
-                    }
-                    assert!(touched, "no impact");
+                    let steps = impact(&mut s);
                     // By id: a GPU backend sorts its particles.
                     let p = &s.synced().unwrap().particles;
                     let v = |id: u64| p.velocity[p.id.iter().position(|&i| i == id).unwrap()].z;
