@@ -27,6 +27,7 @@ __constant__ double pd_template_normals[PD_TEMPLATES * PD_MAX_TEMPLATE_FACES * 3
 __constant__ double pd_template_offsets[PD_TEMPLATES * PD_MAX_TEMPLATE_FACES];
 __constant__ int pd_template_counts[PD_TEMPLATES * 2]; // vertices, faces
 __constant__ double pd_template_radius[PD_TEMPLATES];  // circumscribed radius
+__constant__ double pd_template_equivalent[PD_TEMPLATES]; // volume-equivalent radius
 // Face polygons (TemplateView::face_start, face_points) in global memory: threads of a warp
 // read different faces, which constant memory would serialise.
 __device__ unsigned short pd_template_face_start[PD_TEMPLATES * (PD_MAX_TEMPLATE_FACES + 1)];
@@ -90,6 +91,7 @@ struct PairArgs {
     double* spring_out;
     PairOutputs out;
     double dt;
+    double max_overlap; // the stability guard's overlap-volume bound (src/stability.rs); inf: off
     unsigned int* error;
 };
 static_assert(sizeof(PairArgs) == PD_SIZEOF_PAIR_ARGS, "PairArgs differs from Rust's simulation::PairArgs");
@@ -134,9 +136,26 @@ PD_DEVICE bool pair_broad_phase(const PairArgs& q, size_t k, int* a, int* b, V3<
 // Stage 7 for pair k with overlap `ov` (world frame): the contact law with the tangential
 // spring, written to the pair's slots. The poses are read again rather than kept in registers
 // through the geometry, which would size every thread's registers by them.
+// The stability guard's overlap bound (Simulation::forces_with_history_step): a contact of
+// particle i whose volume exceeds `max_overlap` of the smaller particle's volume records the
+// smallest such i in error[2] as UINT_MAX − i (0: none), read by the host after the forces.
+// A particle's volume is (4π/3) R³ of its volume-equivalent radius (stability::ball_volume).
+PD_DEVICE double equivalent_volume(const ParticleView& p, size_t i) {
+    double r = pd_template_equivalent[p.tmpl[i]] * p.scale[i];
+    return 4.0 / 3.0 * 3.141592653589793 * r * r * r;
+}
+
+PD_DEVICE void guard_overlap(unsigned int* error, double ratio, double max_overlap, unsigned int i) {
+    if (ratio > max_overlap) {
+        atomicMax(&error[2], 0xFFFFFFFFu - i);
+    }
+}
+
 PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const Overlap<double>& ov) {
     const ParticleView& p = q.p;
     const PairOutputs& out = q.out;
+    guard_overlap(q.error, ov.volume / min_(equivalent_volume(p, a), equivalent_volume(p, b)), q.max_overlap,
+                  (unsigned int)min_(a, b));
     V3<double> xa = load3(p.position, a);
     V3<double> xb = load3(p.position, b);
 #if PD_PERIODIC
@@ -164,6 +183,8 @@ PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const
     kin.q_b = qb;
     kin.inverse_inertia_a = v3(1.0 / ia.x, 1.0 / ia.y, 1.0 / ia.z);
     kin.inverse_inertia_b = v3(1.0 / ib.x, 1.0 / ib.y, 1.0 / ib.z);
+    kin.sphere_radius_a = PD_SPHERES ? p.radius[a] : 0.0;
+    kin.sphere_radius_b = PD_SPHERES ? p.radius[b] : 0.0;
 #if PD_SPHERES
     // The lens's centroid is on the line of centres: no lever arm, no rotational term.
     kin.effective_mass = 1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b]);
@@ -728,14 +749,17 @@ extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, 
 #else
     PosedPolytope<double> body;
     OverlapWorkspace<double> ws;
-    place(body, template_view(p.tmpl[i]), p.scale[i], local_t, local_q, zero3<double>());
+    const TemplateView tv = template_view(p.tmpl[i]);
+    place(body, tv, p.scale[i], local_t, local_q, zero3<double>());
     Plane<double> prism[4];
     for (int q = 0; q < 4; ++q) {
         prism[q].normal = v3(prisms[16 * f + 4 * q], prisms[16 * f + 4 * q + 1], prisms[16 * f + 4 * q + 2]);
         prism[q].offset = prisms[16 * f + 4 * q + 3];
     }
     Overlap<double> o = overlap_zero<double>();
-    int status = prism_overlap(ws, body, prism, &o);
+    // WallMesh::contact: the prism overlap on the planes that can bound it.
+    int status = prism_overlap_culled(ws, body, tv, placement(p.scale[i], local_t, local_q, zero3<double>()),
+                                      tv.circumscribed_radius * p.scale[i], prism, &o);
     if (status != STATUS_OK) {
         report_error(error, status, (unsigned int)i);
         o = overlap_zero<double>();
@@ -757,7 +781,8 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
                                          const double* overlaps, const PairMaterial* materials, int n_materials,
                                          const double* spring_in, double* spring_out, double* wall_force,
                                          double* wall_torque, double* wall_energy, double* per_wall_force,
-                                         unsigned int* wall_contact, double dt) {
+                                         unsigned int* wall_contact, double dt, double max_overlap,
+                                         unsigned int* error) {
     int ii = blockIdx.x * blockDim.x + threadIdx.x;
     if (ii >= n) {
         return;
@@ -833,6 +858,8 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
         kin.q_b = identity;
         kin.inverse_inertia_a = v3(1.0 / ip.x, 1.0 / ip.y, 1.0 / ip.z);
         kin.inverse_inertia_b = zero3<double>();
+        kin.sphere_radius_a = PD_SPHERES ? p.radius[i] : 0.0;
+        kin.sphere_radius_b = 0.0;
         double area = norm(world.dv_dxb);
         if (area > 0.0) {
             V3<double> nrm = (-world.dv_dxb) / area;
@@ -844,6 +871,7 @@ extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, con
         }
         ContactHistoryRecord history = load_history(spring_in, slot);
         ContactForces f = contact_forces(params, pm, world, kin, &history, dt);
+        guard_overlap(error, world.volume / equivalent_volume(p, i), max_overlap, (unsigned int)i);
         force -= f.force_b;
         torque += f.torque_a;
         energy += f.elastic_energy;

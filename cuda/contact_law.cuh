@@ -36,6 +36,7 @@ struct ContactKinematics {
     double effective_mass;
     Quat<double> q_a, q_b;
     V3<double> inverse_inertia_a, inverse_inertia_b; // zero for a wall
+    double sphere_radius_a, sphere_radius_b;          // zero for a polyhedron or a wall
 };
 
 // The history of one contact (history.rs `ContactState`), PD_HISTORY_WIDTH doubles in memory.
@@ -123,24 +124,65 @@ PD_HD double mean_pressure(double c, double lo, double hi) {
     return 0.75 * c * (x + y) * (x * x + y * y) / (x * x + x * y + y * y);
 }
 
+// V^{2/3}, the area scale of an overlap of volume V (law.rs `volume_area_scale`).
+PD_HD double volume_area_scale(double volume) {
+    double r = portable_cbrt(volume);
+    return r * r;
+}
+
+// A body wholly inside the other (law.rs `wholly_inside`): S along the line of centres from A
+// to B (+z for coincident centres) with |S| = V^{2/3}, no surface moment.
+PD_HD Overlap<double> wholly_inside(const Overlap<double>& o, const ContactKinematics& kin) {
+    V3<double> d = kin.x_b - kin.x_a;
+    double len = norm(d);
+    V3<double> u = len > 0.0 ? d / len : v3(0.0, 0.0, 1.0);
+    Overlap<double> out = o;
+    out.dv_dxb = (-u) * volume_area_scale(o.volume);
+    out.moment_b = zero3<double>();
+    return out;
+}
+
+// Where damping and friction act (law.rs `contact_point`): a sphere's surface point on a wall,
+// the plane of the lens's rim for two spheres, the elastic line of action at the centroid's
+// depth for polyhedra.
+PD_HD V3<double> contact_point(const Overlap<double>& o, const ContactKinematics& kin, V3<double> n) {
+    double ra = kin.sphere_radius_a, rb = kin.sphere_radius_b;
+    if (ra > 0.0) {
+        if (rb <= 0.0) {
+            return kin.x_a + n * ra;
+        }
+        V3<double> d = kin.x_b - kin.x_a;
+        double d2 = norm2(d);
+        if (d2 > 0.0) {
+            return kin.x_a + d * ((d2 + ra * ra - rb * rb) / (2.0 * d2));
+        }
+    }
+    double area = norm(o.dv_dxb);
+    V3<double> offset = cross(o.dv_dxb, o.moment_b) / (area * area);
+    // x − x is 0 exactly for finite x (Rust's is_finite), NaN otherwise.
+    bool finite = offset.x - offset.x == 0.0 && offset.y - offset.y == 0.0 && offset.z - offset.z == 0.0;
+    return finite ? o.centroid + offset : o.centroid;
+}
+
 // Evaluates the contact law for an overlap, updating the contact's history over `dt`
 // (law.rs `contact_forces`; the comments there and docs/contact.md give every term). ln e
 // and its norm come from `pm`, computed once on the host with the CPU backend's expressions.
 PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMaterial& pm,
-                                   const Overlap<double>& o, const ContactKinematics& kin,
+                                   const Overlap<double>& given, const ContactKinematics& kin,
                                    ContactHistoryRecord* state, double dt) {
-    double area = norm(o.dv_dxb);
-    double volume = o.volume;
-    if (volume <= 0.0 || area <= 0.0) {
+    double volume = given.volume;
+    if (volume <= 0.0) {
         return no_contact_forces();
     }
+    Overlap<double> o = given;
+    if (!(norm(given.dv_dxb) > 1e-6 * volume_area_scale(volume))) { // law.rs INSIDE_AREA_FRACTION
+        o = wholly_inside(given, kin);
+    }
+    double area = norm(o.dv_dxb);
     V3<double> s_vec = o.dv_dxb;
     V3<double> n = (-s_vec) / area;
     V3<double> c = o.centroid;
-    V3<double> offset = cross(s_vec, o.moment_b) / (area * area);
-    // x − x is 0 exactly for finite x (Rust's is_finite), NaN otherwise.
-    bool finite = offset.x - offset.x == 0.0 && offset.y - offset.y == 0.0 && offset.z - offset.z == 0.0;
-    V3<double> r_e = finite ? c + offset : c;
+    V3<double> r_e = contact_point(o, kin, n);
     V3<double> v_rel = (kin.v_b + cross(kin.w_b, r_e - kin.x_b)) - (kin.v_a + cross(kin.w_a, r_e - kin.x_a));
     double vn = dot(v_rel, n);
     bool first_touch = state->approach_speed == 0.0;

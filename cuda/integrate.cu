@@ -74,8 +74,9 @@ PD_DEVICE double wrap_coordinate(double x, double lo, double hi) {
 // (`checks` nonzero), reduced into `flags` (zeroed by the host): flags[0] = 1 when some particle
 // moved more than half the skin since the last list build (PairList::needs_rebuild), flags[1] =
 // number of particles outside a closed domain box, flags[2] = 1 when a position or velocity is
-// not finite (Simulation::check_finite), flags[3] = smallest local index with a non-finite value
-// (for the error message), flags[4] = 1 when, with `wall_reference` not null, some particle is
+// not finite, or an owned particle's angular velocity or orientation is not, or it moves faster
+// than `max_speed` (|v| + |ω| radius; the stability guard, Simulation::check_motion), flags[3] =
+// the smallest local index of such a particle (for the error message), flags[4] = 1 when, with `wall_reference` not null, some particle is
 // farther than `wall_half_reach` from where the wall list was built (the plain difference: a
 // periodic wrap moves a particle against the walls; the host has already taken the walls' own
 // motion off the half skin). Ghosts of a decomposed run are neither kicked nor drifted (their
@@ -88,14 +89,22 @@ extern "C" __global__ void kick_drift(int n, const unsigned int* ghost, double* 
                                       double gy, double gz, double dt, int wrap, GridParams grid, int checks,
                                       const double* reference, double half_skin,
                                       const double* wall_reference, double wall_half_reach,
-                                      unsigned int* flags) {
+                                      const double* radius, double max_speed, unsigned int* flags) {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) {
         return;
     }
     V3<double> x = load3(position, i);
     V3<double> v;
-    if (!is_ghost(ghost, i)) {
+    // The owned particle's new angular velocity and orientation, for the stability guard.
+    V3<double> w_new = zero3<double>();
+    Quat<double> q_new;
+    q_new.w = 1.0;
+    q_new.x = 0.0;
+    q_new.y = 0.0;
+    q_new.z = 0.0;
+    bool owned = !is_ghost(ghost, i);
+    if (owned) {
         V3<double> w;
         half_kick_particle(i, velocity, angular_velocity, load3(force, i), load3(torque, i), mass, inertia,
                            orientation, v3(gx, gy, gz), dt, &v, &w);
@@ -134,7 +143,9 @@ extern "C" __global__ void kick_drift(int n, const unsigned int* ghost, double* 
         q.w = q.w / len;
         store3(velocity, i, v);
         store_quat(orientation, i, q);
-        store3(angular_velocity, i, rotate(q, v3(pi[0] / I.x, pi[1] / I.y, pi[2] / I.z)));
+        w_new = rotate(q, v3(pi[0] / I.x, pi[1] / I.y, pi[2] / I.z));
+        q_new = q;
+        store3(angular_velocity, i, w_new);
     } else if (checks) {
         v = load3(velocity, i);
     }
@@ -164,8 +175,15 @@ extern "C" __global__ void kick_drift(int n, const unsigned int* ghost, double* 
     if (outside) {
         atomicAdd(&flags[1], 1u);
     }
+    // Finiteness, and for owned particles the stability guard's speed bound (src/stability.rs
+    // StabilityGuard::check_motion; the host names the cause from the synced state).
     double all = x.x + x.y + x.z + v.x + v.y + v.z;
-    if (all - all != 0.0) {
+    bool bad = all - all != 0.0;
+    if (owned) {
+        double more = w_new.x + w_new.y + w_new.z + q_new.x + q_new.y + q_new.z + q_new.w;
+        bad = bad || more - more != 0.0 || norm(v) + norm(w_new) * radius[i] > max_speed;
+    }
+    if (bad) {
         flags[2] = 1u;
         atomicMin(&flags[3], (unsigned int)i);
     }

@@ -7,6 +7,7 @@
 
 #include "common.cuh"
 #include "overlap.cuh"
+#include "interior.cuh"
 #include "polytope.cuh"
 
 namespace pd {
@@ -60,6 +61,61 @@ PD_HD int prism_overlap(OverlapWorkspace<T>& ws, const PosedPolytope<T>& body, c
     }
     V3<T> start = body.centre - facet.normal * plane_distance(facet, body.centre);
     return overlap_volume(ws, body.planes, body.n_planes, prism, 4, start, out);
+}
+
+// clip::prism_overlap_culled: prism_overlap on the planes that can bound it. `body` was placed
+// from template `t` by `pl` in the prism's frame (its planes in template order; on return they
+// may be reordered, which a body placed per item does not mind). A body plane whose face has no
+// corner behind the facet plane is set aside; a side plane that holds the ball around the part
+// of the body's bounding ball (radius `radius`) behind the facet plane is dropped (exact); the
+// Chebyshev centre of the planes kept, strictly inside every plane set aside, proves the
+// overlap has an interior and is then the point it is evaluated about. Otherwise every body
+// plane is used, as in prism_overlap.
+template <class T>
+PD_HD int prism_overlap_culled(OverlapWorkspace<T>& ws, PosedPolytope<T>& body, const TemplateView& t,
+                               const Placement& pl, T radius, const Plane<T> prism[4], Overlap<T>* out) {
+    *out = overlap_zero<T>();
+    const Plane<T>& facet = prism[0];
+    for (int k = 0; k < 4; ++k) {
+        bool all_outside = true;
+        for (int i = 0; i < body.n_vertices; ++i) {
+            if (!(plane_distance(prism[k], body.vertices[i]) >= T(0))) {
+                all_outside = false;
+                break;
+            }
+        }
+        if (all_outside) return STATUS_OK;
+    }
+    const T r = radius;
+    const T tol = T(64.0) * Limits<T>::epsilon() * r;
+    set_aside_beyond(body, t, pl, prism, 1, (const Plane<T>*)0, 0, tol);
+    const T d = plane_distance(facet, body.centre);
+    V3<T> cap_centre = body.centre;
+    T cap_radius = r;
+    if (d >= T(0)) {
+        cap_centre = body.centre - facet.normal * d;
+        cap_radius = sqrt_(max_(r * r - d * d, T(0)));
+    }
+    Plane<T> kept[4];
+    kept[0] = prism[0];
+    int n_kept = 1;
+    for (int k = 1; k < 4; ++k) {
+        if (plane_distance(prism[k], cap_centre) + cap_radius > -tol) {
+            kept[n_kept] = prism[k];
+            n_kept += 1;
+        }
+    }
+    const V3<T> start = body.centre - facet.normal * d;
+    ChebyshevCentre<T> centre = chebyshev_centre(body.planes, body.n_planes, kept, n_kept, start);
+    bool proven = centre.radius > tol;
+    for (int j = 0; j < body.n_aside && proven; ++j) {
+        proven = plane_distance(body.aside[j], centre.point) < -tol;
+    }
+    if (proven) {
+        return overlap_about(ws, body.planes, body.n_planes, kept, n_kept, centre.point, out);
+    }
+    restore_aside(body);
+    return overlap_volume(ws, body.planes, body.n_planes, kept, n_kept, start, out);
 }
 
 } // namespace pd

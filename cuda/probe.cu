@@ -113,7 +113,11 @@ PD_DEVICE double* put_facet(double* out, const BodyRef& r, V3<double> origin, co
     int pst = facet_prism(tt, prism);
     Overlap<T> o = overlap_zero<T>();
     int st = 0;
-    if (pst == STATUS_OK) st = prism_overlap(ws, body, prism, &o);
+    // The wall stage's evaluation (WallMesh::contact, clip::prism_overlap_culled).
+    if (pst == STATUS_OK) {
+        st = prism_overlap_culled(ws, body, r.tpl, placement(r.scale, r.pos, r.rot, origin),
+                                  T(r.tpl.circumscribed_radius * r.scale), prism, &o);
+    }
     *out++ = (double)pst;
     *out++ = (double)st;
     return put_overlap(out, to_world(o, zero3<double>()));

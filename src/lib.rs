@@ -4,6 +4,7 @@
 //! [`geometry`] holds the exact contact-geometry queries (GJK, overlap volume by dual-space
 //! Quickhull, wall clipping), and [`probe`] exposes those queries to users and tests.
 
+pub mod accuracy;
 pub mod backend;
 pub mod contact;
 pub mod domain;
@@ -17,4 +18,5 @@ pub mod rng;
 pub mod run;
 pub mod scene;
 pub mod shape;
+pub mod stability;
 pub mod state;

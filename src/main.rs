@@ -49,8 +49,11 @@ enum Command {
     /// Validates a scene and prints the critical time step, the chosen dt and counts.
     Check { scene: PathBuf },
     /// Steps a scene without output and prints particle-steps per second, per-stage seconds,
-    /// contacts per particle and device bytes per particle, as JSON.
+    /// contacts per particle and device bytes per particle, as JSON. `polydem bench accuracy`
+    /// runs the reference cases of docs/accuracy.md instead: error against run time at several
+    /// dt_fraction values (both precisions on a GPU), written as accuracy.csv and accuracy.svg.
     Bench {
+        /// The scene file, or `accuracy`.
         scene: PathBuf,
         #[arg(long, value_enum, default_value = "auto")]
         backend: BackendChoice,
@@ -65,6 +68,20 @@ enum Command {
         /// Print JSON only (the default output is JSON as well; kept for scripts).
         #[arg(long)]
         json: bool,
+        /// `bench accuracy`: also the pour, over five step fractions (the short sweep runs
+        /// three).
+        #[arg(long)]
+        full: bool,
+        /// `bench accuracy`: the step fractions to run, comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        fractions: Option<Vec<f64>>,
+        /// `bench accuracy`: output folder.
+        #[arg(long, default_value = "accuracy")]
+        out: PathBuf,
+        /// `bench accuracy`: only these cases, comma-separated (default: all; the pour with
+        /// --full).
+        #[arg(long, value_delimiter = ',')]
+        cases: Option<Vec<String>>,
     },
     /// Lists GPUs, the CUDA driver and NVRTC versions, as JSON.
     Info,
@@ -202,7 +219,57 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<()> {
             warmup,
             steps,
             json: _,
+            full,
+            fractions,
+            out: out_dir,
+            cases,
         } => {
+            if scene.as_os_str() == "accuracy" && !scene.exists() {
+                use polydem::accuracy::{AccuracyOptions, FULL_FRACTIONS, SHORT_FRACTIONS};
+                use polydem::backend::Device;
+                let devices = match polydem::run::choose_backend(backend)? {
+                    "cuda" => vec![
+                        Device::Cuda {
+                            ordinal: 0,
+                            precision: polydem::backend::cuda::Precision::Double,
+                        },
+                        Device::Cuda {
+                            ordinal: 0,
+                            precision: polydem::backend::cuda::Precision::Mixed,
+                        },
+                    ],
+                    _ => vec![Device::Cpu],
+                };
+                let _ = gpu_precision;
+                let fractions = fractions.unwrap_or_else(|| {
+                    if full {
+                        FULL_FRACTIONS.to_vec()
+                    } else {
+                        SHORT_FRACTIONS.to_vec()
+                    }
+                });
+                if let Some(bad) = fractions.iter().find(|f| !(**f > 0.0 && **f <= 1.0)) {
+                    anyhow::bail!("--fractions: each must be in (0, 1], got {bad}");
+                }
+                let rows = polydem::accuracy::run_accuracy(&AccuracyOptions {
+                    devices,
+                    fractions,
+                    full,
+                    cases: cases.unwrap_or_default(),
+                    out: out_dir.clone(),
+                })?;
+                use std::io::Write;
+                writeln!(
+                    out,
+                    "{}",
+                    serde_json::to_string_pretty(&serde_json::json!({
+                        "csv": out_dir.join("accuracy.csv"),
+                        "plot": out_dir.join("accuracy.svg"),
+                        "rows": rows,
+                    }))?
+                )?;
+                return Ok(());
+            }
             let rank = comm.rank();
             let report = polydem::run::bench_on(
                 &polydem::run::BenchOptions {

@@ -30,6 +30,7 @@ use crate::geometry::{Overlap, PosedPolytope};
 use crate::integrate::{drift, half_kick};
 use crate::neighbor::{Bounds, PairList};
 use crate::scene::{Inserter, Scene, SceneError};
+use crate::stability::{Instability, StabilityGuard};
 use crate::state::Particles;
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
@@ -83,6 +84,15 @@ pub enum SimulationError {
         id: u64,
         field: &'static str,
     },
+    #[error(
+        "step {step}: particle {id} is blowing up: {problem}; its contacts: {contacts}. The time step is probably too large for the contact stiffness (`polydem check` estimates the safe one); [simulation.guard] sets the bounds"
+    )]
+    Unstable {
+        step: u64,
+        id: u64,
+        problem: String,
+        contacts: String,
+    },
 }
 
 /// The result of one pair's contact evaluation.
@@ -92,6 +102,8 @@ struct PairOutcome {
     separating_axis: Vector3<f64>,
     forces: ContactForces,
     state: Option<(ContactKey, ContactState)>,
+    /// The overlap's volume over the smaller particle's volume (the stability guard's measure).
+    penetration: f64,
 }
 
 /// A particle's total wall contribution.
@@ -102,6 +114,8 @@ struct WallOutcome {
     energy: f64,
     per_wall: Vec<(usize, Vector3<f64>)>,
     states: Vec<(ContactKey, ContactState)>,
+    /// The deepest wall contact: overlap volume over the particle's volume, and the wall.
+    penetration: (f64, usize),
 }
 
 /// A running simulation on the CPU backend.
@@ -142,6 +156,11 @@ pub struct Simulation {
     /// Hunt–Crossley `ᾱ(e)` per material pair (`a * materials + b`).
     damping: Vec<f64>,
     dirty: bool,
+    /// The stability guard's bounds (`crate::stability`), set when particles are placed.
+    pub guard: StabilityGuard,
+    /// The contact of the last force evaluation past the guard's overlap bound, if any:
+    /// (particle index, what it overlaps, overlap volume, the smaller particle volume).
+    too_deep: Option<(usize, String, f64, f64)>,
 }
 
 impl Simulation {
@@ -206,9 +225,17 @@ impl Simulation {
             radius: Vec::new(),
             damping,
             dirty: true,
+            guard: StabilityGuard {
+                enabled: false,
+                max_speed: f64::INFINITY,
+                max_overlap: f64::INFINITY,
+                speed_scale: 0.0,
+            },
+            too_deep: None,
         };
         sim.restrict_walls();
         sim.exchange()?;
+        sim.reset_guard();
         sim.forces()?;
         Ok(sim)
     }
@@ -219,6 +246,7 @@ impl Simulation {
     pub fn new_unevaluated(scene: Scene) -> Result<Self, SimulationError> {
         let mut sim = Simulation::new_empty(scene, None)?;
         sim.exchange()?;
+        sim.reset_guard();
         Ok(sim)
     }
 
@@ -283,7 +311,22 @@ impl Simulation {
         self.next_id = next_id;
         self.dirty = true;
         self.refresh_radii();
+        self.reset_guard();
         Ok(self)
+    }
+
+    /// Resolves the stability guard's bounds for the particles now placed (their speeds count
+    /// in the scene's speed scale).
+    pub fn reset_guard(&mut self) {
+        if self.radius.len() != self.particles.len() {
+            self.refresh_radii();
+        }
+        self.guard = StabilityGuard::new(
+            &self.scene.simulation.guard,
+            &self.scene,
+            &self.particles,
+            &self.radius,
+        );
     }
 
     /// Re-evaluates forces after the particle state was edited directly (tests, set-up
@@ -291,6 +334,7 @@ impl Simulation {
     pub fn refresh(&mut self) -> Result<(), SimulationError> {
         self.dirty = true;
         self.refresh_radii();
+        self.reset_guard();
         if self.parallel.is_some() {
             self.parallel_exchange()?;
         }
@@ -318,8 +362,10 @@ impl Simulation {
         self.time += self.dt;
         self.step += 1;
         self.timers.integrate += t0.elapsed().as_secs_f64();
+        self.check_motion()?;
         self.exchange()?;
         self.forces()?;
+        self.check_overlaps()?;
         let t0 = Instant::now();
         half_kick(&mut self.particles, &self.scene.gravity, self.dt);
         self.timers.integrate += t0.elapsed().as_secs_f64();
@@ -702,11 +748,68 @@ impl Simulation {
         self.stats.elastic_energy = energy;
         self.wall_forces = wall_forces;
         self.history = ContactHistory::from_entries(entries);
+        // The guard's overlap bound: the first pair past it, else the first particle with a
+        // wall contact past it (deterministic, whatever the thread count).
+        let limit = self.guard.max_overlap;
+        self.too_deep = None;
+        if limit.is_finite() {
+            // Id and volume-equivalent radius of an owned particle or a ghost.
+            let member = |x: usize| {
+                let s = &self.scene;
+                let p = if x < owned {
+                    (&self.particles, x)
+                } else {
+                    let par = self
+                        .parallel
+                        .as_deref()
+                        .expect("ghosts only in a decomposed run");
+                    (&par.ghosts.particles, x - owned)
+                };
+                let (p, x) = p;
+                let t = &s.templates[s.particle_types[p.kind[x] as usize].template];
+                (
+                    p.id[x],
+                    crate::stability::ball_volume(t.equivalent_radius * p.scale[x]),
+                )
+            };
+            let radius = |i: usize| member(i).1;
+            if let Some(k) = outcomes.iter().position(|o| o.penetration > limit) {
+                let [a, b] = self.pairs.pairs[k].map(|x| x as usize);
+                // The owned member is named (a ghost's id is still the partner's).
+                let (i, j) = if a < owned { (a, b) } else { (b, a) };
+                let size = radius(i).min(radius(j));
+                self.too_deep = Some((
+                    i,
+                    format!("particle {}", member(j).0),
+                    outcomes[k].penetration * size,
+                    size,
+                ));
+            } else if let Some(i) = wall_outcomes.iter().position(|w| w.penetration.0 > limit) {
+                let (depth, k) = wall_outcomes[i].penetration;
+                let size = radius(i);
+                self.too_deep = Some((
+                    i,
+                    format!("wall \"{}\"", self.scene.walls[k].name),
+                    depth * size,
+                    size,
+                ));
+            }
+        }
         self.timers.reduce += t0.elapsed().as_secs_f64();
         if let Some(par) = self.parallel.as_deref_mut() {
             par.cost += t_forces.elapsed().as_secs_f64();
         }
         Ok(())
+    }
+
+    /// The volume of particle `i`, as `(4π/3) R³` of its volume-equivalent radius (the
+    /// stability guard's measure, computed alike on the GPU).
+    fn equivalent_volume(&self, i: usize) -> f64 {
+        let s = &self.scene;
+        let p = &self.particles;
+        let r = s.templates[s.particle_types[p.kind[i] as usize].template].equivalent_radius
+            * p.scale[i];
+        crate::stability::ball_volume(r)
     }
 
     fn contact_parameters(
@@ -835,12 +938,16 @@ impl Simulation {
                     q_b: p.orientation[b],
                     inverse_inertia_a: p.inertia[a].map(|x| 1.0 / x),
                     inverse_inertia_b: p.inertia[b].map(|x| 1.0 / x),
+                    sphere_radius_a: if spheres { self.radius[a] } else { 0.0 },
+                    sphere_radius_b: if spheres { self.radius[b] } else { 0.0 },
                 };
                 let forces = contact_forces(&params, &overlap, &kin, &mut state, dt);
                 Ok(PairOutcome {
                     separating_axis: Vector3::zeros(),
                     forces,
                     state: Some((key, state)),
+                    penetration: overlap.volume
+                        / self.equivalent_volume(a).min(self.equivalent_volume(b)),
                 })
             })
             .collect()
@@ -873,16 +980,15 @@ impl Simulation {
                         } else {
                             let body: &mut PosedPolytope<f64> = &mut ws.a;
                             body.place(tmpl, p.scale[i], &local, &Vector3::zeros());
-                            mesh.contact(&mut ws.overlap, body, facets).map_err(|e| {
-                                SimulationError::Geometry {
+                            mesh.contact(&mut ws.overlap, body, (tmpl, p.scale[i], &local), facets)
+                                .map_err(|e| SimulationError::Geometry {
                                     step,
                                     what: format!(
                                         "particle {} and wall {}",
                                         p.id[i], s.walls[k].name
                                     ),
                                     message: e.to_string(),
-                                }
-                            })?
+                                })?
                         };
                         if o.volume <= 0.0 {
                             continue;
@@ -912,8 +1018,14 @@ impl Simulation {
                             q_b: nalgebra::UnitQuaternion::identity(),
                             inverse_inertia_a: p.inertia[i].map(|x| 1.0 / x),
                             inverse_inertia_b: Vector3::zeros(),
+                            sphere_radius_a: if tmpl.sphere { self.radius[i] } else { 0.0 },
+                            sphere_radius_b: 0.0,
                         };
                         let f = contact_forces(&params, &world, &kin, &mut state, dt);
+                        let depth = world.volume / self.equivalent_volume(i);
+                        if depth > out.penetration.0 {
+                            out.penetration = (depth, k);
+                        }
                         out.force -= f.force_b;
                         out.torque += f.torque_a;
                         out.energy += f.elastic_energy;
@@ -937,6 +1049,82 @@ impl Simulation {
             },
             other => other,
         })
+    }
+
+    /// The stability guard's finiteness and speed checks after the drift: the first particle
+    /// (by index) past a bound stops the step.
+    pub fn check_motion(&self) -> Result<(), SimulationError> {
+        let p = &self.particles;
+        let n = p.len().min(self.radius.len());
+        let found = (0..n)
+            .into_par_iter()
+            .find_first(|&i| self.guard.check_motion(p, &self.radius, i).is_some());
+        match found {
+            Some(i) => Err(self.unstable(i, self.guard.check_motion(p, &self.radius, i))),
+            None => Ok(()),
+        }
+    }
+
+    /// What the stability guard finds wrong with particle `i` now (finiteness and speed).
+    pub fn instability_of(&self, i: usize) -> Option<Instability> {
+        if self.radius.len() != self.particles.len() {
+            return None;
+        }
+        self.guard.check_motion(&self.particles, &self.radius, i)
+    }
+
+    /// The stability guard's overlap check on the last force evaluation.
+    fn check_overlaps(&self) -> Result<(), SimulationError> {
+        match &self.too_deep {
+            Some((i, partner, volume, particle)) => Err(self.unstable(
+                *i,
+                Some(Instability::Overlap {
+                    partner: partner.clone(),
+                    volume: *volume,
+                    particle_volume: *particle,
+                    fraction: self.guard.max_overlap,
+                }),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// The guard's error for particle `i` (an index of this rank's particles), naming its
+    /// contacts from the history.
+    pub fn unstable(&self, i: usize, problem: Option<Instability>) -> SimulationError {
+        let id = self.particles.id[i];
+        let mut contacts: Vec<String> = self
+            .history
+            .entries()
+            .iter()
+            .filter(|(k, _)| k.a == id || (k.wall_index().is_none() && k.b == id))
+            .map(|(k, st)| {
+                let what = match k.wall_index() {
+                    Some(w) => format!(
+                        "wall \"{}\"",
+                        self.scene.walls.get(w).map_or("?", |w| w.name.as_str())
+                    ),
+                    None => format!("particle {}", if k.a == id { k.b } else { k.a }),
+                };
+                format!("{what} (first touched at {:.3e} m/s)", st.approach_speed)
+            })
+            .collect();
+        if contacts.is_empty() {
+            contacts.push("none".into());
+        }
+        let p = &self.particles;
+        SimulationError::Unstable {
+            step: self.step,
+            id,
+            problem: format!(
+                "{} (position {:?}, velocity {:?}, angular velocity {:?})",
+                problem.map_or_else(|| "no bound is past now".to_string(), |p| p.to_string()),
+                p.position[i].as_slice(),
+                p.velocity[i].as_slice(),
+                p.angular_velocity[i].as_slice()
+            ),
+            contacts: contacts.join(", "),
+        }
     }
 
     fn check_finite(&self) -> Result<(), SimulationError> {

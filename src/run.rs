@@ -12,7 +12,7 @@ use crate::io::{
     Checkpoint, FrameView, FrameWriter, SeriesRow, SeriesWriter, WallView, read_checkpoint,
     write_atomic, write_checkpoint, write_particle_csv,
 };
-use crate::pipeline::Simulation;
+use crate::pipeline::{Simulation, SimulationError};
 use crate::scene::{
     Inserter, InserterState, Scene, check_report, face_contact_times, impact_speed, load_scene,
 };
@@ -57,7 +57,7 @@ fn scene_hash(path: &Path) -> Result<u64> {
 
 /// Picks the backend (DESIGN.md §5): `cuda` needs a usable GPU and NVRTC, `auto` takes the GPU
 /// when there is one and says in the log why it does not.
-fn choose_backend(choice: BackendChoice) -> Result<&'static str> {
+pub fn choose_backend(choice: BackendChoice) -> Result<&'static str> {
     let info = backend::cuda_info();
     match choice {
         BackendChoice::Cpu => Ok("cpu"),
@@ -246,6 +246,60 @@ fn checkpoint_of(comm: &dyn Comm, sim: &Simulation, hash: u64) -> Result<Option<
         scene_hash: hash,
         extra: vec![("removed".into(), removed.to_le_bytes().to_vec())],
     }))
+}
+
+/// A run stopped by the stability guard (`crate::stability`) or a non-finite value: the last
+/// scheduled checkpoint is left as it is, and the state at the stop is written beside it as
+/// `checkpoints/unstable-step-<step>.ckpt` for a post-mortem (or a restart with a smaller step),
+/// on one rank and when every value is finite. Other errors pass through unchanged.
+fn stopped_unstable(
+    e: anyhow::Error,
+    comm: &dyn Comm,
+    engine: &mut Engine,
+    dir: &Path,
+    hash: u64,
+) -> anyhow::Error {
+    let unstable = matches!(
+        e.downcast_ref::<SimulationError>(),
+        Some(SimulationError::Unstable { .. } | SimulationError::NonFinite { .. })
+    );
+    if !unstable {
+        return e;
+    }
+    if comm.size() > 1 {
+        return e.context("no checkpoint of the stopped state: the run is decomposed");
+    }
+    let sim = match engine.synced() {
+        Ok(sim) => sim,
+        Err(sync) => return e.context(format!("the stopped state could not be read: {sync}")),
+    };
+    let p = &sim.particles;
+    let finite = (0..p.len()).all(|i| {
+        p.position[i].iter().all(|x| x.is_finite())
+            && p.velocity[i].iter().all(|x| x.is_finite())
+            && p.angular_velocity[i].iter().all(|x| x.is_finite())
+            && p.orientation[i].coords.iter().all(|x| x.is_finite())
+    });
+    if !finite {
+        return e.context("no checkpoint of the stopped state: it holds non-finite values");
+    }
+    let path = dir
+        .join("checkpoints")
+        .join(format!("unstable-step-{}.ckpt", sim.step));
+    let written = checkpoint_of(comm, sim, hash).and_then(|c| match c {
+        Some(c) => {
+            std::fs::create_dir_all(dir.join("checkpoints"))?;
+            write_checkpoint(&path, &c).map_err(anyhow::Error::from)
+        }
+        None => Ok(()),
+    });
+    match written {
+        Ok(()) => e.context(format!(
+            "the state at the stop is in {} (the last scheduled checkpoint is unchanged)",
+            path.display()
+        )),
+        Err(w) => e.context(format!("the state at the stop could not be written: {w}")),
+    }
 }
 
 /// Writes the checkpoint (a collective call in a decomposed run; rank 0 writes) and returns
@@ -500,7 +554,9 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
         {
             break;
         }
-        engine.step()?;
+        if let Err(e) = engine.step() {
+            return Err(stopped_unstable(e, &*comm, &mut engine, &dir, hash));
+        }
         particle_steps += engine.host().particles.len() as u64;
         let (t, dt) = (engine.host().time, engine.host().dt);
         if frame_at.due(t, dt) {

@@ -3,7 +3,7 @@
 //! GPU: the headers compile as plain host C++17, `cuda/host/geometry_harness.cpp` runs them on
 //! cases written by this test, and the results are compared with
 //! `geometry::overlap::{overlap_pair, axis_separates}` and
-//! `geometry::clip::{facet_prism, prism_overlap}` in f64 and f32.
+//! `geometry::clip::{facet_prism, prism_overlap_culled}` in f64 and f32.
 //!
 //! The headers replay the Rust code operation for operation (nalgebra's orders of summation
 //! included) and every build disables floating-point contraction (`-ffp-contract=off` here,
@@ -15,7 +15,7 @@ mod common;
 use common::*;
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use polydem::geometry::Real;
-use polydem::geometry::clip::{facet_prism, prism_overlap};
+use polydem::geometry::clip::{facet_prism, prism_overlap_culled};
 use polydem::geometry::gjk_intersect;
 use polydem::geometry::overlap::{
     Overlap, OverlapError, OverlapWorkspace, PairGeometry, PairWorkspace, axis_separates,
@@ -216,6 +216,31 @@ fn facet_cases(shapes: &[Shape], n: usize, seed: u64) -> Vec<FacetCase> {
             if i % 40 == 7 {
                 tri[2] = tri[1]; // degenerate: facet_prism returns None
             }
+            if i % 6 == 5 {
+                // A face resting on the facet's plane, tilted by round-off and 1e-9 … 1e-5 of
+                // the size deep: the thin slab of a packing's wall contacts, where the
+                // interior-point LP and the plane culling take their rarer branches.
+                let f = &shapes[t].template.faces[i % shapes[t].template.faces.len()];
+                let down = UnitQuaternion::rotation_between(&f.normal, &-nrm)
+                    .unwrap_or_else(UnitQuaternion::identity);
+                let q = UnitQuaternion::from_scaled_axis(e1 * 1e-12 + e2 * 3e-13) * down;
+                let depth = r * 10f64.powf(rng.range(-9.0, -5.0));
+                let low = shapes[t]
+                    .template
+                    .vertices
+                    .iter()
+                    .map(|v| nrm.dot(&(q * v.coords)) * s)
+                    .fold(f64::MAX, f64::min);
+                let p = foot + nrm * (-low - depth);
+                let origin = if i % 2 == 0 { foot } else { Vector3::zeros() };
+                return FacetCase {
+                    t,
+                    s,
+                    pose: pose(p, q),
+                    origin,
+                    tri: tri.map(|v| v - origin),
+                };
+            }
             let origin = if i % 2 == 0 { foot } else { Vector3::zeros() };
             FacetCase {
                 t,
@@ -352,7 +377,13 @@ fn rust_facet<T: Real>(
     let Some(prism) = facet_prism(&tri) else {
         return (6, Result1::empty(0));
     };
-    let r = match prism_overlap(ws, &body, &prism) {
+    let r = match prism_overlap_culled(
+        ws,
+        &mut body,
+        (&shapes[c.t].template, c.s, &c.pose),
+        &c.origin,
+        &prism,
+    ) {
         Ok(o) => Result1 {
             status: 0,
             intersects: false,

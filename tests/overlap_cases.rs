@@ -439,7 +439,12 @@ fn a_resting_face_tilted_by_round_off_keeps_its_wall_contact() {
     let mut facets = Vec::new();
     wall.facets_near(&pose.translation.vector, 0.0174, &mut facets);
     let o = wall
-        .contact(&mut OverlapWorkspace::default(), &ws.a, &facets)
+        .contact(
+            &mut OverlapWorkspace::default(),
+            &mut ws.a,
+            (&template, 1.0, &pose),
+            &facets,
+        )
         .unwrap();
     let depth = 0.01 - pose.translation.vector.z;
     let expect = 4e-4 * depth;

@@ -143,7 +143,10 @@ void run_facet(pd::OverlapWorkspace<T>& ws, pd::PosedPolytope<T>& body, const pd
     int pst = pd::facet_prism(t, prism);
     pd::Overlap<T> o = pd::overlap_zero<T>();
     int st = 0;
-    if (pst == pd::STATUS_OK) st = pd::prism_overlap(ws, body, prism, &o);
+    if (pst == pd::STATUS_OK) {
+        st = pd::prism_overlap_culled(ws, body, r.tpl, pd::placement(r.scale, r.pos, r.rot, origin),
+                                      T(r.tpl.circumscribed_radius * r.scale), prism, &o);
+    }
     std::printf(" %d %d", pst, st);
     put_overlap(pd::to_world(o, pd::zero3<double>()));
 }

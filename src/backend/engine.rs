@@ -39,8 +39,12 @@ impl Engine {
     /// Advances one time step.
     pub fn step(&mut self) -> Result<()> {
         match self {
-            Engine::Cpu(s) => s.step().map_err(|e| anyhow!("{e}")),
-            Engine::Cuda(c) => c.step().map_err(|e| anyhow!("{e}")),
+            // A simulation error keeps its type, so that the run can tell a stability stop.
+            Engine::Cpu(s) => s.step().map_err(anyhow::Error::new),
+            Engine::Cuda(c) => c.step().map_err(|e| match e {
+                super::cuda::CudaError::Simulation(s) => anyhow::Error::new(s),
+                other => anyhow!("{other}"),
+            }),
         }
     }
 

@@ -74,6 +74,10 @@ pub struct ContactKinematics {
     /// Inverse principal moments of inertia of A and B (zero for a wall).
     pub inverse_inertia_a: Vector3<f64>,
     pub inverse_inertia_b: Vector3<f64>,
+    /// Sphere radii of A and B on the sphere fast path, zero for a polyhedron or a wall (see
+    /// [`contact_point`]).
+    pub sphere_radius_a: f64,
+    pub sphere_radius_b: f64,
 }
 
 impl ContactKinematics {
@@ -129,6 +133,71 @@ pub fn mean_pressure(c: f64, lo: f64, hi: f64) -> f64 {
     0.75 * c * (x + y) * (x * x + y * y) / (x * x + x * y + y * y)
 }
 
+/// Below this fraction of the overlap's area scale `V^{2/3}`, `|S|` is taken for a body
+/// wholly inside the other ([`wholly_inside`]).
+pub const INSIDE_AREA_FRACTION: f64 = 1e-6;
+
+/// `V^{2/3}`: the area scale of an overlap of volume `V`.
+fn volume_area_scale(volume: f64) -> f64 {
+    let r = portable_cbrt(volume);
+    r * r
+}
+
+/// The overlap of a body wholly inside the other, where `S = dV/dx_B` vanishes (moving B does
+/// not change V) and what the geometry returns is round-off in magnitude and direction. Its
+/// force is defined instead: along the line of centres from A to B (+z for coincident
+/// centres), with the overlap's area scale `V^{2/3}` for `|S|` and no surface moment, so the
+/// bodies are pushed apart by `c V` and the stability guard (`crate::stability`) names them.
+pub fn wholly_inside(overlap: &Overlap<f64>, kin: &ContactKinematics) -> Overlap<f64> {
+    let d = kin.x_b - kin.x_a;
+    let len = d.norm();
+    let u = if len > 0.0 { d / len } else { Vector3::z() };
+    Overlap {
+        dv_dxb: -u * volume_area_scale(overlap.volume),
+        moment_b: Vector3::zeros(),
+        ..*overlap
+    }
+}
+
+/// Where the damping and friction of a contact act: on the elastic force's line of action, at
+/// the contact surface.
+///
+/// - Polyhedra: `r_e = c_V + (S × M_B)/|S|²`, the line of action at the centroid's depth. For a
+///   face on a face (most contacts of a packing) the centroid lies midway between the two
+///   faces, on the contact surface.
+/// - A sphere on a wall: the sphere's surface point `x_A + R_A n`, so that friction has the
+///   lever `R` of the rigid sphere and rolling means `v = ω R`. The centroid of the cap lies
+///   `2δ/3` inside the surface, which shortened the lever by that much: ω' after a sliding
+///   impact was up to 1 % low for soft spheres (δ/R ≈ 1 %).
+/// - Two spheres: the plane of the lens's rim, where the two surfaces meet, at
+///   `(d² + R_A² − R_B²)/(2d)` from A's centre along the line of centres. One point for both
+///   bodies keeps the pair's angular momentum.
+pub fn contact_point(
+    overlap: &Overlap<f64>,
+    kin: &ContactKinematics,
+    n: &Vector3<f64>,
+) -> Vector3<f64> {
+    let (ra, rb) = (kin.sphere_radius_a, kin.sphere_radius_b);
+    if ra > 0.0 {
+        if rb <= 0.0 {
+            return kin.x_a + n * ra;
+        }
+        let d = kin.x_b - kin.x_a;
+        let d2 = d.norm_squared();
+        if d2 > 0.0 {
+            return kin.x_a + d * ((d2 + ra * ra - rb * rb) / (2.0 * d2));
+        }
+    }
+    let area = overlap.area();
+    // The line of action at the centroid's depth: r_e − c = S × M_B / |S|².
+    let offset = overlap.dv_dxb.cross(&overlap.moment_b) / (area * area);
+    if offset.iter().all(|x| x.is_finite()) {
+        overlap.centroid + offset
+    } else {
+        overlap.centroid
+    }
+}
+
 /// Evaluates the contact law for an overlap, updating the contact's history `state` over `dt`
 /// (the module docs and docs/contact.md give every term).
 pub fn contact_forces(
@@ -138,21 +207,22 @@ pub fn contact_forces(
     state: &mut ContactState,
     dt: f64,
 ) -> ContactForces {
-    let area = overlap.area();
     let volume = overlap.volume;
-    if volume <= 0.0 || area <= 0.0 {
+    if volume <= 0.0 {
         return ContactForces::default();
     }
+    let inside;
+    let overlap = if overlap.area() > INSIDE_AREA_FRACTION * volume_area_scale(volume) {
+        overlap
+    } else {
+        inside = wholly_inside(overlap, kin);
+        &inside
+    };
+    let area = overlap.area();
     let s_vec = overlap.dv_dxb;
     let n = -s_vec / area; // from A to B
     let c = overlap.centroid;
-    // The elastic force's line of action, at the centroid's depth: r_e − c = S × M_B / |S|².
-    let offset = s_vec.cross(&overlap.moment_b) / (area * area);
-    let r_e = if offset.iter().all(|x| x.is_finite()) {
-        c + offset
-    } else {
-        c
-    };
+    let r_e = contact_point(overlap, kin, &n);
     let v_rel =
         (kin.v_b + kin.w_b.cross(&(r_e - kin.x_b))) - (kin.v_a + kin.w_a.cross(&(r_e - kin.x_a)));
     let vn = v_rel.dot(&n); // > 0 when separating

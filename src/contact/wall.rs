@@ -12,10 +12,11 @@
 //! force is then independent of how the wall is meshed and is never counted twice across shared
 //! edges and vertices.
 
-use crate::geometry::clip::{facet_prism, prism_overlap};
+use crate::geometry::clip::{facet_prism, prism_overlap_culled};
 use crate::geometry::overlap::{OverlapError, OverlapWorkspace};
 use crate::geometry::sphere::sphere_facet;
 use crate::geometry::{Overlap, Plane, PosedPolytope};
+use crate::shape::ConvexTemplate;
 use nalgebra::{Isometry3, Point3, Vector3};
 use std::collections::HashMap;
 
@@ -141,16 +142,25 @@ impl WallMesh {
 
     /// The contact of `body` (placed in the wall frame) with the facets `facets`: total
     /// penetrating volume, its centroid, `S = Σ S_f` (derivative with respect to moving the wall;
-    /// `−S` for the particle) and the wall's surface moment about the centroid.
+    /// `−S` for the particle) and the wall's surface moment about the centroid. The body is
+    /// placed from `placed_from` (template, scale, pose in the wall frame), each facet clipped
+    /// on the planes that can bound its overlap ([`prism_overlap_culled`]).
     pub fn contact(
         &self,
         ws: &mut OverlapWorkspace<f64>,
-        body: &PosedPolytope<f64>,
+        body: &mut PosedPolytope<f64>,
+        placed_from: (&ConvexTemplate, f64, &Isometry3<f64>),
         facets: &[u32],
     ) -> Result<Overlap<f64>, OverlapError> {
         let mut sum = FacetSum::default();
         for &f in facets {
-            sum.add(&prism_overlap(ws, body, &self.prisms[f as usize])?);
+            sum.add(&prism_overlap_culled(
+                ws,
+                body,
+                placed_from,
+                &Vector3::zeros(),
+                &self.prisms[f as usize],
+            )?);
         }
         Ok(sum.total())
     }
@@ -529,10 +539,13 @@ mod tests {
         assert!(found > 300, "{found}");
     }
 
+    fn cube() -> ConvexTemplate {
+        Generator::Cube { size: 3f64.sqrt() }.build().unwrap() // unit edge
+    }
+
     fn body(pose: &Isometry3<f64>) -> Box<PosedPolytope<f64>> {
-        let t = Generator::Cube { size: 3f64.sqrt() }.build().unwrap(); // unit edge
         let mut b = Box::<PosedPolytope<f64>>::default();
-        b.place(&t, 1.0, pose, &Vector3::zeros());
+        b.place(&cube(), 1.0, pose, &Vector3::zeros());
         b
     }
 
@@ -557,10 +570,13 @@ mod tests {
         // floor. The solid behind an L corner is {x < 0} ∪ {z < 0}: the volume behind it is
         // a·1·1 + b·1·1 − a·b·1 (the corner column counted once).
         for (a, b) in [(0.1, 0.2), (0.05, 0.05), (0.3, 0.01)] {
-            let bb = body(&Isometry3::translation(0.5 - a, 0.0, 0.5 - b));
+            let pose = Isometry3::translation(0.5 - a, 0.0, 0.5 - b);
+            let mut bb = body(&pose);
             let mut facets = Vec::new();
             mesh.facets_near(&Vector3::new(0.5 - a, 0.0, 0.5 - b), 0.9, &mut facets);
-            let o = mesh.contact(&mut ws, &bb, &facets).unwrap();
+            let o = mesh
+                .contact(&mut ws, &mut bb, (&cube(), 1.0, &pose), &facets)
+                .unwrap();
             let expected = a + b - a * b;
             assert!(
                 (o.volume - expected).abs() < 1e-12,
@@ -588,13 +604,16 @@ mod tests {
         ];
         let q = UnitQuaternion::from_euler_angles(0.3, 0.5, -0.2);
         let pose = Isometry3::from_parts(Vector3::new(0.13, -0.4, 0.6).into(), q);
-        let bb = body(&pose);
+        let mut bb = body(&pose);
         let mut results = Vec::new();
         for tris in [&fine[..], &coarse[..]] {
             let mesh = WallMesh::new(tris, 1.0);
             let mut facets = Vec::new();
             mesh.facets_near(&pose.translation.vector, 0.9, &mut facets);
-            results.push(mesh.contact(&mut ws, &bb, &facets).unwrap());
+            results.push(
+                mesh.contact(&mut ws, &mut bb, (&cube(), 1.0, &pose), &facets)
+                    .unwrap(),
+            );
         }
         assert!(results[0].volume > 1e-3);
         assert!((results[0].volume - results[1].volume).abs() < 1e-12 * results[0].volume);

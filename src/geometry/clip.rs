@@ -16,10 +16,11 @@
 //!    lets the two computations check each other.
 
 use super::Real;
-use super::overlap::{Overlap, OverlapError, OverlapWorkspace, overlap_volume};
+use super::interior::chebyshev_centre;
+use super::overlap::{Overlap, OverlapError, OverlapWorkspace, overlap_about, overlap_volume};
 use super::polytope::{Plane, PosedPolytope};
-use crate::shape::MAX_TEMPLATE_FACES;
-use nalgebra::{Vector2, Vector3};
+use crate::shape::{ConvexTemplate, MAX_TEMPLATE_FACES};
+use nalgebra::{Isometry3, Vector2, Vector3};
 
 /// Largest vertex count of a clipped polygon: a square clipped by every face plane plus the
 /// three triangle edges.
@@ -255,6 +256,78 @@ pub fn prism_overlap<T: Real>(
     // Start the interior-point search on the facet plane under the body's centre.
     let start = body.centre - facet.normal * facet.distance(&body.centre);
     overlap_volume(ws, body.planes(), prism, start)
+}
+
+/// [`prism_overlap`] on the planes that can bound it (the wall stage's evaluation). The body
+/// must be placed from `placed_from` (template, scale, pose) in the frame whose origin is the
+/// point `origin` of the pose's frame (as [`PosedPolytope::place`] takes them), with its planes
+/// in template order, which it has again on return.
+///
+/// - A body plane whose face has no corner behind the facet plane (by more than round-off)
+///   supports no face of the overlap, which lies behind that plane: it is set aside. For a
+///   dodecahedron resting on a wall that leaves 4–6 of its 12 planes.
+/// - A side plane of the prism that holds the ball around the part of the body's bounding ball
+///   behind the facet plane (the cap's ball: base disk radius `√(r² − d²)` about the foot of the
+///   centre when the centre is in front, the whole ball otherwise) holds the whole overlap: it
+///   is dropped. This is exact.
+/// - Setting body planes aside is exact when the overlap has an interior point (a segment from
+///   it to a point beyond a set-aside plane would leave the body through that plane's face,
+///   behind the facet plane). The Chebyshev centre of the planes kept proves it when it lies
+///   strictly inside every plane set aside; then the overlap is evaluated about it on the
+///   planes kept (few enough for the vertex enumeration instead of the dual hull). Otherwise
+///   (a touching or empty overlap) every body plane is used, as in [`prism_overlap`].
+pub fn prism_overlap_culled<T: Real>(
+    ws: &mut OverlapWorkspace<T>,
+    body: &mut PosedPolytope<T>,
+    placed_from: (&ConvexTemplate, f64, &Isometry3<f64>),
+    origin: &Vector3<f64>,
+    prism: &[Plane<T>; 4],
+) -> Result<Overlap<T>, OverlapError> {
+    let facet = &prism[0];
+    if prism.iter().any(|plane| {
+        body.vertices()
+            .iter()
+            .all(|v| plane.distance(v) >= T::zero())
+    }) {
+        return Ok(Overlap::default());
+    }
+    let (template, scale, _) = placed_from;
+    let r = T::of(template.circumscribed_radius * scale);
+    let tol = T::of(64.0) * T::EPSILON * r;
+    body.set_aside_beyond(placed_from, origin, &prism[..1], &[], tol);
+    let d = facet.distance(&body.centre);
+    let (cap_centre, cap_radius) = if d >= T::zero() {
+        (
+            body.centre - facet.normal * d,
+            (r * r - d * d).max(T::zero()).sqrt(),
+        )
+    } else {
+        (body.centre, r)
+    };
+    let mut kept = [prism[0]; 4];
+    let mut n_kept = 1;
+    for plane in &prism[1..] {
+        if plane.distance(&cap_centre) + cap_radius > -tol {
+            kept[n_kept] = *plane;
+            n_kept += 1;
+        }
+    }
+    let kept = &kept[..n_kept];
+    let start = body.centre - facet.normal * d;
+    let centre = chebyshev_centre(body.planes(), kept, start);
+    let proven = centre.radius > tol
+        && body
+            .aside_planes()
+            .iter()
+            .all(|p| p.distance(&centre.point) < -tol);
+    let out = if proven {
+        overlap_about(ws, body.planes(), kept, centre.point, true)
+    } else {
+        body.restore_aside();
+        overlap_volume(ws, body.planes(), kept, start)
+    };
+    body.restore_template_order();
+    out
 }
 
 /// Contact of `body` with triangle `tri` (counter-clockwise seen from the side the particles

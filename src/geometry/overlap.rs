@@ -212,7 +212,7 @@ fn overlap_about_centre<T: Real>(
 /// [`overlap_volume`] about a given interior point `x0` (normally the Chebyshev centre). The
 /// faces come from the vertex enumeration for at most [`ENUM_MAX_PLANES`] planes when
 /// `enumerate` is set, else from the dual hull.
-fn overlap_about<T: Real>(
+pub(crate) fn overlap_about<T: Real>(
     ws: &mut OverlapWorkspace<T>,
     a: &[Plane<T>],
     b: &[Plane<T>],

@@ -231,10 +231,25 @@ pub fn set_aside_faces_apart<T: Real>(
 }
 
 impl<T: Real> PosedPolytope<T> {
+    /// Puts the planes in use and those set aside back in template order (the order
+    /// [`PosedPolytope::place`] gives), so that a body reused for the next facet is evaluated as
+    /// if freshly placed.
+    pub fn restore_template_order(&mut self) {
+        self.restore_aside();
+        for i in 1..self.n_planes {
+            let mut j = i;
+            while j > 0 && self.face[j - 1] > self.face[j] {
+                self.face.swap(j - 1, j);
+                self.planes.swap(j - 1, j);
+                j -= 1;
+            }
+        }
+    }
+
     /// Moves the planes whose face lies beyond one of `p ∪ q` by more than `tol` to the
     /// set-aside list, keeping both lists in order. A plane `n·x <= o` of the pair frame is, for
     /// a corner `v` of this body's template, `s (Rᵀ n)·v − (o − n·(t − origin))` from the plane.
-    fn set_aside_beyond(
+    pub fn set_aside_beyond(
         &mut self,
         (template, scale, pose): (&ConvexTemplate, f64, &Isometry3<f64>),
         origin: &Vector3<f64>,

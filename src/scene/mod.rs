@@ -173,7 +173,45 @@ pub struct SimulationSettings {
     pub seed: u64,
     /// Neighbour-list settings.
     pub neighbor: NeighborSettings,
+    /// Stability guard settings.
+    pub guard: GuardSettings,
 }
+
+/// `[simulation.guard]`, resolved (`crate::stability`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GuardSettings {
+    /// Whether speeds and overlaps are checked (finiteness always is).
+    pub enabled: bool,
+    /// Largest overlap volume of a contact, as a fraction of the smaller particle's volume.
+    pub max_overlap: f64,
+    /// Largest `|v| + |ω| R` (m/s), when given.
+    pub max_speed: Option<f64>,
+    /// Multiple of the scene's speed scale that bounds the speed otherwise.
+    pub speed_factor: f64,
+}
+
+impl GuardSettings {
+    /// Default largest overlap: a tenth of the smaller particle's volume.
+    pub const MAX_OVERLAP: f64 = 0.1;
+    /// Default speed bound: ten times the scene's speed scale.
+    pub const SPEED_FACTOR: f64 = 10.0;
+}
+
+impl Default for GuardSettings {
+    fn default() -> Self {
+        GuardSettings {
+            enabled: true,
+            max_overlap: Self::MAX_OVERLAP,
+            max_speed: None,
+            speed_factor: Self::SPEED_FACTOR,
+        }
+    }
+}
+
+/// `simulation.dt_fraction` when neither `dt` nor `dt_fraction` is given: the largest fraction
+/// of the critical step at which every reference case of `polydem bench accuracy` is within
+/// 1 % of its reference (docs/accuracy.md).
+pub const DEFAULT_DT_FRACTION: f64 = 0.05;
 
 /// How the time step is chosen.
 #[derive(Clone, Copy, Debug, PartialEq)]

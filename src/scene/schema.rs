@@ -98,6 +98,23 @@ pub struct SimulationSection {
     /// `[simulation.neighbor]`.
     #[serde(default)]
     pub neighbor: Option<NeighborSection>,
+    /// `[simulation.guard]`.
+    #[serde(default)]
+    pub guard: Option<GuardSection>,
+}
+
+/// `[simulation.guard]`: the stability guard's bounds (`crate::stability`).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GuardSection {
+    /// Check speeds and overlaps (default true).
+    pub enabled: Option<bool>,
+    /// Largest overlap volume of a contact, as a fraction of the smaller particle's volume.
+    pub max_overlap: Option<f64>,
+    /// Largest `|v| + |ω| R` (m/s); default `speed_factor` × the scene's speed scale.
+    pub max_speed: Option<f64>,
+    /// Multiple of the scene's speed scale that bounds the speed when `max_speed` is not given.
+    pub speed_factor: Option<f64>,
 }
 
 /// `[simulation.neighbor]`: neighbour-list settings.

@@ -72,6 +72,7 @@ impl CudaSimulation {
                 ],
             },
             dt,
+            max_overlap: self.host.guard.max_overlap,
             error: ptr(&self.error, st),
         }
     }
@@ -264,7 +265,7 @@ impl CudaSimulation {
         if let Some(w) = &mut self.walls {
             std::mem::swap(&mut w.spring_in, &mut w.spring_out);
         }
-        let mut error = [0u32; 2];
+        let mut error = [0u32; 3];
         st.memcpy_dtoh(&self.error, &mut error)?;
         self.host.timers.reduce += t0.elapsed().as_secs_f64();
         // A geometry error fails the step; the fused kick has already applied this step's
@@ -281,6 +282,15 @@ impl CudaSimulation {
             .into());
         }
         self.host_current = false;
+        if error[2] != 0 {
+            // The stability guard's overlap bound (cuda/contact.cu `guard_overlap`).
+            let i = (u32::MAX - error[2]) as usize;
+            self.sync_host()?;
+            let problem = crate::stability::Instability::DeepContact {
+                fraction: self.host.guard.max_overlap,
+            };
+            return Err(self.host.unstable(i, Some(problem)).into());
+        }
         Ok(())
     }
 }
@@ -377,6 +387,8 @@ impl CudaSimulation {
                 .arg(&mut w.per_wall_force)
                 .arg(&mut w.contact)
                 .arg(&dt)
+                .arg(&self.host.guard.max_overlap)
+                .arg(&mut self.error)
                 .launch(cfg(self.n))?;
         }
         Ok(())

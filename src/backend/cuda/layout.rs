@@ -138,6 +138,7 @@ pub struct TemplateTables {
     pub offsets: Vec<f64>,
     pub counts: Vec<i32>,
     pub radius: Vec<f64>,
+    pub equivalent: Vec<f64>,
     pub face_start: Vec<u16>,
     pub face_points: Vec<f64>,
     pub face_mask: Vec<u64>,
@@ -164,6 +165,7 @@ impl TemplateTables {
             offsets: vec![0.0; nt * mf],
             counts: vec![0; nt * 2],
             radius: vec![0.0; nt],
+            equivalent: vec![0.0; nt],
             face_start: vec![0; nt * (mf + 1)],
             face_points: vec![0.0; nt * mi * 3],
             face_mask: vec![0; nt * mf],
@@ -196,6 +198,7 @@ impl TemplateTables {
             t.counts[2 * k] = tpl.vertices.len() as i32;
             t.counts[2 * k + 1] = tpl.faces.len() as i32;
             t.radius[k] = tpl.circumscribed_radius;
+            t.equivalent[k] = tpl.equivalent_radius;
         }
         t
     }

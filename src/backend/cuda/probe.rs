@@ -2,7 +2,7 @@
 //! GJK + overlap (stages 4–5) for given pairs of posed templates and the facet-prism overlap
 //! (stage 6) for given body–triangle cases, each evaluated in f64 and in f32 by the same device
 //! functions the step uses. It is how the tests hold the kernels, run on a GPU, to
-//! `geometry::overlap::overlap_pair` and `geometry::clip::prism_overlap`.
+//! `geometry::overlap::overlap_pair` and `geometry::clip::prism_overlap_culled`.
 
 use super::kernels::{KernelConfig, Precision, compile};
 use super::layout::{TemplateTables, max_face_indices};
@@ -53,7 +53,7 @@ pub struct ProbePairResult {
 }
 
 /// One precision's result of a facet case: `facet_prism`'s status (6: degenerate triangle),
-/// `prism_overlap`'s status, and the overlap in world coordinates.
+/// `prism_overlap_culled`'s status, and the overlap in world coordinates.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ProbeFacetResult {
     pub prism_status: i32,

@@ -142,6 +142,7 @@ pub(super) struct PairArgs {
     pub(super) spring_out: u64,
     pub(super) out: PairOutputs,
     pub(super) dt: f64,
+    pub(super) max_overlap: f64,
     pub(super) error: u64,
 }
 // SAFETY: device pointers, a GridParams, an int and a double, laid out as the C struct (the
@@ -437,7 +438,7 @@ impl CudaSimulation {
             device,
             precision,
             flags: stream.alloc_zeros::<u32>(5)?,
-            error: stream.alloc_zeros::<u32>(2)?,
+            error: stream.alloc_zeros::<u32>(3)?,
             reference: stream.alloc_zeros::<f64>(1)?,
             _ctx: ctx,
             k,
@@ -649,6 +650,8 @@ impl CudaSimulation {
                     .arg(&half_skin)
                     .arg(&wall_reference)
                     .arg(&wall_half_reach)
+                    .arg(&p.radius)
+                    .arg(&self.host.guard.max_speed)
                     .arg(&mut self.flags)
                     .launch(cfg(self.n))?;
             }
@@ -666,10 +669,14 @@ impl CudaSimulation {
         if flags[2] != 0 {
             self.sync_host()?;
             let i = flags[3] as usize;
+            if i < self.host.particles.len() {
+                let problem = self.host.instability_of(i);
+                return Err(self.host.unstable(i, problem).into());
+            }
             return Err(SimulationError::NonFinite {
                 step: self.host.step,
-                id: self.host.particles.id.get(i).copied().unwrap_or(0),
-                field: "position or velocity",
+                id: 0,
+                field: "position or velocity (of a ghost)",
             }
             .into());
         }

@@ -57,6 +57,7 @@ impl CudaSimulation {
         set(m, &self.stream, "pd_template_offsets", &t.offsets)?;
         set(m, &self.stream, "pd_template_counts", &t.counts)?;
         set(m, &self.stream, "pd_template_radius", &t.radius)?;
+        set(m, &self.stream, "pd_template_equivalent", &t.equivalent)?;
         set(m, &self.stream, "pd_template_face_start", &t.face_start)?;
         set(m, &self.stream, "pd_template_face_points", &t.face_points)?;
         set(m, &self.stream, "pd_template_face_mask", &t.face_mask)?;

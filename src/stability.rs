@@ -1,0 +1,197 @@
+//! The stability guard: a particle that starts to blow up stops the run within one step, with
+//! an error that names the step, the particle and its contacts (docs/contact.md §7).
+//!
+//! An explicit DEM step goes unstable locally first: one contact too stiff for the step, or a
+//! particle driven into another, gains energy each step until values overflow. Left alone, the
+//! first sign is a NaN thousands of steps later, or particles leaving the domain, long after
+//! the cause. Three bounds catch it at its start:
+//!
+//! - **finiteness** of the position, velocity, angular velocity and orientation;
+//! - **speed**: `|v| + |ω| R` (the fastest point of the particle, `R` its circumscribed radius)
+//!   at most `max_speed`, by default `speed_factor` (10) times the scene's speed scale
+//!   ([`speed_scale`]): what gravity, insertion, the walls' motion and the initial velocities
+//!   can give a particle;
+//! - **overlap**: the overlap volume of every contact at most `max_overlap` (0.1) of the smaller
+//!   particle's volume (`(4π/3) R³` of its volume-equivalent radius R). The volume, not the
+//!   depth: the volume law's energy `(3/4) c V^{4/3}` is set by V whatever touches, so a vertex
+//!   may legitimately reach deep where a face stays shallow (a soft 1 cm cube's corner reaches
+//!   40 % of R into a face at 3 m/s, with V 1 % of the cube). Healthy contacts stay near 1 %; a
+//!   tenth of a particle means the law no longer holds the bodies apart (and a body entirely
+//!   inside another has no defined normal at all).
+//!
+//! The checks run on each step's state on both backends: speed and finiteness after the
+//! drift (the GPU checks them in the same kernel), overlaps where the contact geometry is
+//! evaluated.
+
+use crate::scene::{GuardSettings, Scene, WallMotion};
+use crate::state::Particles;
+use nalgebra::Vector3;
+
+/// The bounds a run is held to, resolved from [`GuardSettings`] and the scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StabilityGuard {
+    /// Whether the guard checks speeds and overlaps (finiteness is always checked).
+    pub enabled: bool,
+    /// Largest `|v| + |ω| R` (m/s); infinite when the scene has no speed scale.
+    pub max_speed: f64,
+    /// Largest overlap volume as a fraction of the smaller particle's volume.
+    pub max_overlap: f64,
+    /// The scene's speed scale (m/s) the default `max_speed` derives from.
+    pub speed_scale: f64,
+}
+
+impl StabilityGuard {
+    /// The guard of `scene` for the particles now placed (`radius` their circumscribed radii).
+    pub fn new(
+        settings: &GuardSettings,
+        scene: &Scene,
+        particles: &Particles,
+        radius: &[f64],
+    ) -> Self {
+        let speed_scale = speed_scale(scene, particles, radius);
+        let max_speed = match settings.max_speed {
+            Some(v) => v,
+            None if speed_scale > 0.0 => settings.speed_factor * speed_scale,
+            None => f64::INFINITY,
+        };
+        StabilityGuard {
+            enabled: settings.enabled,
+            max_speed: if settings.enabled {
+                max_speed
+            } else {
+                f64::INFINITY
+            },
+            max_overlap: if settings.enabled {
+                settings.max_overlap
+            } else {
+                f64::INFINITY
+            },
+            speed_scale,
+        }
+    }
+
+    /// What is wrong with particle `i` after the drift, if anything: a non-finite value, or a
+    /// speed above the bound.
+    pub fn check_motion(&self, p: &Particles, radius: &[f64], i: usize) -> Option<Instability> {
+        let finite = |v: &Vector3<f64>| v.iter().all(|x| x.is_finite());
+        for (field, ok) in [
+            ("position", finite(&p.position[i])),
+            ("velocity", finite(&p.velocity[i])),
+            ("angular velocity", finite(&p.angular_velocity[i])),
+            (
+                "orientation",
+                p.orientation[i].coords.iter().all(|x| x.is_finite()),
+            ),
+        ] {
+            if !ok {
+                return Some(Instability::NonFinite { field });
+            }
+        }
+        let speed = p.velocity[i].norm() + p.angular_velocity[i].norm() * radius[i];
+        (speed > self.max_speed).then_some(Instability::Speed {
+            speed,
+            bound: self.max_speed,
+            scale: self.speed_scale,
+        })
+    }
+}
+
+/// `(4π/3) r³`: the volume the guard measures a particle by (`r` its volume-equivalent
+/// radius), written as the GPU computes it.
+pub fn ball_volume(r: f64) -> f64 {
+    4.0 / 3.0 * std::f64::consts::PI * r * r * r
+}
+
+/// What the guard found.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Instability {
+    /// A value is NaN or infinite.
+    NonFinite { field: &'static str },
+    /// `|v| + |ω| R` above the bound.
+    Speed { speed: f64, bound: f64, scale: f64 },
+    /// A contact's overlap above the bound, as the GPU reports it (without the partner).
+    DeepContact { fraction: f64 },
+    /// A contact's overlap volume above the bound.
+    Overlap {
+        partner: String,
+        volume: f64,
+        particle_volume: f64,
+        fraction: f64,
+    },
+}
+
+impl std::fmt::Display for Instability {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Instability::NonFinite { field } => write!(f, "its {field} is not finite"),
+            Instability::Speed {
+                speed,
+                bound,
+                scale,
+            } => write!(
+                f,
+                "it moves at {speed:.4e} m/s (|v| + |ω| R), above the bound {bound:.4e} m/s \
+                 (simulation.guard.max_speed; the scene's speed scale is {scale:.4e} m/s)"
+            ),
+            Instability::DeepContact { fraction } => write!(
+                f,
+                "one of its contacts overlaps more than {fraction} of the smaller particle's \
+                 volume (simulation.guard.max_overlap)"
+            ),
+            Instability::Overlap {
+                partner,
+                volume,
+                particle_volume,
+                fraction,
+            } => write!(
+                f,
+                "it overlaps {partner} by {volume:.4e} m³, {:.3} of the smaller particle's volume \
+                 {particle_volume:.4e} m³ (simulation.guard.max_overlap = {fraction})",
+                volume / particle_volume
+            ),
+        }
+    }
+}
+
+/// The speed a particle of the scene can be expected to reach (m/s): free fall across the
+/// domain's diagonal, plus the fastest insertion (`|v| + |ω| R`), the fastest wall surface
+/// point and the fastest particle now placed. Zero for a scene where nothing drives motion.
+pub fn speed_scale(scene: &Scene, particles: &Particles, radius: &[f64]) -> f64 {
+    let d = scene.domain.max - scene.domain.min;
+    let fall = (2.0 * scene.gravity.norm() * d.norm()).sqrt();
+    let max_radius = scene.max_bounding_radius();
+    let insert = scene
+        .insertions
+        .iter()
+        .map(|ins| ins.velocity.norm() + ins.angular_velocity.norm() * max_radius)
+        .fold(0.0, f64::max);
+    let wall = scene
+        .walls
+        .iter()
+        .map(|w| match &w.motion {
+            WallMotion::Fixed => 0.0,
+            WallMotion::Translate { velocity } => velocity.norm(),
+            WallMotion::Sinusoidal {
+                amplitude,
+                frequency,
+                ..
+            } => std::f64::consts::TAU * frequency * amplitude.abs(),
+            WallMotion::Rotate { axis, origin, rpm } => {
+                let omega = WallMotion::omega(*rpm).abs();
+                w.triangles
+                    .iter()
+                    .flatten()
+                    .map(|x| {
+                        let r = x - origin;
+                        (r - axis.into_inner() * r.dot(axis)).norm() * omega
+                    })
+                    .fold(0.0, f64::max)
+            }
+        })
+        .fold(0.0, f64::max);
+    let placed = (0..particles.len())
+        .map(|i| particles.velocity[i].norm() + particles.angular_velocity[i].norm() * radius[i])
+        .filter(|s| s.is_finite())
+        .fold(0.0, f64::max);
+    fall + insert + wall + placed
+}

@@ -1,0 +1,61 @@
+//! The short `polydem bench accuracy` (docs/accuracy.md): every reference case at the default
+//! step (`dt_fraction` 0.05) and at twice it, on the CPU. At the default each case is within 1 %
+//! of its independent reference (closed forms and exact invariants, listed in
+//! `polydem::accuracy`); the face restitution error shrinks with the step; the CSV and the
+//! Pareto plot are written. The full sweep (five fractions, the pour, both GPU precisions) runs
+//! on the GPU with `polydem bench accuracy --full`.
+
+mod common;
+
+use polydem::accuracy::{AccuracyOptions, run_accuracy};
+use polydem::backend::Device;
+use polydem::scene::DEFAULT_DT_FRACTION;
+
+#[test]
+fn every_reference_case_is_within_one_percent_at_the_default_step() {
+    let out = common::temp_dir("accuracy-short");
+    let rows = run_accuracy(&AccuracyOptions {
+        devices: vec![Device::Cpu],
+        fractions: vec![2.0 * DEFAULT_DT_FRACTION, DEFAULT_DT_FRACTION],
+        full: false,
+        cases: Vec::new(),
+        out: out.clone(),
+    })
+    .unwrap();
+    for r in &rows {
+        println!(
+            "{:18} {} dt_fraction {:6}: error {:.3e} in {:.2} s ({} steps) {}",
+            r.case, r.backend, r.dt_fraction, r.error, r.seconds, r.steps, r.detail
+        );
+    }
+    let at = |case: &str, f: f64| {
+        rows.iter()
+            .find(|r| r.case == case && r.dt_fraction == f)
+            .unwrap_or_else(|| panic!("{case} at {f} missing"))
+            .error
+    };
+    for case in [
+        "cylinder_impact",
+        "restitution",
+        "elastic_energy",
+        "mesh_independence",
+        "sphere_oblique",
+    ] {
+        let e = at(case, DEFAULT_DT_FRACTION);
+        assert!(
+            e.is_finite() && e <= 0.01,
+            "{case}: error {e:e} at the default step"
+        );
+    }
+    // The face-on-face impact converges in the step (first order): twice the step, about twice
+    // the error, and then past 1 %.
+    let (coarse, fine) = (
+        at("restitution", 2.0 * DEFAULT_DT_FRACTION),
+        at("restitution", DEFAULT_DT_FRACTION),
+    );
+    assert!(coarse > 1.5 * fine, "restitution {coarse:e} → {fine:e}");
+    let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + rows.len());
+    let svg = std::fs::read_to_string(out.join("accuracy.svg")).unwrap();
+    assert!(svg.contains("<svg") && svg.contains("restitution (cpu)"));
+}

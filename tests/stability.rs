@@ -1,0 +1,286 @@
+//! The stability guard (`polydem::stability`, docs/contact.md §7) against closed-form timings,
+//! and a body wholly inside another.
+//!
+//! - Two spheres of negligible stiffness (E = 1 Pa) approach head-on: their centres move as in
+//!   free flight, so the step at which the lens's volume first passes the guard's overlap
+//!   bound (a tenth of a sphere) is known in closed form; the run stops at exactly that step,
+//!   naming both.
+//! - A sphere falls from rest under gravity with `max_speed` set: after step n's first half
+//!   kick its speed is `g Δt (n − 1/2)`, so the stop step is known in closed form too.
+//! - `polydem run` of that scene stops with the error, leaves the last scheduled checkpoint as
+//!   it was, and writes the state at the stop beside it.
+//! - The default speed bound is 10 × the scene's speed scale, which adds up free fall across
+//!   the domain, insertion, wall motion and the placed particles.
+//! - A cube wholly inside a larger one (where `S = dV/dx_B` is round-off) is pushed out along
+//!   the line of centres with `c V`.
+
+mod common;
+
+use common::*;
+use nalgebra::{UnitQuaternion, Vector3};
+use polydem::backend::Device;
+use polydem::pipeline::Simulation;
+use polydem::scene::parse_scene;
+use std::path::Path;
+use std::process::Command;
+
+fn sphere_scene(e_modulus: f64, gravity: f64, dt: f64, guard: &str) -> String {
+    let types = "[[particle_types]]\nname = \"ball\"\nmaterial = \"m\"\n\
+                 generator = { kind = \"sphere\", size = 0.02 }\n";
+    let text = scene_text(&SceneSpec {
+        e_modulus,
+        poisson: 0.3,
+        density: 2500.0,
+        restitution: 1.0,
+        friction: 0.0,
+        gravity,
+        dt,
+        wall_scale: None,
+        wall_motion: None,
+        types,
+    });
+    format!("{text}\n[simulation.guard]\n{guard}\n")
+}
+
+fn place(sim: &mut Simulation, at: &[(Vector3<f64>, Vector3<f64>)]) {
+    let t = sim.scene.templates[0].clone();
+    for (k, (x, v)) in at.iter().enumerate() {
+        sim.particles
+            .push(k as u64, 0, 1.0, *x, UnitQuaternion::identity(), &t, 2500.0);
+        sim.particles.velocity[k] = *v;
+    }
+    sim.refresh().unwrap();
+}
+
+/// Steps until an error; returns (steps done, the error's text).
+fn run_to_error(device: Device, sim: Simulation, limit: u64) -> (u64, String) {
+    let mut e = engine(sim, device);
+    for k in 1..=limit {
+        if let Err(err) = e.step() {
+            return (k, err.to_string());
+        }
+    }
+    panic!("no stop within {limit} steps");
+}
+
+fn deep_overlap(device: Device) {
+    let (r, v, dt) = (0.01, 1.0, 1e-4);
+    let text = sphere_scene(1.0, 0.0, dt, "max_overlap = 0.1");
+    let scene = parse_scene(&text, &repo_root(), "guard.toml").unwrap();
+    let mut sim = Simulation::new(scene).unwrap();
+    // Centres 2R + gap apart, closing at 2v: after n steps the lens is δ = 2 v Δt n − gap thick
+    // (forces of 1 Pa change the velocities by 1e-9 of v over the run, far from a tie), with
+    // the volume π (4R + d)(2R − d)²/12, d = 2R − δ.
+    let gap = 1.3e-4;
+    place(
+        &mut sim,
+        &[
+            (Vector3::new(-(r + gap / 2.0), 0.0, 0.0), Vector3::x() * v),
+            (Vector3::new(r + gap / 2.0, 0.0, 0.0), -Vector3::x() * v),
+        ],
+    );
+    let limit = 0.1 * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+    let lens = |delta: f64| {
+        let d = 2.0 * r - delta;
+        std::f64::consts::PI * (4.0 * r + d) * (2.0 * r - d).powi(2) / 12.0
+    };
+    let expected = (1..)
+        .find(|&n| lens(2.0 * v * dt * n as f64 - gap) > limit)
+        .unwrap();
+    let (step, msg) = run_to_error(device, sim, 1000);
+    println!("deep overlap: stop at step {step} (closed form {expected}): {msg}");
+    assert_eq!(step, expected, "{msg}");
+    assert!(
+        msg.contains(&format!("step {expected}:"))
+            && msg.contains("particle 0 is blowing up")
+            && msg.contains("particle 1")
+            && msg.contains("max_overlap"),
+        "{msg}"
+    );
+}
+
+fn speed_bound(device: Device) {
+    let (g, dt, vmax) = (9.81, 1e-3, 1.0);
+    let text = sphere_scene(1e7, -g, dt, "max_speed = 1.0");
+    let scene = parse_scene(&text, &repo_root(), "guard.toml").unwrap();
+    let mut sim = Simulation::new(scene).unwrap();
+    place(&mut sim, &[(Vector3::new(0.0, 0.0, 5.0), Vector3::zeros())]);
+    // |v| after step n's first half kick: g Δt (n − 1/2).
+    let expected = (vmax / (g * dt) + 0.5).ceil() as u64;
+    let (step, msg) = run_to_error(device, sim, 1000);
+    println!("speed bound: stop at step {step} (closed form {expected}): {msg}");
+    assert_eq!(step, expected, "{msg}");
+    assert!(
+        msg.contains("particle 0 is blowing up")
+            && msg.contains("above the bound 1.0000e0 m/s")
+            && msg.contains("its contacts: none"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_deep_overlap_stops_the_run_at_the_step_it_happens() {
+    deep_overlap(CPU);
+}
+
+#[test]
+fn a_speed_past_the_bound_stops_the_run_at_the_step_it_happens() {
+    speed_bound(CPU);
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn the_guard_stops_gpu_runs_at_the_same_steps() {
+    deep_overlap(GPU_DOUBLE);
+    speed_bound(GPU_DOUBLE);
+    deep_overlap(GPU_MIXED);
+    speed_bound(GPU_MIXED);
+}
+
+#[test]
+fn the_default_speed_bound_is_ten_times_the_scene_speed_scale() {
+    // Domain ±10 m: free fall across its diagonal √(2 g √1200); a turning wall adds ω r_max.
+    let text = sphere_scene(1e7, -9.81, 1e-4, "enabled = true");
+    let scene = parse_scene(&text, &repo_root(), "guard.toml").unwrap();
+    let mut sim = Simulation::new(scene).unwrap();
+    let fall = (2.0 * 9.81 * 1200f64.sqrt()).sqrt();
+    assert!((sim.guard.speed_scale - fall).abs() <= 1e-12 * fall);
+    assert!((sim.guard.max_speed - 10.0 * fall).abs() <= 1e-12 * fall);
+    // A placed particle's speed counts, the spin with its circumscribed radius.
+    place(&mut sim, &[(Vector3::zeros(), Vector3::new(3.0, 0.0, 4.0))]);
+    sim.particles.angular_velocity[0] = Vector3::new(0.0, 0.0, 100.0);
+    sim.refresh().unwrap();
+    let expected = fall + 5.0 + 100.0 * 0.01;
+    assert!(
+        (sim.guard.speed_scale - expected).abs() <= 1e-12 * expected,
+        "{} vs {expected}",
+        sim.guard.speed_scale
+    );
+    // With the guard off nothing is bounded.
+    let text = sphere_scene(1e7, -9.81, 1e-4, "enabled = false");
+    let sim = Simulation::new(parse_scene(&text, &repo_root(), "guard.toml").unwrap()).unwrap();
+    assert!(sim.guard.max_speed.is_infinite() && sim.guard.max_overlap.is_infinite());
+    // Bad values are refused with the key.
+    let text = sphere_scene(1e7, -9.81, 1e-4, "max_overlap = -1.0");
+    let err = parse_scene(&text, &repo_root(), "guard.toml").unwrap_err();
+    assert_eq!(err.keys(), vec!["simulation.guard.max_overlap"]);
+}
+
+fn write_scene(dir: &Path) -> std::path::PathBuf {
+    // The falling sphere of `speed_bound` at half its step, with checkpoints every 100 steps.
+    let text = sphere_scene(1e7, -9.81, 5e-4, "max_speed = 1.0")
+        .replace(
+            &format!(
+                "dir = \"{}\"",
+                std::env::temp_dir().join("polydem-validation").display()
+            ),
+            "dir = \"out\"\ncheckpoint_interval = 0.05",
+        )
+        .replace("end_time = 1.0", "end_time = 1.0\n")
+        + "[[insertions]]\ntype = \"ball\"\nregion = { kind = \"box\", min = [-0.05, -0.05, 4.9], max = [0.05, 0.05, 5.1] }\ncount = 1\n";
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn a_stopped_run_keeps_its_checkpoint_and_writes_the_stopped_state() {
+    let dir = std::env::temp_dir().join(format!("polydem-guard-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = write_scene(&dir);
+    let out = Command::new(polydem_bin())
+        .arg("run")
+        .arg(&scene)
+        .args(["--backend", "cpu"])
+        .output()
+        .expect("run polydem");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "the run must fail: {stderr}");
+    // Stop at step 205 (g Δt (n − 1/2) > 1 m/s), after the checkpoints of steps 100 and 200.
+    assert!(
+        stderr.contains("step 205: particle 0 is blowing up")
+            && stderr.contains("unstable-step-205.ckpt"),
+        "{stderr}"
+    );
+    let ck = dir.join("out/checkpoints");
+    let latest = polydem::io::read_checkpoint(&ck.join("latest.ckpt")).unwrap();
+    assert_eq!(latest.step, 200);
+    let stopped = polydem::io::read_checkpoint(&ck.join("unstable-step-205.ckpt")).unwrap();
+    assert_eq!(stopped.step, 205);
+    assert!(stopped.particles.velocity[0].norm() > 1.0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_body_wholly_inside_another_is_pushed_out_along_the_line_of_centres() {
+    use nalgebra::Isometry3;
+    use polydem::contact::history::ContactState;
+    use polydem::contact::{ContactKinematics, ContactParameters, contact_forces};
+    use polydem::geometry::overlap::{PairWorkspace, overlap_pair};
+    use polydem::shape::ConvexTemplate;
+    let cube = |edge: f64| {
+        let h = edge / 2.0;
+        let corners: Vec<nalgebra::Point3<f64>> = (0..8)
+            .map(|k| {
+                let s = |b: i32| if k >> b & 1 == 1 { h } else { -h };
+                nalgebra::Point3::new(s(0), s(1), s(2))
+            })
+            .collect();
+        ConvexTemplate::from_points("cube", &corners).unwrap()
+    };
+    let (big, small) = (cube(0.04), cube(0.01));
+    let mut ws = PairWorkspace::<f64>::default();
+    for (offset, direction) in [
+        (
+            Vector3::new(0.003, -0.002, 0.001),
+            Vector3::new(0.003, -0.002, 0.001).normalize(),
+        ),
+        (Vector3::zeros(), Vector3::z()),
+    ] {
+        let (xa, xb) = (
+            Vector3::new(0.1, 0.2, 0.3),
+            Vector3::new(0.1, 0.2, 0.3) + offset,
+        );
+        let q = UnitQuaternion::from_euler_angles(0.3, -0.2, 0.1);
+        let pa = Isometry3::from_parts(xa.into(), q);
+        let pb = Isometry3::from_parts(xb.into(), UnitQuaternion::identity());
+        let g = overlap_pair(&mut ws, (&big, 1.0, &pa), (&small, 1.0, &pb)).unwrap();
+        let o = g.overlap;
+        // The whole small cube: V = 1e-6 m³ and S is round-off.
+        assert!((o.volume - 1e-6).abs() <= 1e-15, "{}", o.volume);
+        assert!(o.dv_dxb.norm() <= 1e-12, "{:?}", o.dv_dxb);
+        let c = 1e6 / big.equivalent_radius + 1e6 / small.equivalent_radius;
+        let params = ContactParameters {
+            normal_stiffness: c,
+            tangential_stiffness: 0.0,
+            restitution: 1.0,
+            friction: 0.0,
+            damping: 0.0,
+            rocking: true,
+        };
+        let kin = ContactKinematics {
+            x_a: xa,
+            x_b: xb,
+            v_a: Vector3::zeros(),
+            v_b: Vector3::zeros(),
+            w_a: Vector3::zeros(),
+            w_b: Vector3::zeros(),
+            effective_mass: 1.0,
+            q_a: q,
+            q_b: UnitQuaternion::identity(),
+            inverse_inertia_a: Vector3::repeat(1.0),
+            inverse_inertia_b: Vector3::repeat(1.0),
+            sphere_radius_a: 0.0,
+            sphere_radius_b: 0.0,
+        };
+        let f = contact_forces(&params, &o, &kin, &mut ContactState::default(), 1e-5);
+        // c V^{1/3} · V^{2/3} = c V, on B away from A.
+        let expected = direction * c * o.volume;
+        assert!(
+            (f.force_b - expected).norm() <= 1e-9 * expected.norm(),
+            "{:?} vs {expected:?}",
+            f.force_b
+        );
+    }
+}
