@@ -145,6 +145,8 @@ pub fn run_accuracy(opts: &AccuracyOptions) -> Result<Vec<AccuracyRow>> {
                 }
             }
             rows.extend(case_rows);
+            // Written after every case, so that a sweep cut short keeps what it measured.
+            write_csv(&opts.out.join("accuracy.csv"), &rows)?;
         }
     }
     write_csv(&opts.out.join("accuracy.csv"), &rows)?;

@@ -237,6 +237,8 @@ impl Simulation {
         sim.exchange()?;
         sim.reset_guard();
         sim.forces()?;
+        // Again with the initial contacts' elastic energy, which a compressed start releases.
+        sim.reset_guard();
         Ok(sim)
     }
 
@@ -315,8 +317,8 @@ impl Simulation {
         Ok(self)
     }
 
-    /// Resolves the stability guard's bounds for the particles now placed (their speeds count
-    /// in the scene's speed scale).
+    /// Resolves the stability guard's bounds for the particles now placed (their speeds and
+    /// the elastic energy of the last force evaluation count in the scene's speed scale).
     pub fn reset_guard(&mut self) {
         if self.radius.len() != self.particles.len() {
             self.refresh_radii();
@@ -326,6 +328,7 @@ impl Simulation {
             &self.scene,
             &self.particles,
             &self.radius,
+            self.stats.elastic_energy,
         );
     }
 
@@ -341,6 +344,7 @@ impl Simulation {
         let saved = self.history.clone();
         self.forces_with_history_step(0.0)?;
         self.history = saved;
+        self.reset_guard();
         Ok(())
     }
 
@@ -1106,7 +1110,11 @@ impl Simulation {
                     ),
                     None => format!("particle {}", if k.a == id { k.b } else { k.a }),
                 };
-                format!("{what} (first touched at {:.3e} m/s)", st.approach_speed)
+                if st.approach_speed > 1e-300 {
+                    format!("{what} (first touched at {:.3e} m/s)", st.approach_speed)
+                } else {
+                    format!("{what} (in contact from rest)")
+                }
             })
             .collect();
         if contacts.is_empty() {

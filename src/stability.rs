@@ -9,8 +9,8 @@
 //! - **finiteness** of the position, velocity, angular velocity and orientation;
 //! - **speed**: `|v| + |ω| R` (the fastest point of the particle, `R` its circumscribed radius)
 //!   at most `max_speed`, by default `speed_factor` (10) times the scene's speed scale
-//!   ([`speed_scale`]): what gravity, insertion, the walls' motion and the initial velocities
-//!   can give a particle;
+//!   ([`speed_scale`]): what gravity, insertion, the walls' motion, the initial velocities and
+//!   the initial contacts' elastic energy can give a particle;
 //! - **overlap**: the overlap volume of every contact at most `max_overlap` (0.1) of the smaller
 //!   particle's volume (`(4π/3) R³` of its volume-equivalent radius R). The volume, not the
 //!   depth: the volume law's energy `(3/4) c V^{4/3}` is set by V whatever touches, so a vertex
@@ -41,14 +41,16 @@ pub struct StabilityGuard {
 }
 
 impl StabilityGuard {
-    /// The guard of `scene` for the particles now placed (`radius` their circumscribed radii).
+    /// The guard of `scene` for the particles now placed (`radius` their circumscribed radii),
+    /// whose contacts store the elastic energy `elastic` (J).
     pub fn new(
         settings: &GuardSettings,
         scene: &Scene,
         particles: &Particles,
         radius: &[f64],
+        elastic: f64,
     ) -> Self {
-        let speed_scale = speed_scale(scene, particles, radius);
+        let speed_scale = speed_scale(scene, particles, radius, elastic);
         let max_speed = match settings.max_speed {
             Some(v) => v,
             None if speed_scale > 0.0 => settings.speed_factor * speed_scale,
@@ -155,8 +157,10 @@ impl std::fmt::Display for Instability {
 
 /// The speed a particle of the scene can be expected to reach (m/s): free fall across the
 /// domain's diagonal, plus the fastest insertion (`|v| + |ω| R`), the fastest wall surface
-/// point and the fastest particle now placed. Zero for a scene where nothing drives motion.
-pub fn speed_scale(scene: &Scene, particles: &Particles, radius: &[f64]) -> f64 {
+/// point, the fastest particle now placed and the speed the contacts' stored elastic energy
+/// `elastic` (J) would give the lightest particle now placed, `√(2 U / m_min)` (a packing that
+/// starts compressed releases it). Zero for a scene where nothing drives motion.
+pub fn speed_scale(scene: &Scene, particles: &Particles, radius: &[f64], elastic: f64) -> f64 {
     let d = scene.domain.max - scene.domain.min;
     let fall = (2.0 * scene.gravity.norm() * d.norm()).sqrt();
     let max_radius = scene.max_bounding_radius();
@@ -193,5 +197,11 @@ pub fn speed_scale(scene: &Scene, particles: &Particles, radius: &[f64]) -> f64 
         .map(|i| particles.velocity[i].norm() + particles.angular_velocity[i].norm() * radius[i])
         .filter(|s| s.is_finite())
         .fold(0.0, f64::max);
-    fall + insert + wall + placed
+    let lightest = particles.mass.iter().copied().fold(f64::INFINITY, f64::min);
+    let released = if elastic > 0.0 && lightest.is_finite() && lightest > 0.0 {
+        (2.0 * elastic / lightest).sqrt()
+    } else {
+        0.0
+    };
+    fall + insert + wall + placed + released
 }
