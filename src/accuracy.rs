@@ -21,7 +21,7 @@ use crate::backend::cuda::Precision;
 use crate::backend::{Device, Engine};
 use crate::pipeline::Simulation;
 use crate::rng::Rng;
-use crate::scene::{load_scene, parse_scene};
+use crate::scene::parse_scene;
 use crate::shape::MeshFile;
 use anyhow::{Context, Result, anyhow};
 use nalgebra::{Point3, UnitQuaternion, Vector3};
@@ -94,7 +94,7 @@ pub fn run_accuracy(opts: &AccuracyOptions) -> Result<Vec<AccuracyRow>> {
     }
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("{}: cannot create", opts.out.display()))?;
-    let ctx = Context_::new(&opts.out)?;
+    let ctx = CaseRunner::new(&opts.out)?;
     let mut rows = Vec::new();
     for &device in &opts.devices {
         for case in CASES {
@@ -260,7 +260,7 @@ fn plot(path: &Path, rows: &[AccuracyRow]) -> Result<()> {
 }
 
 /// Scratch folder, the repository's meshes, the generated walls.
-struct Context_ {
+struct CaseRunner {
     dir: PathBuf,
     root: PathBuf,
 }
@@ -326,7 +326,7 @@ struct Spec<'a> {
     wall: Option<&'a Path>,
 }
 
-impl Context_ {
+impl CaseRunner {
     fn new(out: &Path) -> Result<Self> {
         let dir = out.join("cases");
         std::fs::create_dir_all(&dir)
@@ -334,7 +334,7 @@ impl Context_ {
         write_plane(&dir.join("plane.stl"), 1.0, 1)?;
         write_plane(&dir.join("mesh_coarse.stl"), 0.2, 8)?; // λ = 0.5 for the 2.5 cm cuboid
         write_plane(&dir.join("mesh_fine.stl"), 0.2, 64)?; // λ = 4
-        Ok(Context_ {
+        Ok(CaseRunner {
             dir,
             root: repo_root(),
         })
@@ -739,12 +739,9 @@ dir = "{}"
         let text = std::fs::read_to_string(&path)
             .with_context(|| format!("{}: cannot read", path.display()))?;
         let text = text.replace("dt_fraction = 0.05", &format!("dt_fraction = {f}"));
-        let scratch = self.root.join("launch/validation/.accuracy_pour.toml");
-        std::fs::write(&scratch, &text)
-            .with_context(|| format!("{}: cannot write", scratch.display()))?;
-        let scene = load_scene(&scratch).map_err(|e| anyhow!("{e}"));
-        let _ = std::fs::remove_file(&scratch);
-        let scene = scene?;
+        // Relative paths of the file (its meshes) resolve against its own folder.
+        let base = path.parent().unwrap_or(&self.root);
+        let scene = parse_scene(&text, base, "pour.toml").map_err(|e| anyhow!("{e}"))?;
         let end = scene.simulation.end_time;
         let sim = Simulation::new(scene)?;
         let mut e = Engine::new(sim, device)?;
