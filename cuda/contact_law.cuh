@@ -175,7 +175,9 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
         return no_contact_forces();
     }
     Overlap<double> o = given;
-    if (!(norm(given.dv_dxb) > 1e-6 * volume_area_scale(volume))) { // law.rs INSIDE_AREA_FRACTION
+    // law.rs: |S| > 1e-6 V^{2/3} (INSIDE_AREA_FRACTION) as |S|³ > 1e-18 V², without a cube root.
+    double given_area = norm(given.dv_dxb);
+    if (!(given_area * given_area * given_area > 1e-18 * volume * volume)) {
         o = wholly_inside(given, kin);
     }
     double area = norm(o.dv_dxb);
