@@ -757,7 +757,8 @@ impl Simulation {
         let limit = self.guard.max_overlap;
         self.too_deep = None;
         if limit.is_finite() {
-            // Id and volume-equivalent radius of an owned particle or a ghost.
+            // Id and volume ((4π/3) R³ of the volume-equivalent radius) of an owned particle
+            // or a ghost.
             let member = |x: usize| {
                 let s = &self.scene;
                 let p = if x < owned {
@@ -776,12 +777,12 @@ impl Simulation {
                     crate::stability::ball_volume(t.equivalent_radius * p.scale[x]),
                 )
             };
-            let radius = |i: usize| member(i).1;
+            let volume = |i: usize| member(i).1;
             if let Some(k) = outcomes.iter().position(|o| o.penetration > limit) {
                 let [a, b] = self.pairs.pairs[k].map(|x| x as usize);
                 // The owned member is named (a ghost's id is still the partner's).
                 let (i, j) = if a < owned { (a, b) } else { (b, a) };
-                let size = radius(i).min(radius(j));
+                let size = volume(i).min(volume(j));
                 self.too_deep = Some((
                     i,
                     format!("particle {}", member(j).0),
@@ -790,7 +791,7 @@ impl Simulation {
                 ));
             } else if let Some(i) = wall_outcomes.iter().position(|w| w.penetration.0 > limit) {
                 let (depth, k) = wall_outcomes[i].penetration;
-                let size = radius(i);
+                let size = volume(i);
                 self.too_deep = Some((
                     i,
                     format!("wall \"{}\"", self.scene.walls[k].name),

@@ -286,6 +286,18 @@ impl CudaSimulation {
             // The stability guard's overlap bound (cuda/contact.cu `guard_overlap`).
             let i = (u32::MAX - error[2]) as usize;
             self.sync_host()?;
+            if i >= self.host.particles.len() {
+                return Err(SimulationError::Domain {
+                    step: self.host.step,
+                    message: format!(
+                        "a contact of ghost slot {i} overlaps more than {} of the smaller \
+                         particle's volume (simulation.guard.max_overlap); its owner's rank \
+                         names it",
+                        self.host.guard.max_overlap
+                    ),
+                }
+                .into());
+            }
             let problem = crate::stability::Instability::DeepContact {
                 fraction: self.host.guard.max_overlap,
             };
