@@ -234,8 +234,7 @@ impl Validator<'_> {
                 );
                 TimeStep::FractionOfCritical(0.1)
             }
-            // The default: the largest fraction at which every case of `polydem bench
-            // accuracy` is within 1 % (docs/accuracy.md).
+            // The default of docs/accuracy.md (DEFAULT_DT_FRACTION).
             (None, None) => TimeStep::FractionOfCritical(DEFAULT_DT_FRACTION),
         };
         let end_time = self.positive("simulation.end_time", s.end_time);
