@@ -386,8 +386,8 @@ fn long_steps() -> u64 {
 }
 
 /// The dense elastic packings of every built-in shape stay finite and within the guard's
-/// bounds, and keep their energy to 1 % over 1500 steps (measured: 1.3e-6 … 6.8e-6 for the
-/// polyhedra, 2.1e-3 for spheres, each four times smaller at half the step).
+/// bounds, and keep their energy to 1 % over 1500 steps (measured at the default step: 3.2e-7 …
+/// 1.6e-6 for the polyhedra, 5.0e-4 for spheres; four times as much at twice the step).
 #[test]
 fn dense_elastic_packings_of_every_shape_keep_their_energy() {
     for shape in SHAPES {
@@ -397,10 +397,9 @@ fn dense_elastic_packings_of_every_shape_keep_their_energy() {
 }
 
 /// The same packings for 1e6 steps each (`POLYDEM_PACKING_STEPS`): about 3 minutes per shape on
-/// one CPU core. Measured: the polyhedra within 1.5e-5; the spheres drift to 0.54 (open: with 1 %
-/// overlaps and six neighbours each, the kick window of docs/contact.md §1 opens on every
-/// contact that grazes open and shut, and without it the drift is ten times smaller but not
-/// gone; at half the step it is 3.8e-4 over the same time).
+/// one CPU core. Measured at dt_fraction 0.05: the polyhedra within 1.5e-5; the spheres drift to
+/// 0.54 (docs/contact.md §8: with 1 % overlaps and six neighbours each, the kick window of §1
+/// opens on every contact that grazes open and shut).
 #[test]
 #[ignore = "long: 1e6 steps of each shape"]
 fn dense_elastic_packings_run_a_million_steps() {
