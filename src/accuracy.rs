@@ -602,17 +602,13 @@ dir = "{}"
             }
         }
         sim.refresh()?;
-        let energy = |s: &Simulation| {
-            let (kt, kr, pg) = s.energies();
-            kt + kr + pg + s.stats.elastic_energy
-        };
-        let e0 = energy(&sim);
+        let e0 = sim.total_energy();
         let steps = (0.02 / sim.dt).round() as u64;
         let mut e = Engine::new(sim, device)?;
         for _ in 0..steps {
             e.step()?;
         }
-        let e1 = energy(e.synced()?);
+        let e1 = e.synced()?.total_energy();
         let error = (e1 - e0).abs() / e0;
         Ok((
             error,

@@ -1168,6 +1168,13 @@ impl Simulation {
         v
     }
 
+    /// Kinetic, gravitational and elastic energy together (J): what an elastic, frictionless
+    /// run conserves.
+    pub fn total_energy(&self) -> f64 {
+        let (kt, kr, pg) = self.energies();
+        kt + kr + pg + self.stats.elastic_energy
+    }
+
     /// Kinetic energy (translational, rotational) and gravitational potential energy
     /// (relative to the origin).
     pub fn energies(&self) -> (f64, f64, f64) {

@@ -344,11 +344,7 @@ dir = "{}"
         );
     }
     sim.refresh().unwrap();
-    let energy = |s: &Simulation| {
-        let (kt, kr, pg) = s.energies();
-        kt + kr + pg + s.stats.elastic_energy
-    };
-    let e0 = energy(&sim);
+    let e0 = sim.total_energy();
     let contacts0 = sim.stats.contacts;
     let mut e = engine(sim, device);
     let mut worst = 0.0f64;
@@ -358,7 +354,7 @@ dir = "{}"
             .unwrap_or_else(|err| panic!("{shape}, step {k}: {err}"));
         if k % every == 0 {
             let s = e.synced().unwrap();
-            worst = worst.max((energy(s) - e0).abs() / e0);
+            worst = worst.max((s.total_energy() - e0).abs() / e0);
         }
     }
     println!(
@@ -368,14 +364,8 @@ dir = "{}"
     worst
 }
 
-const SHAPES: [&str; 6] = [
-    "tetrahedron",
-    "cube",
-    "octahedron",
-    "dodecahedron",
-    "icosahedron",
-    "sphere",
-];
+/// Every built-in shape.
+const SHAPES: [&str; 6] = polydem::shape::GENERATOR_NAMES;
 
 /// Steps of the long packing runs: `POLYDEM_PACKING_STEPS`, default 1e6.
 fn long_steps() -> u64 {

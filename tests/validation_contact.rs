@@ -52,11 +52,6 @@ fn add(
     sim.particles.angular_velocity[i] = w;
 }
 
-fn total_energy(sim: &Simulation) -> f64 {
-    let (kt, kr, pg) = sim.energies();
-    kt + kr + pg + sim.stats.elastic_energy
-}
-
 fn in_contact(e: &mut Engine) -> bool {
     let (pairs, walls) = e.contact_counts().unwrap();
     pairs + walls > 0
@@ -82,12 +77,12 @@ fn impact(e: &mut Engine) -> u64 {
 /// energy change).
 fn collide(mut sim: Simulation, device: Device) -> (u64, f64) {
     sim.refresh().unwrap();
-    let e0 = total_energy(&sim);
+    let e0 = sim.total_energy();
     let mut e = engine(sim, device);
     let contact_steps = impact(&mut e);
     (
         contact_steps,
-        (total_energy(e.synced().unwrap()) - e0).abs() / e0,
+        (e.synced().unwrap().total_energy() - e0).abs() / e0,
     )
 }
 
@@ -496,14 +491,14 @@ dir = "{}"
             }
         }
         sim.refresh().unwrap();
-        let e0 = total_energy(&sim);
+        let e0 = sim.total_energy();
         let steps = (0.04 / dt).round() as u64;
         let mut e = engine(sim, device);
         for _ in 0..steps {
             e.step().unwrap();
         }
         let s = e.synced().unwrap();
-        errors.push((total_energy(s) - e0) / e0);
+        errors.push((s.total_energy() - e0) / e0);
         println!(
             "{device:?} aligned cubes, dt = t_c/{divisions}: {} steps, {} contacts at the end, relative energy change {:.3e}",
             steps,

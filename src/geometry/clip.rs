@@ -234,6 +234,17 @@ pub fn facet_prism<T: Real>(tri: &[Vector3<T>; 3]) -> Option<[Plane<T>; 4]> {
     Some(prism)
 }
 
+/// Whether a plane of the prism has every vertex of the body on its outer side, which separates
+/// the two: nothing to compute. This cheap test rejects most facets near a particle (those it
+/// passes over sideways, or hovers above).
+fn prism_separates<T: Real>(body: &PosedPolytope<T>, prism: &[Plane<T>; 4]) -> bool {
+    prism.iter().any(|plane| {
+        body.vertices()
+            .iter()
+            .all(|v| plane.distance(v) >= T::zero())
+    })
+}
+
 /// Overlap of `body` with a facet's prism `[facet plane, side planes…]` (planes of B): the
 /// penetrating volume, its centroid, `S` (so `dV/dx_body = −S`) and the moment of the prism's
 /// part of the surface.
@@ -243,14 +254,7 @@ pub fn prism_overlap<T: Real>(
     prism: &[Plane<T>; 4],
 ) -> Result<Overlap<T>, OverlapError> {
     let facet = &prism[0];
-    // A plane with every vertex of the body on its outer side separates the two: nothing to
-    // compute. This cheap test rejects most facets near a particle (those it passes over
-    // sideways, or hovers above).
-    if prism.iter().any(|plane| {
-        body.vertices()
-            .iter()
-            .all(|v| plane.distance(v) >= T::zero())
-    }) {
+    if prism_separates(body, prism) {
         return Ok(Overlap::default());
     }
     // Start the interior-point search on the facet plane under the body's centre.
@@ -284,11 +288,7 @@ pub fn prism_overlap_culled<T: Real>(
     prism: &[Plane<T>; 4],
 ) -> Result<Overlap<T>, OverlapError> {
     let facet = &prism[0];
-    if prism.iter().any(|plane| {
-        body.vertices()
-            .iter()
-            .all(|v| plane.distance(v) >= T::zero())
-    }) {
+    if prism_separates(body, prism) {
         return Ok(Overlap::default());
     }
     let (template, scale, _) = placed_from;
