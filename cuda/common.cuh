@@ -97,6 +97,52 @@ PD_HD double portable_cbrt(double x) {
 }
 PD_HD int max_(int a, int b) { return a > b ? a : b; }
 
+// sin and cos from + − × ÷ and floor only (Rust geometry::real::portable_sin_cos, whose docs
+// give the method): libm's and CUDA's sin/cos differ in the last bit for some arguments, and
+// the free rotation takes five of them per particle and step.
+PD_HD void portable_sin_cos(double x, double* s_out, double* c_out) {
+    if (!(x - x == 0.0)) {
+        *s_out = x - x;
+        *c_out = x - x;
+        return;
+    }
+    const double pio2_hi = 1.5707963267341256;   // 0x1.921fb544p+0, 33 significant bits
+    const double pio2_lo = 6.077100506506192e-11; // pi/2 - pio2_hi
+    const double sin_coeffs[8] = {-1.0 / 6.0,           1.0 / 120.0,          -1.0 / 5040.0,
+                                  1.0 / 362880.0,       -1.0 / 39916800.0,    1.0 / 6227020800.0,
+                                  -1.0 / 1307674368000.0, 1.0 / 355687428096000.0};
+    const double cos_coeffs[8] = {1.0 / 24.0,           -1.0 / 720.0,           1.0 / 40320.0,
+                                  -1.0 / 3628800.0,     1.0 / 479001600.0,      -1.0 / 87178291200.0,
+                                  1.0 / 20922789888000.0, -1.0 / 6402373705728000.0};
+    double n = 0.0, r = x;
+    if (!(abs_(x) <= 0.78539816339744830962)) { // FRAC_PI_4
+        n = floor(x * 0.63661977236758134308 + 0.5); // FRAC_2_PI
+        r = (x - n * pio2_hi) - n * pio2_lo;
+    }
+    double z = r * r;
+    double ps = sin_coeffs[7], pc = cos_coeffs[7];
+    for (int k = 6; k >= 0; --k) {
+        ps = sin_coeffs[k] + z * ps;
+        pc = cos_coeffs[k] + z * pc;
+    }
+    double s = r + r * z * ps;
+    double c = 1.0 - (0.5 * z - z * z * pc);
+    double quadrant = n - 4.0 * floor(n * 0.25);
+    if (quadrant == 0.0) {
+        *s_out = s;
+        *c_out = c;
+    } else if (quadrant == 1.0) {
+        *s_out = c;
+        *c_out = -s;
+    } else if (quadrant == 2.0) {
+        *s_out = -s;
+        *c_out = -c;
+    } else {
+        *s_out = -c;
+        *c_out = s;
+    }
+}
+
 // Machine epsilon and the largest finite value of T (Rust's f64::EPSILON / f32::EPSILON).
 template <class T> struct Limits;
 template <> struct Limits<double> {

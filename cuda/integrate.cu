@@ -1,8 +1,9 @@
 // Stage 9, integration: the GPU twin of src/integrate/mod.rs (velocity Verlet for translation,
 // the Dullweber–Leimkuhler–McLachlan splitting of the free rotation in the body frame with
 // quaternions, seed paper Eq. 23–26 in energy-conserving form). One thread per particle. The
-// operations follow nalgebra's order (quaternion product, rotation, normalisation) so that
-// double results match the CPU backend up to the sin/cos of the rotation steps.
+// operations follow nalgebra's order (quaternion product, rotation, normalisation) and the
+// rotation steps' sin/cos are common.cuh's portable_sin_cos, so that double results match the
+// CPU backend bit for bit.
 //
 // A step makes two passes over the particle state: `kick_drift` (half kick, drift, periodic wrap
 // and the per-step checks) and `reduce_and_kick` (the force reduction of stage 8 and the second
@@ -120,7 +121,7 @@ extern "C" __global__ void kick_drift(int n, const unsigned int* ghost, double* 
             int axis = axes[s];
             double theta = halves[s] * dt * pi[axis] / inertia_k[axis];
             double sang, cang;
-            sincos(theta / 2.0, &sang, &cang);
+            portable_sin_cos(theta / 2.0, &sang, &cang);
             Quat<double> step;
             step.w = cang;
             step.x = axis == 0 ? sang : 0.0;

@@ -57,8 +57,10 @@ enum Command {
         scene: PathBuf,
         #[arg(long, value_enum, default_value = "auto")]
         backend: BackendChoice,
-        #[arg(long, value_enum, default_value = "mixed")]
-        gpu_precision: polydem::backend::cuda::Precision,
+        /// Pair-geometry arithmetic on the GPU: `mixed` unless given; `bench accuracy` runs
+        /// both precisions unless one is given.
+        #[arg(long, value_enum)]
+        gpu_precision: Option<polydem::backend::cuda::Precision>,
         /// Steps before timing.
         #[arg(long, default_value_t = 20)]
         warmup: u64,
@@ -228,19 +230,19 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<()> {
                 use polydem::accuracy::{AccuracyOptions, FULL_FRACTIONS, SHORT_FRACTIONS};
                 use polydem::backend::Device;
                 let devices = match polydem::run::choose_backend(backend)? {
-                    "cuda" => vec![
-                        Device::Cuda {
-                            ordinal: 0,
-                            precision: polydem::backend::cuda::Precision::Double,
-                        },
-                        Device::Cuda {
-                            ordinal: 0,
-                            precision: polydem::backend::cuda::Precision::Mixed,
-                        },
-                    ],
+                    "cuda" => {
+                        use polydem::backend::cuda::Precision;
+                        gpu_precision
+                            .map_or(vec![Precision::Double, Precision::Mixed], |p| vec![p])
+                            .into_iter()
+                            .map(|precision| Device::Cuda {
+                                ordinal: 0,
+                                precision,
+                            })
+                            .collect()
+                    }
                     _ => vec![Device::Cpu],
                 };
-                let _ = gpu_precision;
                 let fractions = fractions.unwrap_or_else(|| {
                     if full {
                         FULL_FRACTIONS.to_vec()
@@ -275,7 +277,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<()> {
                 &polydem::run::BenchOptions {
                     scene,
                     backend,
-                    precision: gpu_precision,
+                    precision: gpu_precision.unwrap_or(polydem::backend::cuda::Precision::Mixed),
                     warmup,
                     steps,
                 },

@@ -1058,3 +1058,270 @@ fn cuda_sphere_headers_match_the_rust_reference_bitwise() {
         mismatches[..mismatches.len().min(5)].join("\n")
     );
 }
+
+/// A vector with components uniform in [lo, hi).
+fn rand3(rng: &mut Rng, lo: f64, hi: f64) -> Vector3<f64> {
+    Vector3::new(rng.range(lo, hi), rng.range(lo, hi), rng.range(lo, hi))
+}
+
+/// The contact law (`cuda/contact_law.cuh`) and the portable math it and the integrator use
+/// (`portable_sin_cos`, `portable_cbrt` in `cuda/common.cuh`) against `contact::law` and
+/// `geometry::real`, bit for bit. The law's cases cover every branch: first touch with the
+/// kick window open and carrying the missed share, the slope at V, a body wholly inside the
+/// other (|S| ≈ 0), spheres on walls and on spheres, sticking and sliding springs, twisting
+/// friction within and at its Coulomb cap, rocking damping at its one-step bound, μ = 0, e = 1
+/// and dt = 0 (the first force evaluation).
+#[test]
+fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
+    use polydem::contact::{ContactKinematics, ContactParameters, ContactState, contact_forces};
+    use polydem::geometry::{portable_cbrt, portable_sin_cos};
+    let mut rng = Rng::new(47);
+    let mut text = String::new();
+    let mut want = Vec::new();
+    let n = 4000;
+    writeln!(text, "sincos {n}").unwrap();
+    for i in 0..n {
+        let x = match i % 3 {
+            0 => rng.range(-1e-2, 1e-2),
+            1 => rng.range(-10.0, 10.0),
+            _ => rng.range(-1e5, 1e5),
+        };
+        hex(&mut text, x);
+        text.push('\n');
+        let (s, c) = portable_sin_cos(x);
+        let mut l = format!("S {i}");
+        hex(&mut l, s);
+        hex(&mut l, c);
+        want.push(l);
+    }
+    writeln!(text, "cbrt {n}").unwrap();
+    for i in 0..n {
+        let x = 10f64.powf(rng.range(-320.0, 300.0)) * if i % 2 == 0 { 1.0 } else { -1.0 };
+        hex(&mut text, x);
+        text.push('\n');
+        let mut l = format!("R {i}");
+        hex(&mut l, portable_cbrt(x));
+        want.push(l);
+    }
+    writeln!(text, "law {n}").unwrap();
+    let mut branches = [0usize; 6]; // window, first-touch share, inside, sliding, twist cap, sphere
+    for i in 0..n {
+        let sphere = i % 4 == 3;
+        let e = if i % 5 == 0 {
+            1.0
+        } else {
+            0.1 + 0.85 * ((i * 7919) % 100) as f64 / 100.0
+        };
+        let mu = if i % 7 == 0 { 0.0 } else { 0.5 };
+        let damping = if e < 1.0 {
+            polydem::contact::hunt_crossley_alpha(e)
+        } else {
+            0.0
+        };
+        let params = ContactParameters {
+            normal_stiffness: 2e8 * (1.0 + (i % 3) as f64),
+            tangential_stiffness: 8e7,
+            restitution: e,
+            friction: mu,
+            damping,
+            rocking: !sphere,
+        };
+        let log_e = e.ln();
+        let log_norm = (log_e.powi(2) + std::f64::consts::PI.powi(2)).sqrt();
+        let volume = 10f64.powf(-14.0 + 6.0 * ((i * 37) % 97) as f64 / 97.0);
+        let size = volume.cbrt();
+        let inside = i % 17 == 0;
+        let s_len = if inside {
+            1e-10 * size * size
+        } else {
+            size * size * (1.0 + 50.0 * ((i * 13) % 11) as f64)
+        };
+        let normal = Vector3::from(rng.unit_vector());
+        let x_a = rand3(&mut rng, -0.01, 0.01);
+        let x_b = x_a + normal * 0.005 + rand3(&mut rng, -1e-3, 1e-3);
+        let overlap = Overlap {
+            volume,
+            centroid: (x_a + x_b) * 0.5 + rand3(&mut rng, -1e-4, 1e-4),
+            dv_dxb: -normal * s_len,
+            moment_b: rand3(&mut rng, -1.0, 1.0) * (s_len * size * 0.1),
+            depth: size * 0.1,
+            thickness: size * 0.2,
+        };
+        let speed = 10f64.powf(rng.range(-3.0, 0.5));
+        let kin = ContactKinematics {
+            x_a,
+            x_b,
+            v_a: rand3(&mut rng, -1.0, 1.0) * speed,
+            v_b: rand3(&mut rng, -1.0, 1.0) * speed,
+            w_a: rand3(&mut rng, -1.0, 1.0) * (speed * 100.0),
+            w_b: rand3(&mut rng, -1.0, 1.0) * (speed * 100.0),
+            effective_mass: 10f64.powf(rng.range(-4.0, -2.0)),
+            q_a: UnitQuaternion::from_quaternion(nalgebra::Quaternion::from(
+                nalgebra::Vector4::from(rng.unit_quaternion()),
+            )),
+            q_b: UnitQuaternion::from_quaternion(nalgebra::Quaternion::from(
+                nalgebra::Vector4::from(rng.unit_quaternion()),
+            )),
+            inverse_inertia_a: rand3(&mut rng, 1e6, 1e8),
+            inverse_inertia_b: if i % 6 == 1 {
+                Vector3::zeros()
+            } else {
+                rand3(&mut rng, 1e6, 1e8)
+            },
+            sphere_radius_a: if sphere { 0.005 } else { 0.0 },
+            sphere_radius_b: if sphere && i % 8 == 3 { 0.004 } else { 0.0 },
+        };
+        let first = i % 3 == 0;
+        let state = ContactState {
+            spring: if first {
+                Vector3::zeros()
+            } else {
+                rand3(&mut rng, -1.0, 1.0) * 10f64.powf(rng.range(-9.0, -4.0))
+            },
+            approach_speed: if first {
+                0.0
+            } else {
+                speed * rng.range(0.5, 2.0)
+            },
+            twist: if first {
+                0.0
+            } else {
+                rng.range(-1.0, 1.0) * 10f64.powf(rng.range(-6.0, 0.0))
+            },
+        };
+        let dt = if i % 19 == 0 {
+            0.0
+        } else {
+            10f64.powf(rng.range(-7.0, -5.0))
+        };
+        for x in [
+            params.normal_stiffness,
+            params.tangential_stiffness,
+            e,
+            mu,
+            damping,
+            log_e,
+            log_norm,
+            if params.rocking { 1.0 } else { 0.0 },
+            volume,
+        ] {
+            hex(&mut text, x);
+        }
+        hex3(&mut text, &overlap.centroid);
+        hex3(&mut text, &overlap.dv_dxb);
+        hex3(&mut text, &overlap.moment_b);
+        hex(&mut text, overlap.depth);
+        hex(&mut text, overlap.thickness);
+        for v in [kin.x_a, kin.x_b, kin.v_a, kin.v_b, kin.w_a, kin.w_b] {
+            hex3(&mut text, &v);
+        }
+        hex(&mut text, kin.effective_mass);
+        for q in [kin.q_a, kin.q_b] {
+            for x in [q.w, q.i, q.j, q.k] {
+                hex(&mut text, x);
+            }
+        }
+        hex3(&mut text, &kin.inverse_inertia_a);
+        hex3(&mut text, &kin.inverse_inertia_b);
+        hex(&mut text, kin.sphere_radius_a);
+        hex(&mut text, kin.sphere_radius_b);
+        hex3(&mut text, &state.spring);
+        hex(&mut text, state.approach_speed);
+        hex(&mut text, state.twist);
+        hex(&mut text, dt);
+        text.push('\n');
+        let mut after = state;
+        let f = contact_forces(&params, &overlap, &kin, &mut after, dt);
+        // Which branches the case took (recomputed as the law does).
+        let area = overlap.area();
+        let sweep = 0.5 * (kin.v_b - kin.v_a).dot(&normal).abs() * dt * area;
+        branches[0] += usize::from(sweep > 0.5 * volume);
+        branches[1] += usize::from(first && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0);
+        branches[2] += usize::from(inside);
+        // Sliding: the spring holds exactly the Coulomb force; the twist likewise its cap.
+        let n_used = -overlap.dv_dxb / area;
+        let f_normal = f.force_b.dot(&n_used);
+        let k_t = params.tangential_stiffness * area;
+        let disk = area / std::f64::consts::PI;
+        let near = |a: f64, b: f64| b > 0.0 && (a - b).abs() <= 1e-9 * b;
+        branches[3] += usize::from(mu > 0.0 && near(after.spring.norm() * k_t, mu * f_normal));
+        branches[4] += usize::from(
+            mu > 0.0
+                && near(
+                    0.5 * k_t * disk * after.twist.abs(),
+                    mu * f_normal * (2.0 / 3.0) * disk.sqrt(),
+                ),
+        );
+        branches[5] += usize::from(sphere);
+        let mut l = format!("W {i}");
+        hex3(&mut l, &f.force_b);
+        hex3(&mut l, &f.torque_a);
+        hex3(&mut l, &f.torque_b);
+        hex(&mut l, f.elastic_energy);
+        hex3(&mut l, &after.spring);
+        hex(&mut l, after.approach_speed);
+        hex(&mut l, after.twist);
+        want.push(l);
+    }
+    let root = repo_root();
+    let dir = temp_dir("cuda-law-host");
+    let exe = build_harness(&root, &dir);
+    let cases = dir.join("law.txt");
+    std::fs::write(&cases, text).unwrap();
+    let out = Command::new(&exe)
+        .arg("--law")
+        .arg(&cases)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "harness failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let got: Vec<String> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| l.trim_end().to_string())
+        .collect();
+    assert_eq!(got.len(), want.len());
+    let mismatches: Vec<_> = got
+        .iter()
+        .zip(&want)
+        .filter(|(g, w)| g.trim() != w.trim())
+        .map(|(g, w)| format!("C++  {g}\nRust {w}"))
+        .collect();
+    println!(
+        "{} cases ({n} sin/cos, {n} cbrt, {n} law; law branches: window {}, first-touch share \
+         {}, inside {}, sliding {}, twist capped {}, spheres {}), {} differ",
+        want.len(),
+        branches[0],
+        branches[1],
+        branches[2],
+        branches[3],
+        branches[4],
+        branches[5],
+        mismatches.len()
+    );
+    for (k, what) in [
+        "window",
+        "first-touch share",
+        "inside",
+        "sliding",
+        "twist cap",
+        "spheres",
+    ]
+    .iter()
+    .enumerate()
+    {
+        assert!(
+            branches[k] >= 20,
+            "only {} law cases take the {what} branch",
+            branches[k]
+        );
+    }
+    assert!(
+        mismatches.is_empty(),
+        "{}",
+        mismatches[..mismatches.len().min(5)].join("\n")
+    );
+}

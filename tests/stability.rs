@@ -349,6 +349,7 @@ dir = "{}"
     let mut e = engine(sim, device);
     let mut worst = 0.0f64;
     let every = (steps / 20).max(1);
+    let clock = std::time::Instant::now();
     for k in 1..=steps {
         e.step()
             .unwrap_or_else(|err| panic!("{shape}, step {k}: {err}"));
@@ -358,14 +359,30 @@ dir = "{}"
         }
     }
     println!(
-        "{device:?} {shape}: {contacts0} contacts at the start, {steps} steps, largest |ΔE|/E \
-         {worst:.3e}"
+        "{device:?} {shape}: {contacts0} contacts at the start, {steps} steps in {:.1} s, \
+         largest |ΔE|/E {worst:.3e}",
+        clock.elapsed().as_secs_f64()
     );
     worst
 }
 
 /// Every built-in shape.
 const SHAPES: [&str; 6] = polydem::shape::GENERATOR_NAMES;
+
+/// The shapes of the long packing runs: `POLYDEM_PACKING_SHAPES` (comma-separated; every
+/// built-in shape by default), so that one machine can run them side by side.
+fn long_shapes() -> Vec<&'static str> {
+    let only = std::env::var("POLYDEM_PACKING_SHAPES").unwrap_or_default();
+    let chosen: Vec<&str> = SHAPES
+        .into_iter()
+        .filter(|s| only.is_empty() || only.split(',').any(|o| o.trim() == *s))
+        .collect();
+    assert!(
+        !chosen.is_empty(),
+        "POLYDEM_PACKING_SHAPES={only}: none of {SHAPES:?}"
+    );
+    chosen
+}
 
 /// Steps of the long packing runs: `POLYDEM_PACKING_STEPS`, default 1e6.
 fn long_steps() -> u64 {
@@ -393,7 +410,7 @@ fn dense_elastic_packings_of_every_shape_keep_their_energy() {
 #[test]
 #[ignore = "long: 1e6 steps of each shape"]
 fn dense_elastic_packings_run_a_million_steps() {
-    for shape in SHAPES {
+    for shape in long_shapes() {
         let worst = elastic_packing(CPU, shape, long_steps());
         assert!(worst <= 0.01, "{shape}: energy changed by {worst:e}");
     }
@@ -402,8 +419,19 @@ fn dense_elastic_packings_run_a_million_steps() {
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn dense_elastic_packings_run_on_the_gpu() {
-    for shape in SHAPES {
-        for device in [GPU_DOUBLE, GPU_MIXED] {
+    // `POLYDEM_PACKING_PRECISION=double|mixed` runs one of them.
+    let only = std::env::var("POLYDEM_PACKING_PRECISION").unwrap_or_default();
+    let devices: Vec<Device> = [("double", GPU_DOUBLE), ("mixed", GPU_MIXED)]
+        .into_iter()
+        .filter(|(name, _)| only.is_empty() || only == *name)
+        .map(|(_, d)| d)
+        .collect();
+    assert!(
+        !devices.is_empty(),
+        "POLYDEM_PACKING_PRECISION={only}: double or mixed"
+    );
+    for shape in long_shapes() {
+        for &device in &devices {
             let worst = elastic_packing(device, shape, long_steps());
             assert!(
                 worst <= 0.01,

@@ -4,6 +4,7 @@
 // Build: c++ -O2 -std=c++17 -ffp-contract=off -I cuda cuda/host/geometry_harness.cpp
 // Usage: geometry_harness CASES_FILE      (results on stdout)
 //        geometry_harness --spheres FILE   (the sphere fast path, sphere.cuh; format below)
+//        geometry_harness --law FILE       (portable math and the contact law, contact_law.cuh)
 //        geometry_harness --sizes          (workspace sizes in bytes for the compiled capacities)
 //
 // Input (whitespace-separated tokens; every floating-point number is the 16-hex-digit bit
@@ -21,10 +22,16 @@
 //   F i  {prism_status status volume centroid(3) S(3) M(3) depth thickness} for double, then float
 // Sphere input: "lenses N" N × { ra rb d(3) }, then "caps N" N × { c(3) r tri(9) n(3) }; output
 //   L i {volume centroid(3) S(3) M(3) depth thickness} and C i {the same}.
+// Law input: "sincos N" N × { x }, "cbrt N" N × { x }, "law N" N × { c_n c_t e mu damping ln_e
+//   log_norm rocking(1.0/0.0)  volume centroid(3) S(3) M(3) depth thickness  x_a x_b v_a v_b w_a
+//   w_b (3 each) m_eff q_a(w x y z) q_b inv_inertia_a(3) inv_inertia_b(3) r_sphere_a r_sphere_b
+//   spring(3) approach twist dt }; output S i {sin cos}, R i {cbrt}, W i {force_b(3) torque_a(3)
+//   torque_b(3) energy spring(3) approach twist}.
 
 #include "overlap.cuh"
 #include "prism.cuh"
 #include "sphere.cuh"
+#include "contact_law.cuh"
 
 #include <cinttypes>
 #include <cstdio>
@@ -193,6 +200,83 @@ int run_spheres(const char* path) {
     return 0;
 }
 
+int run_law(const char* path) {
+    in = std::fopen(path, "r");
+    if (!in) {
+        std::perror(path);
+        return 2;
+    }
+    read_word("sincos");
+    long ns = read_int();
+    for (long i = 0; i < ns; ++i) {
+        double s, c;
+        pd::portable_sin_cos(read_f64(), &s, &c);
+        std::printf("S %ld", i);
+        put(s);
+        put(c);
+        std::printf("\n");
+    }
+    read_word("cbrt");
+    long nr = read_int();
+    for (long i = 0; i < nr; ++i) {
+        std::printf("R %ld", i);
+        put(pd::portable_cbrt(read_f64()));
+        std::printf("\n");
+    }
+    read_word("law");
+    long nw = read_int();
+    for (long i = 0; i < nw; ++i) {
+        pd::ContactParameters params;
+        pd::PairMaterial pm;
+        params.normal_stiffness = read_f64();
+        params.tangential_stiffness = read_f64();
+        pm.restitution = params.restitution = read_f64();
+        pm.friction = params.friction = read_f64();
+        pm.damping = params.damping = read_f64();
+        pm.log_restitution = read_f64();
+        pm.log_norm = read_f64();
+        params.rocking = read_f64() != 0.0;
+        pd::Overlap<double> o;
+        o.volume = read_f64();
+        o.centroid = read_v3();
+        o.dv_dxb = read_v3();
+        o.moment_b = read_v3();
+        o.depth = read_f64();
+        o.thickness = read_f64();
+        pd::ContactKinematics kin;
+        kin.x_a = read_v3();
+        kin.x_b = read_v3();
+        kin.v_a = read_v3();
+        kin.v_b = read_v3();
+        kin.w_a = read_v3();
+        kin.w_b = read_v3();
+        kin.effective_mass = read_f64();
+        kin.q_a = read_quat();
+        kin.q_b = read_quat();
+        kin.inverse_inertia_a = read_v3();
+        kin.inverse_inertia_b = read_v3();
+        kin.sphere_radius_a = read_f64();
+        kin.sphere_radius_b = read_f64();
+        pd::ContactHistoryRecord h;
+        h.spring = read_v3();
+        h.approach_speed = read_f64();
+        h.twist = read_f64();
+        double dt = read_f64();
+        pd::ContactForces f = pd::contact_forces(params, pm, o, kin, &h, dt);
+        std::printf("W %ld", i);
+        put3(f.force_b);
+        put3(f.torque_a);
+        put3(f.torque_b);
+        put(f.elastic_energy);
+        put3(h.spring);
+        put(h.approach_speed);
+        put(h.twist);
+        std::printf("\n");
+    }
+    std::fclose(in);
+    return 0;
+}
+
 } // namespace
 
 int main(int argc, char** argv) {
@@ -202,6 +286,9 @@ int main(int argc, char** argv) {
     }
     if (argc == 3 && std::strcmp(argv[1], "--spheres") == 0) {
         return run_spheres(argv[2]);
+    }
+    if (argc == 3 && std::strcmp(argv[1], "--law") == 0) {
+        return run_law(argv[2]);
     }
     if (argc != 2) {
         std::fprintf(stderr, "usage: geometry_harness CASES_FILE | --sizes\n");

@@ -31,4 +31,4 @@ pub use gjk::gjk_intersect;
 pub use interior::{ChebyshevCentre, chebyshev_centre};
 pub use overlap::{Overlap, OverlapError, OverlapWorkspace, overlap_pair, overlap_volume};
 pub use polytope::{Plane, PosedPolytope};
-pub use real::{Real, portable_cbrt};
+pub use real::{Real, portable_cbrt, portable_sin_cos};

@@ -12,8 +12,9 @@
 //! to round-off (it is renormalised anyway). A stepper that differentiates Euler's equations
 //! directly drifts in energy for tumbling (asymmetric) bodies.
 
+use crate::geometry::portable_sin_cos;
 use crate::state::Particles;
-use nalgebra::{Unit, UnitQuaternion, Vector3};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 /// Half kick: `v += F/m · dt/2`, `π += Rᵀτ · dt/2`, for every particle; gravity `g` is added to
@@ -85,8 +86,16 @@ pub fn free_rotation(
         // Exact flow of T_k = π_k² / (2 I_k): the body turns by θ = h dt π_k / I_k about its
         // k-th axis, and the (world-fixed) momentum, seen from the body, turns by −θ.
         let theta = h * dt * pi[axis] / inertia[axis];
-        let e = Unit::new_unchecked(Vector3::ith(axis, 1.0));
-        let step = UnitQuaternion::from_axis_angle(&e, theta);
+        // The rotation by θ about body axis `axis`, (cos θ/2, sin θ/2 e): sin and cos from
+        // `portable_sin_cos`, which the GPU twin evaluates to the same bits.
+        let (s, c) = portable_sin_cos(theta / 2.0);
+        let component = |k: usize| if k == axis { s } else { 0.0 };
+        let step = UnitQuaternion::new_unchecked(Quaternion::new(
+            c,
+            component(0),
+            component(1),
+            component(2),
+        ));
         q *= step;
         pi = step.inverse_transform_vector(&pi);
     }
