@@ -47,7 +47,7 @@ build: setup
 # when one is present and the CUDA backend is built, else on the CPU; ParaView output and
 # summary.json go to out/quickstart/, and the summary is printed.
 run: build
-	@cd $(ROOT) && $(POLYDEM) run launch/quickstart/quickstart.toml --backend auto
+	@cd $(ROOT) && $(POLYDEM) run launch/quickstart/quickstart.toml --backend auto --overwrite
 
 # The contact-geometry probe on the example pairs and wall cases of launch/probe/ (see
 # launch/probe/README.md).

@@ -13,6 +13,8 @@
 #   MPIRUN_ARGS      extra launcher arguments (e.g. "--hostfile hosts")
 #   RAYON_NUM_THREADS  threads per rank (default: cores / N, at least 1)
 #   POLYDEM_BACKEND  cpu, cuda or auto (default)
+#   POLYDEM_SIGKILL_TIMEOUT  seconds mpirun waits between SIGTERM and SIGKILL when interrupted
+#                    (default 60: time for the interrupt checkpoint)
 #
 # On a GPU machine each rank drives the GPU of its node-local rank modulo the visible GPUs
 # (DESIGN.md §6); POLYDEM_BACKEND=cpu|cuda|auto (default auto) picks the backend.
@@ -48,6 +50,10 @@ if ((ranks * threads > cores)); then
 else
     launcher_args+=(--map-by "slot:PE=$threads" --bind-to core)
 fi
+# Ctrl-C or `kill` on mpirun: Open MPI sends every rank SIGTERM, then SIGKILL after
+# odls_base_sigkill_timeout seconds (1 by default). The ranks agree on the signal after the
+# step they are in and write the interrupt checkpoint; give them a minute for a large one.
+launcher_args+=(--mca odls_base_sigkill_timeout "${POLYDEM_SIGKILL_TIMEOUT:-60}")
 if [[ "$(id -u)" == 0 ]]; then
     # Open MPI refuses root without these (containers, CI).
     export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1

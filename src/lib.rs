@@ -10,6 +10,7 @@ pub mod contact;
 pub mod domain;
 pub mod geometry;
 pub mod integrate;
+pub mod interrupt;
 pub mod io;
 pub mod neighbor;
 pub mod pipeline;

@@ -45,6 +45,10 @@ enum Command {
         /// frame with f64 state (the CPU is always f64).
         #[arg(long, value_enum, default_value = "double")]
         gpu_precision: polydem::backend::cuda::Precision,
+        /// Remove a previous run's output from the output folder first (a new run into a
+        /// folder holding one is refused otherwise; `--restart` continues in it).
+        #[arg(long)]
+        overwrite: bool,
     },
     /// Validates a scene and prints the critical time step, the chosen dt and counts.
     Check { scene: PathBuf },
@@ -168,26 +172,37 @@ fn main() {
             }
         }));
     }
-    if let Err(e) = run(cli, comm.clone()) {
-        if comm.size() > 1 {
-            eprintln!("error (rank {} of {}): {e:#}", comm.rank(), comm.size());
-            comm.abort(1);
+    match run(cli, comm.clone()) {
+        Err(e) => {
+            if comm.size() > 1 {
+                eprintln!("error (rank {} of {}): {e:#}", comm.rank(), comm.size());
+                comm.abort(1);
+            }
+            eprintln!("error: {e:#}");
+            std::process::exit(1);
         }
-        eprintln!("error: {e:#}");
-        std::process::exit(1);
+        Ok(0) => {}
+        Ok(status) => {
+            // A run stopped by a signal: MPI is finalized first (the communicator's last
+            // handle), then the shell's 128 + signal tells scripts it did not finish.
+            drop(comm);
+            std::process::exit(status);
+        }
     }
 }
 
-fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<()> {
+/// Runs the command; returns the process's exit status (non-zero only for a run stopped by a
+/// signal, `polydem::interrupt`).
+fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     match cli.command {
         Command::Probe {
             query: ProbeQuery::Overlap { file, precision },
-        } => probe_overlap(&file, precision, &mut out),
+        } => probe_overlap(&file, precision, &mut out).map(|()| 0),
         Command::Probe {
             query: ProbeQuery::Wall { file, precision },
-        } => probe_wall(&file, precision, &mut out),
+        } => probe_wall(&file, precision, &mut out).map(|()| 0),
         Command::Run {
             scene,
             backend,
@@ -195,6 +210,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<()> {
             restart,
             max_steps,
             gpu_precision,
+            overwrite,
         } => {
             let rank = comm.rank();
             let summary = polydem::run::run_on(
@@ -205,6 +221,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<()> {
                     restart,
                     max_steps,
                     precision: gpu_precision,
+                    overwrite,
                 },
                 comm,
             )?;
@@ -212,7 +229,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<()> {
                 use std::io::Write;
                 writeln!(out, "{}", serde_json::to_string_pretty(&summary)?)?;
             }
-            Ok(())
+            Ok(summary["exit_status"].as_i64().unwrap_or(0) as i32)
         }
         Command::Bench {
             scene,
@@ -270,7 +287,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<()> {
                         "rows": rows,
                     }))?
                 )?;
-                return Ok(());
+                return Ok(0);
             }
             let rank = comm.rank();
             let report = polydem::run::bench_on(
@@ -287,7 +304,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<()> {
                 use std::io::Write;
                 writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
             }
-            Ok(())
+            Ok(0)
         }
         Command::Check { scene } => {
             use std::io::Write;
@@ -296,16 +313,16 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<()> {
                 "{}",
                 serde_json::to_string_pretty(&polydem::run::check(&scene)?)?
             )?;
-            Ok(())
+            Ok(0)
         }
         Command::Info => {
             use std::io::Write;
             let info = polydem::backend::cuda_info();
             writeln!(out, "{}", serde_json::to_string_pretty(&info)?)?;
-            Ok(())
+            Ok(0)
         }
         Command::Shape {
             action: ShapeAction::Info { shape, size },
-        } => polydem::probe::shape_info(&shape, size, &mut out),
+        } => polydem::probe::shape_info(&shape, size, &mut out).map(|()| 0),
     }
 }

@@ -22,7 +22,6 @@ use serde_json::json;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Which backend a run asks for.
@@ -47,6 +46,128 @@ pub struct RunOptions {
     pub max_steps: Option<u64>,
     /// Arithmetic of the pair geometry on the GPU (the CPU backend is always f64).
     pub precision: Precision,
+    /// Clear a previous run's output from the output folder ([`prepare_output_dir`]).
+    pub overwrite: bool,
+}
+
+/// What `polydem run` writes into its output folder: `--overwrite` removes these (and
+/// temporary files of interrupted writes), and nothing else.
+pub const OUTPUT_ENTRIES: [&str; 7] = [
+    "summary.json",
+    "series.csv",
+    "frames.pvd",
+    "walls.pvd",
+    "frames",
+    "checkpoints",
+    "particles",
+];
+
+/// Whether `name` is one of the run's outputs ([`OUTPUT_ENTRIES`]) or a temporary file of an
+/// interrupted atomic write (`NAME.tmp-PID`).
+fn is_run_output(name: &str) -> bool {
+    OUTPUT_ENTRIES.contains(&name)
+        || name
+            .rsplit_once(".tmp-")
+            .is_some_and(|(_, pid)| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Makes `dir` ready for a run's output (rank 0, before the run).
+///
+/// - A path blocked by a file is refused, naming the file (not only the folder it blocks).
+/// - A new run into a folder that already holds output is refused unless `overwrite`: its
+///   series, summary and collections would be overwritten and a previous run's later
+///   checkpoints and frames left mixed with the new ones. With `overwrite` the previous run's
+///   outputs are removed ([`OUTPUT_ENTRIES`]); other files are kept and named in the log.
+/// - A restart (`restart`) continues in the folder as it is.
+pub fn prepare_output_dir(dir: &Path, overwrite: bool, restart: bool) -> Result<()> {
+    // The nearest part of the path that exists must be a folder.
+    for ancestor in dir.ancestors() {
+        match std::fs::metadata(ancestor) {
+            Ok(m) if m.is_dir() => break,
+            Ok(_) if ancestor == dir => {
+                bail!(
+                    "{}: the output folder's path is a file, not a folder; give another --out \
+                     (or output.dir)",
+                    dir.display()
+                )
+            }
+            Ok(_) => bail!(
+                "{}: is a file, not a folder, so the output folder {} cannot be created in it; \
+                 give another --out (or output.dir)",
+                ancestor.display(),
+                dir.display()
+            ),
+            // Not there yet, or below a file (which a shorter ancestor then names).
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory
+                ) =>
+            {
+                continue;
+            }
+            Err(e) => {
+                return Err(e).with_context(|| format!("{}: cannot inspect", ancestor.display()));
+            }
+        }
+    }
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("{}: cannot create the output directory", dir.display()))?;
+    if restart {
+        return Ok(());
+    }
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .with_context(|| format!("{}: cannot list the output directory", dir.display()))?
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    if names.is_empty() {
+        return Ok(());
+    }
+    let (ours, others): (Vec<String>, Vec<String>) =
+        names.into_iter().partition(|n| is_run_output(n));
+    if !overwrite {
+        if ours.is_empty() {
+            // Only files the run does not write (notes, a scene copy): nothing is overwritten.
+            return Ok(());
+        }
+        let shown: Vec<&str> = ours.iter().take(6).map(String::as_str).collect();
+        bail!(
+            "{}: the output folder holds a previous run's output ({}{}); give --overwrite to \
+             remove it, --restart CHECKPOINT to continue that run, or another --out",
+            dir.display(),
+            shown.join(", "),
+            if ours.len() > shown.len() {
+                ", …"
+            } else {
+                ""
+            }
+        );
+    }
+    for name in &ours {
+        let path = dir.join(name);
+        let removed = if path.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        removed.with_context(|| format!("{}: cannot remove (--overwrite)", path.display()))?;
+    }
+    tracing::info!(
+        "--overwrite: removed the previous output in {} ({})",
+        dir.display(),
+        ours.join(", ")
+    );
+    if !others.is_empty() {
+        tracing::warn!(
+            "{}: kept {} entries that polydem does not write: {}",
+            dir.display(),
+            others.len(),
+            others.join(", ")
+        );
+    }
+    Ok(())
 }
 
 /// Hash identifying a scene for restarts: the scene file's bytes.
@@ -431,8 +552,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
     let hash = scene_hash(&opts.scene)?;
     let dir = scene.output.dir.clone();
     if rank == 0 {
-        std::fs::create_dir_all(&dir)
-            .with_context(|| format!("{}: cannot create the output directory", dir.display()))?;
+        prepare_output_dir(&dir, opts.overwrite, opts.restart.is_some())?;
     }
     comm.barrier();
     let type_template: Vec<usize> = scene.particle_types.iter().map(|t| t.template).collect();
@@ -525,13 +645,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
         out.series(engine.synced()?)?;
     }
 
-    let interrupted = Arc::new(AtomicBool::new(false));
-    {
-        let flag = interrupted.clone();
-        // A second handler registration (several runs in one process, as in tests) is refused;
-        // the first one's flag then never fires for this run, which only loses Ctrl-C handling.
-        let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
-    }
+    let signals = crate::interrupt::StopSignals::install().map_err(|e| anyhow!("{e}"))?;
     let sim = engine.host();
     let total_steps = ((end_time - sim.time) / sim.dt).ceil().max(0.0) as u64;
     let bar = (rank == 0 && std::io::stderr().is_terminal()).then(|| {
@@ -546,7 +660,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
     });
     let start = Instant::now();
     let (step0, mut particle_steps) = (engine.host().step, 0u64);
-    let mut stopped_by_user = false;
+    let mut stopped_by: Option<(i32, &str)> = None;
     while engine.host().time + 0.5 * engine.host().dt < end_time {
         if opts
             .max_steps
@@ -598,21 +712,29 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
                 eta
             );
         }
-        // Ctrl-C reaches every rank through the launcher, not necessarily in the same step:
-        // ranks agree on it every 10 steps.
-        let stop = if ranks > 1 {
-            done % 10 == 0 && comm.any(interrupted.load(Ordering::SeqCst))
+        // A signal reaches the ranks of a decomposed run at different moments: they agree on
+        // it after every step (one small sum), so that all stop after the same step, within
+        // the second mpirun leaves between its SIGTERM and SIGKILL (crate::interrupt).
+        let received = signals.received();
+        let counts = if ranks > 1 {
+            let c = comm.sum_u64(&received);
+            [c[0], c[1]]
         } else {
-            interrupted.load(Ordering::SeqCst)
+            received
         };
-        if stop {
+        if let Some(signal) = crate::interrupt::stop_signal(counts) {
             let path = save_checkpoint(&*comm, engine.synced()?, &dir, hash)?;
-            tracing::warn!(
-                "interrupted: checkpoint written to {}; resume with --restart {}",
-                path.display(),
-                path.display()
-            );
-            stopped_by_user = true;
+            if rank == 0 {
+                tracing::warn!(
+                    "interrupted by {} after step {}: checkpoint written to {}; resume with \
+                     --restart {}",
+                    signal.1,
+                    engine.host().step,
+                    path.display(),
+                    path.display()
+                );
+            }
+            stopped_by = Some(signal);
             break;
         }
     }
@@ -621,7 +743,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
     }
     let wall = start.elapsed().as_secs_f64();
     let sim = engine.synced()?;
-    if !stopped_by_user {
+    if stopped_by.is_none() {
         out.frame(sim)?;
         out.series(sim)?;
         if sim.scene.output.checkpoint_interval.is_some() {
@@ -652,7 +774,9 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
         "wall_contacts": g.stats.wall_contacts,
         "energy": {"kinetic_translational": kt, "kinetic_rotational": kr, "potential_gravity": pg, "elastic": g.stats.elastic_energy},
         "stage_seconds": sim.timers,
-        "interrupted": stopped_by_user,
+        "interrupted": stopped_by.is_some(),
+        "signal": stopped_by.map(|s| s.1),
+        "exit_status": stopped_by.map_or(0, |s| crate::interrupt::exit_status(s.0)),
     });
     if rank == 0 {
         write_atomic(

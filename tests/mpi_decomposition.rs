@@ -456,3 +456,120 @@ fn gpu_ranks_periodic_grid_and_restart() {
         "GPU restart 4 → 2 ranks",
     );
 }
+
+/// Interrupting a 2-rank run, as a terminal's Ctrl-C does (SIGINT to the whole process group:
+/// mpirun and its ranks) and as `kill -INT` on mpirun does (mpirun then sends every rank
+/// SIGTERM, and SIGKILL a second later): every rank stops after the same step, the checkpoint
+/// of that step and the summary (`interrupted`, the signal) are written, and the run exits
+/// non-zero. The first checkpoint restarts on 2 ranks and ends byte-identical to the
+/// uninterrupted single-rank run of as many steps.
+#[cfg(unix)]
+#[test]
+fn interrupting_mpirun_stops_every_rank_at_the_same_step() {
+    use std::io::{BufRead, BufReader};
+    use std::process::Stdio;
+    let dir = temp_dir("mpi-interrupt");
+    let root = repo_root();
+    // The pour made long (it would end at step 2000), logging every 100 steps.
+    let text = std::fs::read_to_string(root.join("launch/mpi/pour.toml"))
+        .unwrap()
+        .replace("end_time = 0.04", "end_time = 4.0")
+        .replace("\"../../meshes/", &format!("\"{}/meshes/", root.display()))
+        .replace("log_interval_steps = 500", "log_interval_steps = 100");
+    assert!(
+        text.contains("end_time = 4.0") && text.contains("log_interval_steps = 100"),
+        "the pour's end_time and log lines"
+    );
+    let scene = dir.join("long_pour.toml");
+    std::fs::write(&scene, &text).unwrap();
+    let scene = scene.to_str().unwrap().to_string();
+    let mut first = None;
+    for target in ["process group", "mpirun"] {
+        let out = dir.join(target.replace(' ', "_"));
+        let mut child = Command::new("setsid")
+            .args(["mpirun", "--oversubscribe", "-n", "2"])
+            .arg(polydem_bin())
+            .args(["run", &scene, "--backend", "cpu", "--out"])
+            .arg(&out)
+            .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+            .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+            .env("RAYON_NUM_THREADS", "1")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start setsid mpirun (util-linux, Open MPI)");
+        let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+        let mut log = String::new();
+        for line in lines.by_ref() {
+            let line = line.unwrap();
+            log.push_str(&line);
+            log.push('\n');
+            if line.contains("step 300 ") {
+                break;
+            }
+        }
+        // setsid made mpirun the leader of its own group: -pid names the group.
+        let pid = child.id().to_string();
+        let whom = if target == "mpirun" {
+            pid
+        } else {
+            format!("-{pid}")
+        };
+        let kill = Command::new("kill").args(["-INT", "--", &whom]).status();
+        assert!(kill.unwrap().success());
+        for line in lines {
+            log.push_str(&line.unwrap());
+            log.push('\n');
+        }
+        let status = child.wait().unwrap();
+        assert!(!status.success(), "{target}: exited with success:\n{log}");
+        let summary: Value = serde_json::from_slice(
+            &std::fs::read(out.join("summary.json"))
+                .unwrap_or_else(|e| panic!("{target}: no summary.json ({e}):\n{log}")),
+        )
+        .unwrap();
+        assert_eq!(summary["interrupted"], true, "{target}");
+        assert!(
+            ["SIGINT", "SIGTERM"].contains(&summary["signal"].as_str().unwrap_or("")),
+            "{target}: {}",
+            summary["signal"]
+        );
+        let k = summary["final_step"].as_u64().unwrap();
+        assert!(k >= 300, "{target}: stopped at step {k}");
+        // One message, from rank 0, for the step every rank stopped after.
+        assert_eq!(
+            log.matches(&format!("after step {k}:")).count(),
+            1,
+            "{target}:\n{log}"
+        );
+        let name = format!("step_{k:010}.ckpt");
+        let c = read_checkpoint(&out.join("checkpoints").join(&name)).unwrap();
+        assert_eq!(c.step, k, "{target}");
+        println!(
+            "{target}: every rank stopped after step {k} ({})",
+            summary["signal"]
+        );
+        first.get_or_insert((out, k));
+    }
+    // The first interrupted run's checkpoint, restarted on 2 ranks for 100 steps, against one
+    // rank run straight through.
+    let (stopped, k) = first.unwrap();
+    let ck = stopped.join(format!("checkpoints/step_{k:010}.ckpt"));
+    let (resumed, straight) = (dir.join("resumed"), dir.join("straight"));
+    let until = (k + 100).to_string();
+    let s = run_ok(
+        2,
+        &scene,
+        &resumed,
+        &["--restart", ck.to_str().unwrap(), "--max-steps", "100"],
+    );
+    assert_eq!(s["final_step"], k + 100);
+    run_ok(1, &scene, &straight, &["--max-steps", &until]);
+    same_checkpoint(
+        &straight,
+        &resumed,
+        &format!("step_{:010}.ckpt", k + 100),
+        "restart of the interrupted run",
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

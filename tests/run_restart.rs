@@ -183,15 +183,23 @@ fn check_reports_time_steps_and_counts() {
     assert!(v.to_string().contains("rayleigh"));
 }
 
-/// Ctrl-C (SIGINT) ends a run cleanly: exit status 0, a checkpoint at the step it stopped at,
-/// `interrupted: true` in the summary, and a restart from that checkpoint ends bitwise equal to
-/// a run that was never interrupted.
+/// Ctrl-C (SIGINT) ends a run cleanly: exit status 130 (the shell's 128 + 2, so that scripts
+/// can tell), a checkpoint at the step it stopped at, `interrupted: true` and the signal in the
+/// summary, and a restart from that checkpoint ends bitwise equal to a run that was never
+/// interrupted. SIGTERM (Slurm at a job's time limit) does the same with status 143.
 #[cfg(unix)]
 #[test]
 fn ctrl_c_writes_a_checkpoint_that_restarts_bitwise() {
+    for (signal, status) in [("-TERM", 143), ("-INT", 130)] {
+        interrupted_run_restarts_bitwise(signal, status);
+    }
+}
+
+#[cfg(unix)]
+fn interrupted_run_restarts_bitwise(signal: &str, expected: i32) {
     use std::io::{BufRead, BufReader};
     use std::process::Stdio;
-    let dir = temp_dir("ctrl-c");
+    let dir = temp_dir(&format!("ctrl-c{signal}"));
     let scene = scene(&dir);
     // Log every 20 steps, so the test sees the run going before it interrupts it.
     let text = std::fs::read_to_string(&scene)
@@ -218,7 +226,7 @@ fn ctrl_c_writes_a_checkpoint_that_restarts_bitwise() {
         }
     }
     let kill = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
+        .args([signal, &child.id().to_string()])
         .status()
         .unwrap();
     assert!(kill.success());
@@ -227,14 +235,21 @@ fn ctrl_c_writes_a_checkpoint_that_restarts_bitwise() {
         log.push('\n');
     }
     let status = child.wait().unwrap();
-    assert!(
-        status.success(),
-        "interrupted run exited with {status}:\n{log}"
+    assert_eq!(
+        status.code(),
+        Some(expected),
+        "{signal}: interrupted run exited with {status}:\n{log}"
     );
-    assert!(log.contains("interrupted: checkpoint written"), "{log}");
+    let name = format!("SIG{}", &signal[1..]);
+    assert!(
+        log.contains(&format!("interrupted by {name} after step")),
+        "{log}"
+    );
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(stopped.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["interrupted"], true);
+    assert_eq!(summary["signal"], name.as_str());
+    assert_eq!(summary["exit_status"], expected);
     let k = summary["final_step"].as_u64().unwrap();
     let c = read_checkpoint(&stopped.join("checkpoints/latest.ckpt")).unwrap();
     assert_eq!(c.step, k, "checkpoint at the step the run stopped at");
@@ -274,4 +289,98 @@ fn ctrl_c_writes_a_checkpoint_that_restarts_bitwise() {
         a.history == b.history,
         "contact history differs after Ctrl-C and restart"
     );
+}
+
+/// A new run into a folder holding a previous run's output is refused (its series, summary and
+/// collections would be overwritten, its later checkpoints and frames left mixed in), naming
+/// what is there and the ways out; `--overwrite` removes that output (a later checkpoint of the
+/// old run included) and keeps files polydem does not write; `--restart` continues in place.
+/// An output path blocked by a file names the file.
+#[test]
+fn a_used_output_folder_needs_overwrite_or_restart() {
+    let dir = temp_dir("reuse-out");
+    let scene = scene(&dir);
+    let s = scene.to_str().unwrap();
+    let out = dir.join("out");
+    let o = out.to_str().unwrap();
+    run(&[s, "--backend", "cpu", "--out", o, "--max-steps", "20"]);
+    let again = |extra: &[&str]| {
+        Command::new(polydem_bin())
+            .args([
+                "run",
+                s,
+                "--backend",
+                "cpu",
+                "--out",
+                o,
+                "--max-steps",
+                "30",
+            ])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let refused = again(&[]);
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success(),
+        "a second run into {o} was accepted"
+    );
+    assert!(
+        err.contains("previous run's output")
+            && err.contains("checkpoints")
+            && err.contains("summary.json")
+            && err.contains("--overwrite")
+            && err.contains("--restart"),
+        "{err}"
+    );
+    // A stale later checkpoint of the old run, a temporary file of a killed write, and a file
+    // of the user's.
+    let stale = out.join("checkpoints/step_0000099999.ckpt");
+    std::fs::copy(out.join("checkpoints/latest.ckpt"), &stale).unwrap();
+    std::fs::write(out.join("series.csv.tmp-4242"), "cut short").unwrap();
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let o2 = again(&["--overwrite"]);
+    assert!(
+        o2.status.success(),
+        "{}",
+        String::from_utf8_lossy(&o2.stderr)
+    );
+    assert!(!stale.exists(), "--overwrite left the old run's checkpoint");
+    assert!(!out.join("series.csv.tmp-4242").exists());
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    let c = read_checkpoint(&out.join("checkpoints/latest.ckpt")).unwrap();
+    assert_eq!(c.step, 30);
+    // Only files polydem does not write: accepted as it is.
+    let notes_only = dir.join("notes_only");
+    std::fs::create_dir_all(&notes_only).unwrap();
+    std::fs::write(notes_only.join("README"), "x").unwrap();
+    run(&[
+        s,
+        "--backend",
+        "cpu",
+        "--out",
+        notes_only.to_str().unwrap(),
+        "--max-steps",
+        "5",
+    ]);
+    // A path through a file.
+    let file = dir.join("a_file");
+    std::fs::write(&file, "x").unwrap();
+    for (out, named) in [(file.join("sub"), &file), (file.clone(), &file)] {
+        let o = Command::new(polydem_bin())
+            .args(["run", s, "--backend", "cpu", "--max-steps", "5", "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success());
+        assert!(
+            err.contains(&format!("{}: ", named.display())) && err.contains("not a folder"),
+            "{err}"
+        );
+    }
 }
