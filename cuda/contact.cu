@@ -72,11 +72,17 @@ struct PairOutputs {
     unsigned int* contact; // 1 when the pair is in contact (its spring is live history)
 };
 
-// Records the first geometry error (status code and the pair or particle index) for the host.
-PD_DEVICE void report_error(unsigned int* error, int status, unsigned int where) {
-    if (atomicCAS(&error[0], 0u, (unsigned int)status) == 0u) {
-        error[1] = where;
-    }
+// Where a geometry error happened: a pair of the list, or a particle against the walls.
+#define PD_ERROR_PAIR 0ull
+#define PD_ERROR_WALL 1ull
+
+// Records a geometry error for the host: of all errors of a step, the one of the smallest key
+// (source, index, status), pairs before walls as the CPU evaluates them, whatever the order in
+// which the threads reach this. error[0..2] hold the bitwise complement of that key as one
+// 64-bit word (0: none), so that atomicMax keeps the smallest key (CudaSimulation::forces).
+PD_DEVICE void report_error(unsigned int* error, unsigned long long source, int status, unsigned int where) {
+    unsigned long long key = (source << 40) | ((unsigned long long)where << 8) | (unsigned long long)(status & 0xff);
+    atomicMax((unsigned long long*)error, ~key);
 }
 
 // The arguments every pair evaluation reads and writes.
@@ -239,7 +245,7 @@ PD_DEVICE bool cached_axis_separates(const PairArgs& q, size_t k, const BodyRef&
 // the next step, the slots of a pair without contact cleared).
 PD_DEVICE bool pair_geometry_outcome(const PairArgs& q, size_t k, int status, const PairGeometry& g) {
     if (status != STATUS_OK) {
-        report_error(q.error, status, (unsigned int)k);
+        report_error(q.error, PD_ERROR_PAIR, status, (unsigned int)k);
         store3(q.axes, k, zero3<double>());
         clear_pair(q, k);
         return false;
@@ -761,7 +767,7 @@ extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, 
     int status = prism_overlap_culled(ws, body, tv, placement(p.scale[i], local_t, local_q, zero3<double>()),
                                       tv.circumscribed_radius * p.scale[i], prism, &o);
     if (status != STATUS_OK) {
-        report_error(error, status, (unsigned int)i);
+        report_error(error, PD_ERROR_WALL, status, item.x); // particle · walls + wall
         o = overlap_zero<double>();
     }
 #endif

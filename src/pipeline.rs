@@ -955,6 +955,9 @@ impl Simulation {
                         / self.equivalent_volume(a).min(self.equivalent_volume(b)),
                 })
             })
+            .collect::<Vec<_>>()
+            // The first failing pair in list order, whatever the threads' timing.
+            .into_iter()
             .collect()
     }
 
@@ -1040,6 +1043,9 @@ impl Simulation {
                     Ok(out)
                 })
             })
+            .collect::<Vec<_>>()
+            // The first failing particle in index order, whatever the threads' timing.
+            .into_iter()
             .collect()
     }
 

@@ -285,20 +285,9 @@ fn a_body_wholly_inside_another_is_pushed_out_along_the_line_of_centres() {
     }
 }
 
-/// A dense elastic packing of `shape` (circumscribed diameter 1 cm): 64 particles on a simple
-/// cubic lattice in a periodic box, randomly oriented and overlapping, with random velocities
-/// of up to 0.5 m/s per axis, e = 1, μ = 0, at the default step. Returns the largest relative
-/// energy change over `steps` steps (sampled 20 times); every step passes the stability guard.
-fn elastic_packing(device: Device, shape: &str, steps: u64) -> f64 {
-    // Lattice spacings that give 30–120 contacts among the 64 particles, with an elastic
-    // energy of the order of the kinetic one (spheres: 1 % overlaps).
-    let spacing = match shape {
-        "tetrahedron" => 0.007,
-        "cube" => 0.0085,
-        "octahedron" => 0.008,
-        "sphere" => 0.0099,
-        _ => 0.009,
-    };
+/// The packing of [`elastic_packing`]: 64 particles of `shape` on a simple cubic lattice of
+/// `spacing` in a periodic box, randomly oriented, e = 1, μ = 0.
+fn packing_scene(shape: &str, spacing: f64) -> polydem::scene::Scene {
     let side = 4.0 * spacing;
     let text = format!(
         r#"gravity = [0.0, 0.0, 0.0]
@@ -333,7 +322,24 @@ dir = "{}"
 "#,
         std::env::temp_dir().join("polydem-validation").display()
     );
-    let scene = parse_scene(&text, &repo_root(), "packing.toml").unwrap();
+    parse_scene(&text, &repo_root(), "packing.toml").unwrap()
+}
+
+/// A dense elastic packing of `shape` (circumscribed diameter 1 cm): 64 particles on a simple
+/// cubic lattice in a periodic box, randomly oriented and overlapping, with random velocities
+/// of up to 0.5 m/s per axis, e = 1, μ = 0, at the default step. Returns the largest relative
+/// energy change over `steps` steps (sampled 20 times); every step passes the stability guard.
+fn elastic_packing(device: Device, shape: &str, steps: u64) -> f64 {
+    // Lattice spacings that give 30–120 contacts among the 64 particles, with an elastic
+    // energy of the order of the kinetic one (spheres: 1 % overlaps).
+    let spacing = match shape {
+        "tetrahedron" => 0.007,
+        "cube" => 0.0085,
+        "octahedron" => 0.008,
+        "sphere" => 0.0099,
+        _ => 0.009,
+    };
+    let scene = packing_scene(shape, spacing);
     let mut sim = Simulation::new(scene).unwrap();
     let mut rng = polydem::rng::Rng::new(11);
     for v in sim.particles.velocity.iter_mut() {

@@ -270,16 +270,8 @@ impl CudaSimulation {
         self.host.timers.reduce += t0.elapsed().as_secs_f64();
         // A geometry error fails the step; the fused kick has already applied this step's
         // forces to the velocities on the device (the run stops with the error: `engine.step()?`).
-        if error[0] != 0 {
-            return Err(SimulationError::Geometry {
-                step: self.host.step,
-                what: format!("pair or particle slot {} on the GPU", error[1]),
-                message: format!(
-                    "geometry status {} (cuda/polytope.cuh status codes)",
-                    error[0]
-                ),
-            }
-            .into());
+        if error[0] != 0 || error[1] != 0 {
+            return Err(self.geometry_error(error).into());
         }
         self.host_current = false;
         if error[2] != 0 {
@@ -308,6 +300,53 @@ impl CudaSimulation {
 }
 
 impl CudaSimulation {
+    /// The geometry error the kernels recorded (`report_error` of cuda/contact.cu): of all
+    /// that failed this step, the pair of the smallest list index, else the particle–wall
+    /// item of the smallest particle slot and wall, named by global ids as the CPU names them.
+    fn geometry_error(&self, error: [u32; 3]) -> SimulationError {
+        let key = !(u64::from(error[0]) | (u64::from(error[1]) << 32));
+        let (source, index, status) = (key >> 40, (key >> 8) & 0xffff_ffff, key & 0xff);
+        let step = self.host.step;
+        let message = format!("geometry status {status} (cuda/polytope.cuh status codes)");
+        let st = &self.stream;
+        let ids = st.clone_dtoh(&self.p.id).unwrap_or_default();
+        let id = |slot: usize| {
+            ids.get(slot)
+                .map_or(format!("slot {slot}"), |g| g.to_string())
+        };
+        let what = if source == 0 {
+            let pair = self
+                .pairs
+                .as_ref()
+                .and_then(|p| st.clone_dtoh(&p.pairs).ok())
+                .and_then(|pr| {
+                    Some((
+                        *pr.get(2 * index as usize)?,
+                        *pr.get(2 * index as usize + 1)?,
+                    ))
+                });
+            match pair {
+                Some((a, b)) => format!("particles {} and {}", id(a as usize), id(b as usize)),
+                None => format!("pair slot {index}"),
+            }
+        } else {
+            let walls = self.host.scene.walls.len().max(1);
+            let (i, k) = (index as usize / walls, index as usize % walls);
+            let name = self
+                .host
+                .scene
+                .walls
+                .get(k)
+                .map_or("?", |w| w.name.as_str());
+            format!("particle {} and wall {name}", id(i))
+        };
+        SimulationError::Geometry {
+            step,
+            what,
+            message,
+        }
+    }
+
     /// Stage 6, first part: the walls' poses at the current time uploaded, the wall list built
     /// when due, then `wall_facet_overlaps` queued on the wall stream after everything queued
     /// so far on the main one (the particles' poses of this step): one thread per listed

@@ -288,6 +288,19 @@ pub(super) struct HistorySource {
     pub(super) spring: CudaSlice<f64>,
 }
 
+/// Waits for the wall stream before anything is freed: the fields drop in declaration order,
+/// and a step that failed between the walls' two events (a CUDA error, a guard stop) can leave
+/// `wall_facet_overlaps` queued on it, reading particle arrays and the wall list that would
+/// otherwise be freed under it. The main stream is waited for too (cudarc frees a slice on its
+/// own stream, but the wall stream's kernels read the main stream's slices).
+impl Drop for CudaSimulation {
+    fn drop(&mut self) {
+        // Errors here have nowhere to go; the context reports them on its next use.
+        let _ = self.wall_stream.stream.synchronize();
+        let _ = self.stream.synchronize();
+    }
+}
+
 /// A simulation stepped on the GPU. See the module docs.
 pub struct CudaSimulation {
     /// Host copy: scene, inserter, time, step, statistics, and (when synced) the state.
