@@ -5,8 +5,8 @@
 use nalgebra::{Matrix3, Point3, Vector3};
 use polydem::rng::Rng;
 use polydem::shape::{
-    ConvexTemplate, Generator, MassProperties, MeshFile, ShapeError, load_mesh,
-    prism_mass_properties,
+    ConvexTemplate, Generator, MAX_INPUT_POINTS, MAX_PRISM_SIDES, MAX_RANDOM_HULL_POINTS,
+    MassProperties, MeshFile, ShapeError, load_mesh, prism_mass_properties,
 };
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -745,7 +745,18 @@ fn errors_name_their_source() {
     };
     let e = err_text(big.build().unwrap_err());
     assert!(
-        e.contains("196 faces") && e.contains("128") && e.contains("simplify"),
+        e.contains("random_hull100_seed5")
+            && e.contains("points = 100")
+            && e.contains("2n − 4 faces")
+            && e.contains("4 to 66"),
+        "{e}"
+    );
+    // The same 100 points as a vertex list: refused by the merged-face count.
+    let e = err_text(ConvexTemplate::from_points("big", &big_points(100)).unwrap_err());
+    assert!(
+        e.contains("big: convex hull has 196 faces")
+            && e.contains("limit 128")
+            && e.contains("simplify"),
         "{e}"
     );
 
@@ -1008,11 +1019,12 @@ fn dense_coplanar_inputs_merge() {
 
 #[test]
 fn large_point_clouds_are_fast_and_rejected_cleanly() {
-    // 100 000 points inside an icosahedron: the hull is the icosahedron.
+    // 100 000 points (MAX_INPUT_POINTS), the icosahedron's and the rest inside it: the hull is
+    // the icosahedron.
     let ico = Generator::Icosahedron { size: 2.0 }.points().unwrap();
     let mut rng = Rng::new(3);
     let mut pts = ico.clone();
-    for _ in 0..100_000 {
+    for _ in ico.len()..MAX_INPUT_POINTS {
         // Random convex combination of vertices: inside.
         let w: Vec<f64> = (0..12).map(|_| rng.uniform()).collect();
         let s: f64 = w.iter().sum();
@@ -1027,14 +1039,10 @@ fn large_point_clouds_are_fast_and_rejected_cleanly() {
     assert_eq!((t.faces.len(), t.vertices.len()), (20, 12));
     assert!(start.elapsed().as_secs_f64() < 5.0, "{:?}", start.elapsed());
     // 5000 points on a sphere: too many faces and vertices, said so.
-    let g = Generator::RandomHull {
-        points: 5000,
-        size: 1.0,
-        seed: 1,
-        aspect: [1.0, 1.0, 1.0],
-    };
     let start = std::time::Instant::now();
-    let e = g.build().unwrap_err().to_string();
+    let e = ConvexTemplate::from_points("sphere5000", &big_points(5000))
+        .unwrap_err()
+        .to_string();
     // (Fewer than the 9996 triangles: on so dense a sphere a few neighbouring triangles are
     // coplanar within the merge tolerance and merge.)
     assert!(
@@ -1042,6 +1050,93 @@ fn large_point_clouds_are_fast_and_rejected_cleanly() {
         "{e}"
     );
     assert!(start.elapsed().as_secs_f64() < 5.0, "{:?}", start.elapsed());
+}
+
+/// `n` seeded random points on the unit sphere, all extreme: a hull of 2n − 4 triangles.
+fn big_points(n: usize) -> Vec<Point3<f64>> {
+    let mut rng = Rng::new(5);
+    (0..n)
+        .map(|_| {
+            let u = rng.unit_vector();
+            Point3::new(u[0], u[1], u[2])
+        })
+        .collect()
+}
+
+#[test]
+fn oversized_hulls_are_refused_within_seconds() {
+    // Each of these used to run for minutes (10⁵ points on a sphere: the O(faces × vertices)
+    // plane offsets of a 2·10⁵-face hull; 10⁴ prism sides; 10⁷ random points) before being
+    // refused by the face count.
+    let start = std::time::Instant::now();
+    let e = err_text(ConvexTemplate::from_points("ball", &big_points(100_000)).unwrap_err());
+    assert!(
+        e.starts_with("ball: convex hull has ") && e.contains("more than the limit 128"),
+        "{e}"
+    );
+    let faces: usize = e["ball: convex hull has ".len()..]
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(faces > 150_000, "{e}");
+    assert!(
+        start.elapsed().as_secs_f64() < 10.0,
+        "{:?}",
+        start.elapsed()
+    );
+
+    let start = std::time::Instant::now();
+    let prism = Generator::Prism {
+        sides: 10_000,
+        diameter: 1.0,
+        height: 1.0,
+    };
+    let e = err_text(prism.build().unwrap_err());
+    assert_eq!(
+        e,
+        "prism10000: sides = 10000: a prism has sides + 2 faces and a template at most 128 \
+         (MAX_TEMPLATE_FACES), so sides must be 3 to 126"
+    );
+    assert!(
+        Generator::Prism {
+            sides: MAX_PRISM_SIDES,
+            diameter: 1.0,
+            height: 1.0,
+        }
+        .build()
+        .is_ok_and(|t| t.faces.len() == 128)
+    );
+    let e = err_text(
+        Generator::RandomHull {
+            points: 10_000_000,
+            size: 1.0,
+            seed: 1,
+            aspect: [1.0; 3],
+        }
+        .build()
+        .unwrap_err(),
+    );
+    assert!(
+        e.starts_with("random_hull10000000_seed1: points = 10000000") && e.contains("4 to 66"),
+        "{e}"
+    );
+    assert_eq!(MAX_RANDOM_HULL_POINTS, 66);
+
+    // Beyond MAX_INPUT_POINTS nothing is built: refused in the time it takes to count.
+    let too_many = vec![Point3::new(1.0, 2.0, 3.0); MAX_INPUT_POINTS + 1];
+    let e = err_text(ConvexTemplate::from_points("scan", &too_many).unwrap_err());
+    assert_eq!(
+        e,
+        format!(
+            "scan: {} points, more than the limit {MAX_INPUT_POINTS} (MAX_INPUT_POINTS) a \
+             particle template is built from; a template has at most 128 faces and 256 \
+             vertices, so decimate the mesh first",
+            MAX_INPUT_POINTS + 1
+        )
+    );
+    assert!(start.elapsed().as_secs_f64() < 2.0, "{:?}", start.elapsed());
 }
 
 #[test]

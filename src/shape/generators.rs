@@ -3,7 +3,7 @@
 //! (dodecahedra in Secs. 3.3–3.4, a 20-gon cylinder in Sec. 3.1, an 18-vertex mineral grain in
 //! Sec. 4.2, 5.5 mm catalyst cylinders in Sec. 4.3).
 
-use super::{ConvexTemplate, MeshFile, ShapeError};
+use super::{ConvexTemplate, MAX_TEMPLATE_FACES, MeshFile, ShapeError};
 use crate::rng::Rng;
 use nalgebra::{Point3, Vector3};
 use std::f64::consts::{PI, TAU};
@@ -49,6 +49,14 @@ pub enum Generator {
     /// fast path, [`crate::geometry::sphere`]), drawn as an 80-face geodesic polyhedron.
     Sphere { size: f64 },
 }
+
+/// Most sides of a [`Generator::Prism`]: it has `sides + 2` faces, at most
+/// [`MAX_TEMPLATE_FACES`].
+pub const MAX_PRISM_SIDES: usize = MAX_TEMPLATE_FACES - 2;
+
+/// Most points of a [`Generator::RandomHull`]: all are extreme, so its hull has `2·points − 4`
+/// faces, at most [`MAX_TEMPLATE_FACES`].
+pub const MAX_RANDOM_HULL_POINTS: usize = (MAX_TEMPLATE_FACES + 4) / 2;
 
 /// Names accepted by [`Generator::parse`].
 pub const GENERATOR_NAMES: [&str; 6] = [
@@ -100,7 +108,8 @@ impl Generator {
         }
     }
 
-    /// Validates the parameters: lengths positive and finite, at least 3 sides, at least 4 points.
+    /// Validates the parameters: lengths positive and finite, 3 to [`MAX_PRISM_SIDES`] sides,
+    /// 4 to [`MAX_RANDOM_HULL_POINTS`] points.
     fn check(&self) -> Result<(), ShapeError> {
         let bad = |message: String| ShapeError::BadParameter {
             source_name: self.name(),
@@ -133,6 +142,15 @@ impl Generator {
                 if *sides < 3 {
                     return Err(bad(format!("a prism needs at least 3 sides, got {sides}")));
                 }
+                // Refused before the points are made: a prism has sides + 2 faces, and building
+                // the hull of 10⁴ sides only to refuse it takes minutes.
+                if *sides > MAX_PRISM_SIDES {
+                    return Err(bad(format!(
+                        "sides = {sides}: a prism has sides + 2 faces and a template at most \
+                         {MAX_TEMPLATE_FACES} (MAX_TEMPLATE_FACES), so sides must be 3 to \
+                         {MAX_PRISM_SIDES}"
+                    )));
+                }
                 length("diameter", *diameter)?;
                 length("height", *height)
             }
@@ -145,6 +163,15 @@ impl Generator {
                 if *points < 4 {
                     return Err(bad(format!(
                         "a random hull needs at least 4 points, got {points}"
+                    )));
+                }
+                // Every point is extreme, so the hull has 2·points − 4 faces: refused before
+                // drawing them (10⁷ points would take minutes and gigabytes).
+                if *points > MAX_RANDOM_HULL_POINTS {
+                    return Err(bad(format!(
+                        "points = {points}: a random hull of n points has 2n − 4 faces and a \
+                         template at most {MAX_TEMPLATE_FACES} (MAX_TEMPLATE_FACES), so points \
+                         must be 4 to {MAX_RANDOM_HULL_POINTS}"
                     )));
                 }
                 length("size", *size)?;

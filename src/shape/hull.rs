@@ -18,7 +18,7 @@
 //! Because the faces come from the quickhull's own triangle adjacency, the topology is consistent
 //! by construction even for noisy input near the tolerance.
 
-use super::{Face, ShapeError};
+use super::{Face, MAX_INPUT_POINTS, MAX_TEMPLATE_FACES, MAX_TEMPLATE_VERTICES, ShapeError};
 use nalgebra::{Point3, Vector3};
 use std::collections::HashMap;
 
@@ -57,6 +57,18 @@ pub(crate) fn convex_polytope(points: &[Point3<f64>], src: &str) -> Result<Polyt
             format!("a convex particle needs at least 4 points, got {n}"),
         ));
     }
+    // Refused before any work: the hull of this many points takes seconds to minutes and
+    // gigabytes, and a template could not hold it anyway (see MAX_INPUT_POINTS).
+    if n > MAX_INPUT_POINTS {
+        return Err(ShapeError::TooLarge {
+            source_name: src.to_string(),
+            message: format!(
+                "{n} points, more than the limit {MAX_INPUT_POINTS} (MAX_INPUT_POINTS) a particle \
+                 template is built from; a template has at most {MAX_TEMPLATE_FACES} faces and \
+                 {MAX_TEMPLATE_VERTICES} vertices, so decimate the mesh first"
+            ),
+        });
+    }
     for (i, p) in points.iter().enumerate() {
         if !p.iter().all(|x| x.is_finite()) {
             return Err(degenerate(
@@ -91,7 +103,12 @@ pub(crate) fn convex_polytope(points: &[Point3<f64>], src: &str) -> Result<Polyt
                 None => return Ok(poly),
                 Some(i) => why = format!("input point {i} is outside the computed hull"),
             },
-            Err(e) => why = e,
+            // Not retried: perturbing the points cannot remove faces, and finishing the build
+            // of a hull with thousands of faces costs O(faces × vertices).
+            Err(AttemptError::TooManyFaces(faces)) => {
+                return Err(too_many_faces(src, faces));
+            }
+            Err(AttemptError::Failed(e)) => why = e,
         }
     }
     Err(degenerate(
@@ -100,10 +117,42 @@ pub(crate) fn convex_polytope(points: &[Point3<f64>], src: &str) -> Result<Polyt
     ))
 }
 
+/// The error for a hull with more than [`MAX_TEMPLATE_FACES`] merged faces.
+pub(crate) fn too_many_faces(src: &str, faces: usize) -> ShapeError {
+    ShapeError::TooLarge {
+        source_name: src.to_string(),
+        message: format!(
+            "convex hull has {faces} faces after merging coplanar triangles, more than the limit \
+             {MAX_TEMPLATE_FACES} (MAX_TEMPLATE_FACES); simplify the mesh (decimate it or use \
+             fewer facets)"
+        ),
+    }
+}
+
+/// Why one hull construction failed.
+enum AttemptError {
+    /// The merged faces are more than a template may have: final, not worth a retry.
+    TooManyFaces(usize),
+    /// A numerical or topological failure that a retry (unwelded, perturbed) may avoid.
+    Failed(String),
+}
+
+impl From<String> for AttemptError {
+    fn from(e: String) -> Self {
+        AttemptError::Failed(e)
+    }
+}
+
+impl From<&str> for AttemptError {
+    fn from(e: &str) -> Self {
+        AttemptError::Failed(e.to_string())
+    }
+}
+
 /// The first input point farther than `tol` outside a face plane, if any. Skipped (None) for
 /// hulls with more faces than a template may have: those are rejected anyway, by count.
 fn outside_point(points: &[Point3<f64>], poly: &Polytope, tol: f64) -> Option<usize> {
-    if poly.faces.len() > super::MAX_TEMPLATE_FACES {
+    if poly.faces.len() > MAX_TEMPLATE_FACES {
         return None;
     }
     points.iter().position(|p| {
@@ -120,7 +169,7 @@ fn attempt(
     tol: f64,
     welded: bool,
     perturb: Option<u64>,
-) -> Result<Polytope, String> {
+) -> Result<Polytope, AttemptError> {
     let (hull_pts, hull_tris) = match perturb {
         None => parry_hull(points)?,
         Some(seed) => {
@@ -186,7 +235,7 @@ fn attempt(
             .map(|&v| new_index[v])
             .collect();
         if loop_idx.len() < 3 {
-            return Err("a merged face has fewer than 3 corners".to_string());
+            return Err("a merged face has fewer than 3 corners".into());
         }
         out_faces.push(Face {
             normal: f.normal,
@@ -209,10 +258,10 @@ fn attempt(
             .map(|&v| f.offset - f.normal.dot(&vertices[v as usize].coords))
             .fold(0.0, f64::max);
         if depth > 4.0 * tol {
-            return Err(format!(
+            return Err(AttemptError::Failed(format!(
                 "a merged face is not planar ({depth:.3e} > {:.3e}): the quickhull mesh is not convex",
                 4.0 * tol
-            ));
+            )));
         }
     }
     let edges = check_topology(vertices.len(), &out_faces)?;
@@ -237,19 +286,19 @@ fn merge_regions(
     hull: &[Point3<f64>],
     tris: &[[usize; 3]],
     tol: f64,
-) -> Result<Vec<Region>, String> {
+) -> Result<Vec<Region>, AttemptError> {
     // Directed edge → triangle; the quickhull output must be a closed, oriented manifold.
     let mut edge_tri: HashMap<(usize, usize), usize> = HashMap::with_capacity(3 * tris.len());
     for (ti, t) in tris.iter().enumerate() {
         for k in 0..3 {
             if edge_tri.insert((t[k], t[(k + 1) % 3]), ti).is_some() {
-                return Err("quickhull mesh has a repeated edge".to_string());
+                return Err("quickhull mesh has a repeated edge".into());
             }
         }
     }
     let twin = |a: usize, b: usize| edge_tri.get(&(b, a)).copied();
     if edge_tri.keys().any(|&(a, b)| twin(a, b).is_none()) {
-        return Err("quickhull mesh is not closed".to_string());
+        return Err("quickhull mesh is not closed".into());
     }
     let area_vec = |t: &[usize; 3]| (hull[t[1]] - hull[t[0]]).cross(&(hull[t[2]] - hull[t[0]]));
     let mut order: Vec<usize> = (0..tris.len()).collect();
@@ -305,21 +354,34 @@ fn merge_regions(
                 longest[region[ti]].max((hull[t[(k + 1) % 3]] - hull[t[k]]).norm());
         }
     }
+    let sliver: Vec<bool> = (0..count)
+        .map(|r| 0.5 * area[r].norm() <= tol * longest[r])
+        .collect();
+    // Every region that is not a sliver stays one face (slivers only join others), so the face
+    // count is known here: a hull with too many faces is refused before the work below and the
+    // vertex selection, which grow with the square of the hull's size.
+    let faces = sliver.iter().filter(|s| !**s).count();
+    if faces > MAX_TEMPLATE_FACES {
+        return Err(AttemptError::TooManyFaces(faces));
+    }
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); count];
+    for (ti, &r) in region.iter().enumerate() {
+        members[r].push(ti);
+    }
+    // `target` is a union-find forest: a merged sliver points at the region it joined.
     let mut target: Vec<usize> = (0..count).collect();
-    for r in 0..count {
-        if 0.5 * area[r].norm() > tol * longest[r] {
-            continue;
+    let root = |target: &[usize], mut r: usize| {
+        while target[r] != r {
+            r = target[r];
         }
+        r
+    };
+    for r in (0..count).filter(|&r| sliver[r]) {
         let mut shared: HashMap<usize, usize> = HashMap::new();
-        for t in tris
-            .iter()
-            .enumerate()
-            .filter(|(ti, _)| region[*ti] == r)
-            .map(|(_, t)| t)
-        {
+        for t in members[r].iter().map(|&ti| &tris[ti]) {
             for k in 0..3 {
                 if let Some(nb) = twin(t[k], t[(k + 1) % 3]) {
-                    let q = target[region[nb]];
+                    let q = root(&target, region[nb]);
                     if q != r {
                         *shared.entry(q).or_insert(0) += 1;
                     }
@@ -331,15 +393,10 @@ fn merge_regions(
             .max_by_key(|(q, n)| (**n, std::cmp::Reverse(**q)))
         {
             target[r] = q;
-            for t in target.iter_mut() {
-                if *t == r {
-                    *t = q;
-                }
-            }
         }
     }
     for r in region.iter_mut() {
-        *r = target[*r];
+        *r = root(&target, *r);
     }
 
     // Boundary loops: per region, the directed edges whose twin lies in another region.
@@ -356,14 +413,14 @@ fn merge_regions(
             let (a, b) = (t[k], t[(k + 1) % 3]);
             let inside = twin(a, b).is_some_and(|nb| region[nb] == region[ti]);
             if !inside && next[r].insert(a, b).is_some() {
-                return Err("a merged face touches itself at a vertex".to_string());
+                return Err("a merged face touches itself at a vertex".into());
             }
         }
     }
     let mut out = Vec::with_capacity(ids.len());
     for (r, edges) in next.iter().enumerate() {
         let Some(&start) = edges.keys().min() else {
-            return Err("a merged face has no boundary".to_string());
+            return Err("a merged face has no boundary".into());
         };
         let mut boundary = vec![start];
         let mut v = start;
@@ -375,7 +432,7 @@ fn merge_regions(
             v = w;
         }
         if boundary.len() != edges.len() {
-            return Err("a merged face is not a disk".to_string());
+            return Err("a merged face is not a disk".into());
         }
         let normal = sum[r]
             .try_normalize(0.0)

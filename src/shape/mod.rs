@@ -11,7 +11,9 @@ mod import;
 mod mass;
 
 pub use generators::Generator;
-pub use generators::{GENERATOR_NAMES, prism_mass_properties};
+pub use generators::{
+    GENERATOR_NAMES, MAX_PRISM_SIDES, MAX_RANDOM_HULL_POINTS, prism_mass_properties,
+};
 pub use import::{ImportReport, MESH_EXTENSIONS};
 pub use import::{MeshFile, load_mesh};
 pub use mass::MassProperties;
@@ -25,6 +27,14 @@ pub const MAX_TEMPLATE_FACES: usize = 128;
 
 /// Largest number of hull vertices a template may have (support-function loops in GJK).
 pub const MAX_TEMPLATE_VERTICES: usize = 256;
+
+/// Largest number of input points (mesh vertices, a vertex list) a template is built from. A
+/// template keeps at most [`MAX_TEMPLATE_VERTICES`] of them; the others lie inside or on its
+/// faces, as in a finely tessellated mesh of a flat-faced particle. The hull of this many points
+/// takes about a second in the worst case (every point extreme, the hull then refused by its
+/// face count); a larger input is refused before any work, since its hull could take minutes
+/// and gigabytes.
+pub const MAX_INPUT_POINTS: usize = 100_000;
 
 /// Principal moments equal within this fraction of the largest count as equal (degenerate
 /// eigenspace: the input axes are kept there), for inputs given in f64.
@@ -144,29 +154,20 @@ impl ConvexTemplate {
     ) -> Result<(ConvexTemplate, f64), ShapeError> {
         let src = source.display_name();
         let poly = hull::convex_polytope(points, &src)?;
-        let too_large =
-            |what: &str, count: usize, limit: usize, constant: &str| ShapeError::TooLarge {
-                source_name: src.clone(),
-                message: format!(
-                    "convex hull has {count} {what}, more than the limit {limit} ({constant}); \
-                 simplify the mesh (decimate it or use fewer facets)"
-                ),
-            };
+        // The hull refuses more faces while it is built; a face that only appeared after the
+        // sliver merge would still be caught here.
         if poly.faces.len() > MAX_TEMPLATE_FACES {
-            return Err(too_large(
-                "faces after merging coplanar triangles",
-                poly.faces.len(),
-                MAX_TEMPLATE_FACES,
-                "MAX_TEMPLATE_FACES",
-            ));
+            return Err(hull::too_many_faces(&src, poly.faces.len()));
         }
         if poly.vertices.len() > MAX_TEMPLATE_VERTICES {
-            return Err(too_large(
-                "vertices",
-                poly.vertices.len(),
-                MAX_TEMPLATE_VERTICES,
-                "MAX_TEMPLATE_VERTICES",
-            ));
+            return Err(ShapeError::TooLarge {
+                source_name: src.clone(),
+                message: format!(
+                    "convex hull has {} vertices, more than the limit {MAX_TEMPLATE_VERTICES} \
+                     (MAX_TEMPLATE_VERTICES); simplify the mesh (decimate it or use fewer facets)",
+                    poly.vertices.len()
+                ),
+            });
         }
         let mass =
             MassProperties::from_triangles(&poly.vertices, &fan(&poly.faces)).ok_or_else(|| {
