@@ -329,6 +329,23 @@ fn missing_files_and_bad_motions_are_errors() {
         "particle_types[0].mesh",
     );
     assert!(msg.contains("missing.stl"), "{msg}");
+    // A wall STL cut short: the error gives the sizes (it used to say only "failed to fill
+    // whole buffer").
+    let dir = std::env::temp_dir().join(format!("polydem_scene_stl_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cut = dir.join("plane_cut.stl");
+    let plane = std::fs::read(repo_root().join("meshes/walls/plane.stl")).unwrap();
+    assert_eq!(plane.len(), 184); // 2 triangles
+    std::fs::write(&cut, &plane[..150]).unwrap();
+    let msg = error_naming(
+        &replace("meshes/walls/plane.stl", &cut.display().to_string()),
+        "walls[0].mesh",
+    );
+    assert!(
+        msg.contains("plane_cut.stl")
+            && msg.contains("the header gives 2 triangles, which take 84 + 50 × 2 = 184 bytes, but the file has 150 bytes"),
+        "{msg}"
+    );
     error_naming(&replace("rpm = 30.0 }", "}"), "walls[1].motion.rpm");
     error_naming(
         &replace("axis = [0.0, 0.0, 1.0], rpm", "axis = [0.0, 0.0, 0.0], rpm"),

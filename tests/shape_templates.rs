@@ -673,6 +673,109 @@ fn binary_and_ascii_stl_load_identically() {
 }
 
 #[test]
+fn stl_problems_are_named_with_sizes_and_lines() {
+    let dir = temp_dir("stl_errors");
+    let cube = particles_dir().join("cube.stl"); // 12 triangles: 84 + 600 = 684 bytes
+    let bytes = std::fs::read(&cube).unwrap();
+    assert_eq!(bytes.len(), 684);
+    let load = |name: &str, data: &[u8]| {
+        let path = dir.join(name);
+        std::fs::write(&path, data).unwrap();
+        err_text(load_mesh(&path).unwrap_err())
+    };
+
+    let e = load("empty.stl", b"");
+    assert!(
+        e.contains("empty.stl: cannot read mesh file: invalid STL: the file is empty (0 bytes)"),
+        "{e}"
+    );
+    let e = load("header.stl", &bytes[..80]);
+    assert!(
+        e.contains("80 bytes: too short for a binary STL, which has at least 84"),
+        "{e}"
+    );
+    // A count of 0 is a well-formed, empty binary STL.
+    let mut empty = bytes[..84].to_vec();
+    empty[80..84].copy_from_slice(&0u32.to_le_bytes());
+    let e = load("no_triangles.stl", &empty);
+    assert!(e.contains("no vertices"), "{e}");
+
+    // Truncated (or a count larger than the data).
+    let e = load("truncated.stl", &bytes[..654]);
+    assert!(
+        e.contains(
+            "the header gives 12 triangles, which take 84 + 50 × 12 = 684 bytes, but the file \
+             has 654 bytes, 30 bytes fewer"
+        ) && e.contains("hold 11 whole triangles and 20 bytes more"),
+        "{e}"
+    );
+    // A count smaller than the data: read partially before, now refused.
+    let mut short_count = bytes.clone();
+    short_count[80..84].copy_from_slice(&11u32.to_le_bytes());
+    let e = load("short_count.stl", &short_count);
+    assert!(
+        e.contains("the header gives 11 triangles, which take 84 + 50 × 11 = 634 bytes, but the file has 684 bytes, 50 bytes more")
+            && e.contains("hold 12 whole triangles and 0 bytes more"),
+        "{e}"
+    );
+    // The same with a header beginning with "solid": still a binary size mismatch.
+    short_count[..6].copy_from_slice(b"solid ");
+    let e = load("solid_header.stl", &short_count);
+    assert!(
+        e.contains("634 bytes, but the file has 684") && e.contains("contains NUL bytes"),
+        "{e}"
+    );
+    // Random bytes.
+    let mut rng = Rng::new(8);
+    let noise: Vec<u8> = (0..1000).map(|_| (rng.uniform() * 256.0) as u8).collect();
+    let e = load("noise.stl", &noise);
+    assert!(
+        e.contains("binary STL size mismatch") && e.contains("but the file has 1000 bytes"),
+        "{e}"
+    );
+
+    // ASCII: coordinates that f32 cannot hold are named with their line.
+    let tet = |x: &str| {
+        format!(
+            "solid t\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex {x} 0 0\n\
+             vertex 0 {x} 0\nendloop\nendfacet\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\n\
+             vertex 0 {x} 0\nvertex 0 0 {x}\nendloop\nendfacet\nendsolid t\n"
+        )
+    };
+    let e = load("tiny.stl", tet("1e-50").as_bytes());
+    assert!(
+        e.contains("tiny.stl: cannot read mesh file: invalid STL: line 5: coordinate 1e-50 underflows to 0 in f32"),
+        "{e}"
+    );
+    let e = load("huge.stl", tet("1e50").as_bytes());
+    assert!(e.contains("line 5: coordinate 1e50 overflows f32"), "{e}");
+    let ok = dir.join("ok.stl");
+    std::fs::write(&ok, tet("1e-30")).unwrap();
+    assert_eq!(load_mesh(&ok).unwrap().vertices.len(), 4);
+    let text = tet("1");
+    // Cut after the last vertex: "endloop\nendfacet\nendsolid t\n" (28 bytes) missing.
+    let e = load("cut.stl", &text.as_bytes()[..text.len() - 28]);
+    assert!(
+        e.contains("ends at line 13 inside a facet (truncated?)"),
+        "{e}"
+    );
+    let e = load(
+        "two.stl",
+        text.replace("vertex 0 0 0\nvertex 1", "vertex 1")
+            .as_bytes(),
+    );
+    assert!(
+        e.contains("line 7: a facet has 2 vertices, an STL facet needs 3"),
+        "{e}"
+    );
+    let e = load(
+        "word.stl",
+        text.replace("vertex 1 0 0", "vertex 1 x 0").as_bytes(),
+    );
+    assert!(e.contains("line 5: \"x\" is not a number"), "{e}");
+}
+
+#[test]
 fn obj_parser_features() {
     let dir = temp_dir("obj");
     let path = dir.join("TET.OBJ");

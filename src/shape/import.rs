@@ -1,4 +1,4 @@
-//! Mesh import (STL binary/ASCII through stl_io, OBJ by a small parser) and template building
+//! Mesh import (STL binary/ASCII and OBJ by small parsers whose errors name the line or size) and template building
 //! from files, with a warning when a non-convex mesh is replaced by its convex hull.
 
 use super::{ConvexTemplate, MassProperties, ShapeError, ShapeSource};
@@ -159,32 +159,188 @@ pub fn load_mesh(path: &Path) -> Result<MeshFile, ShapeError> {
     Ok(mesh)
 }
 
-/// STL via stl_io. A binary STL whose 80-byte header happens to begin with "solid " (some CAD
-/// exporters write that) would be taken for ASCII; when the size matches the binary layout
-/// exactly (84 + 50 × count bytes) the header is blanked so stl_io reads it as binary.
-fn parse_stl(bytes: &[u8]) -> std::io::Result<MeshFile> {
-    let mut data = bytes.to_vec();
-    if data.len() >= 84 {
-        let count = u32::from_le_bytes([data[80], data[81], data[82], data[83]]) as usize;
-        if data.len() == 84 + 50 * count && data.starts_with(b"solid") {
-            data[..5].copy_from_slice(b"     ");
+/// Size of a binary STL's header (free text) and of the triangle count that follows it.
+const STL_HEADER: usize = 80;
+/// Bytes of one binary STL triangle: normal and three vertices (12 f32), a 2-byte attribute.
+const STL_TRIANGLE: u64 = 50;
+
+/// Reads binary or ASCII STL. The size decides first: a file of exactly 84 + 50 × count bytes
+/// (count = the u32 after the 80-byte header) is binary, even when its header begins with
+/// "solid", as some CAD exporters write. Otherwise a text file (no NUL byte) beginning with
+/// "solid" is ASCII, and anything else is a binary STL whose size does not match its count:
+/// the error gives both sizes, so that a truncated file, a wrong count or extra data is named,
+/// never read partially.
+fn parse_stl(bytes: &[u8]) -> Result<MeshFile, String> {
+    let len = bytes.len() as u64;
+    if len == 0 {
+        return Err(
+            "the file is empty (0 bytes); a binary STL has at least 84 bytes (an 80-byte \
+                    header and a 4-byte triangle count), an ASCII STL begins with \"solid\""
+                .to_string(),
+        );
+    }
+    let count = bytes
+        .get(STL_HEADER..STL_HEADER + 4)
+        .map(|c| u64::from(u32::from_le_bytes([c[0], c[1], c[2], c[3]])));
+    let expected = count.map(|n| STL_HEADER as u64 + 4 + STL_TRIANGLE * n);
+    if let (Some(n), Some(size)) = (count, expected)
+        && size == len
+    {
+        return Ok(parse_binary_stl(bytes, n as usize));
+    }
+    let text = bytes.trim_ascii_start();
+    if text.starts_with(b"solid") && !bytes.contains(&0) {
+        return parse_ascii_stl(&String::from_utf8_lossy(bytes));
+    }
+    let (Some(n), Some(size)) = (count, expected) else {
+        return Err(format!(
+            "{len} bytes: too short for a binary STL, which has at least 84 (an 80-byte header \
+             and a 4-byte triangle count), and not an ASCII STL (it does not begin with \"solid\")"
+        ));
+    };
+    let data = len - 84;
+    let (whole, rest) = (data / STL_TRIANGLE, data % STL_TRIANGLE);
+    let relation = if len < size {
+        format!(
+            "{} bytes fewer (truncated, or the count is too large)",
+            size - len
+        )
+    } else {
+        format!(
+            "{} bytes more (the count is too small, or data follow the triangles)",
+            len - size
+        )
+    };
+    Err(format!(
+        "binary STL size mismatch: the header gives {n} triangles, which take 84 + 50 × {n} = \
+         {size} bytes, but the file has {len} bytes, {relation}; its {data} data bytes hold \
+         {whole} whole triangles and {rest} bytes more. (Not an ASCII STL either: it {}.)",
+        if text.starts_with(b"solid") {
+            "begins with \"solid\" but contains NUL bytes"
+        } else {
+            "does not begin with \"solid\""
+        }
+    ))
+}
+
+/// Indexes triangles by vertex, merging vertices of bitwise-equal f32 coordinates (the same
+/// corner written once per triangle, as STL does), in order of first appearance.
+#[derive(Default)]
+struct VertexIndex {
+    mesh: MeshFile,
+    index: HashMap<[u32; 3], u32>,
+}
+
+impl VertexIndex {
+    fn push(&mut self, tri: [[f32; 3]; 3]) {
+        let mut t = [0u32; 3];
+        for (slot, v) in t.iter_mut().zip(tri) {
+            let next = self.mesh.vertices.len() as u32;
+            *slot = *self.index.entry(v.map(f32::to_bits)).or_insert_with(|| {
+                self.mesh
+                    .vertices
+                    .push(Point3::new(v[0] as f64, v[1] as f64, v[2] as f64));
+                next
+            });
+        }
+        self.mesh.triangles.push(t);
+    }
+}
+
+/// Binary STL of `count` triangles; the caller has checked the size.
+fn parse_binary_stl(bytes: &[u8], count: usize) -> MeshFile {
+    let mut mesh = VertexIndex::default();
+    for k in 0..count {
+        let at = STL_HEADER + 4 + STL_TRIANGLE as usize * k + 12;
+        let f = |i: usize| {
+            let b = &bytes[at + 4 * i..at + 4 * i + 4];
+            f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        };
+        mesh.push([[f(0), f(1), f(2)], [f(3), f(4), f(5)], [f(6), f(7), f(8)]]);
+    }
+    mesh.mesh
+}
+
+/// ASCII STL: `solid [name]`, then per facet `facet normal nx ny nz`, `outer loop`, three
+/// `vertex x y z`, `endloop`, `endfacet`, and `endsolid [name]`; several solids may follow one
+/// another. The normals are not used (the winding is). Errors name the line.
+fn parse_ascii_stl(text: &str) -> Result<MeshFile, String> {
+    let mut mesh = VertexIndex::default();
+    let mut in_solid = false;
+    let mut facet: Option<Vec<[f32; 3]>> = None;
+    let mut last = 0;
+    for (lineno, raw) in text.lines().enumerate() {
+        let line_no = lineno + 1;
+        last = line_no;
+        let mut tokens = raw.split_whitespace();
+        let Some(keyword) = tokens.next() else {
+            continue;
+        };
+        let args: Vec<&str> = tokens.collect();
+        let unexpected = || format!("line {line_no}: unexpected {keyword:?}: {:?}", raw.trim());
+        match keyword {
+            "solid" if !in_solid => in_solid = true,
+            "endsolid" if in_solid && facet.is_none() => in_solid = false,
+            "facet" if in_solid && facet.is_none() => facet = Some(Vec::with_capacity(3)),
+            "outer" | "endloop" if facet.is_some() => {}
+            "vertex" if facet.is_some() => {
+                if args.len() != 3 {
+                    return Err(format!(
+                        "line {line_no}: a vertex needs 3 coordinates, got {}: {:?}",
+                        args.len(),
+                        raw.trim()
+                    ));
+                }
+                let mut v = [0f32; 3];
+                for (x, a) in v.iter_mut().zip(&args) {
+                    *x = stl_coordinate(a).map_err(|e| format!("line {line_no}: {e}"))?;
+                }
+                if let Some(f) = facet.as_mut() {
+                    f.push(v);
+                }
+            }
+            "endfacet" => match facet.take() {
+                Some(f) if f.len() == 3 => mesh.push([f[0], f[1], f[2]]),
+                Some(f) => {
+                    return Err(format!(
+                        "line {line_no}: a facet has {} vertices, an STL facet needs 3",
+                        f.len()
+                    ));
+                }
+                None => return Err(unexpected()),
+            },
+            _ => return Err(unexpected()),
         }
     }
-    let mesh = stl_io::read_stl(&mut std::io::Cursor::new(data))?;
-    let vertices = mesh
-        .vertices
-        .iter()
-        .map(|v| Point3::new(v[0] as f64, v[1] as f64, v[2] as f64))
-        .collect();
-    let mut triangles = Vec::with_capacity(mesh.faces.len());
-    for f in &mesh.faces {
-        let t = f.vertices;
-        triangles.push([t[0] as u32, t[1] as u32, t[2] as u32]);
+    if in_solid {
+        return Err(format!(
+            "ASCII STL ends at line {last} inside a {} (truncated?): \"endsolid\" is missing",
+            if facet.is_some() { "facet" } else { "solid" }
+        ));
     }
-    Ok(MeshFile {
-        vertices,
-        triangles,
-    })
+    Ok(mesh.mesh)
+}
+
+/// One ASCII STL coordinate as the f32 STL stores. A nonzero value that f32 would turn into 0
+/// or infinity is an error: silently, distinct vertices would collapse into one.
+fn stl_coordinate(text: &str) -> Result<f32, String> {
+    let x: f64 = text
+        .parse()
+        .map_err(|_| format!("{text:?} is not a number"))?;
+    let y = x as f32;
+    if x.is_finite() && x != 0.0 && y == 0.0 {
+        return Err(format!(
+            "coordinate {text} underflows to 0 in f32 (STL stores 32-bit floats, whose smallest \
+             nonzero magnitude is 1.4e-45); rescale the mesh (e.g. write it in smaller units)"
+        ));
+    }
+    if x.is_finite() && y.is_infinite() {
+        return Err(format!(
+            "coordinate {text} overflows f32 (STL stores 32-bit floats, at most 3.4e38 in \
+             magnitude); rescale the mesh (e.g. write it in larger units)"
+        ));
+    }
+    Ok(y)
 }
 
 /// OBJ statements that carry no geometry polydem needs; skipped.
