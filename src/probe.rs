@@ -21,7 +21,7 @@ use crate::geometry::clip::facet_contact;
 use crate::geometry::overlap::{OverlapWorkspace, PairWorkspace, overlap_pair};
 use crate::geometry::polytope::{PosedPolytope, cast, widen};
 use crate::geometry::{Overlap, Real};
-use crate::shape::{ConvexTemplate, Generator};
+use crate::shape::{ConvexTemplate, Generator, MESH_EXTENSIONS};
 use anyhow::{Context, Result, anyhow, bail};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use serde::Deserialize;
@@ -288,10 +288,20 @@ pub fn probe_wall(path: &Path, precision: Precision, out: &mut dyn Write) -> Res
 /// `polydem shape info`: a template's counts and mass properties as one JSON object.
 pub fn shape_info(shape: &str, size: f64, out: &mut dyn Write) -> Result<()> {
     let path = Path::new(shape);
+    let is_mesh_name = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| MESH_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()));
     let template = if path.exists() {
         ConvexTemplate::from_file(path)?
+    } else if is_mesh_name || shape.contains(std::path::MAIN_SEPARATOR) || shape.contains('/') {
+        // A file name, not a generator: say that the file is missing rather than that no
+        // generator has this name.
+        bail!("{shape}: no such file (a mesh file .stl or .obj, or a generator name)");
     } else {
-        Generator::parse(shape, size)?.build()?
+        Generator::parse(shape, size)
+            .map_err(|e| anyhow!("{e}; and no file \"{shape}\" exists"))?
+            .build()?
     };
     let i = template.principal_inertia;
     let value = json!({

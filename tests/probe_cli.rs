@@ -159,6 +159,42 @@ fn bad_input_names_the_pair_and_field() {
 }
 
 #[test]
+fn shape_info_names_a_missing_file() {
+    let run = |args: &[&str]| {
+        let out = Command::new(polydem_bin())
+            .args(["shape", "info"])
+            .args(args)
+            .output()
+            .expect("run polydem");
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+        )
+    };
+    // It used to say "unknown shape generator".
+    let (ok, err) = run(&["missing.stl"]);
+    assert!(!ok);
+    assert!(
+        err.contains("missing.stl: no such file (a mesh file .stl or .obj, or a generator name)"),
+        "{err}"
+    );
+    let (ok, err) = run(&["no/such/dir/grain"]);
+    assert!(
+        !ok && err.contains("no/such/dir/grain: no such file"),
+        "{err}"
+    );
+    let (ok, err) = run(&["ellipsoid"]);
+    assert!(!ok);
+    assert!(
+        err.contains("ellipsoid: unknown shape generator; allowed: tetrahedron")
+            && err.contains("and no file \"ellipsoid\" exists"),
+        "{err}"
+    );
+    let (ok, _) = run(&["cube"]);
+    assert!(ok);
+}
+
+#[test]
 fn wall_probe_sums_over_a_triangulated_wall() {
     // The wall is the square [−1, 2]² of the plane z = 0, facing +z, in two triangles; the unit
     // cube spans z ∈ [−0.1, 0.9] over [0, 1]²: penetrating volume 0.1, section area 1.
