@@ -5,7 +5,7 @@
 //! Input (`probe overlap`):
 //! ```json
 //! {"shapes": {"NAME": {"vertices": [[x,y,z], ...]} | {"mesh": "path.stl"}
-//!                   | {"generator": "dodecahedron", "size": 1.0}},
+//!                   | {"generator": "dodecahedron", "size": 1.0}},   (exactly one source)
 //!  "pairs": [{"a": "NAME", "b": "NAME",
 //!             "pose_a": {"position": [x,y,z], "orientation": [w,x,y,z]},
 //!             "pose_b": {...}}]}
@@ -39,12 +39,67 @@ pub enum Precision {
     F32,
 }
 
-#[derive(Deserialize)]
-#[serde(untagged)]
 enum ShapeSpec {
-    Vertices { vertices: Vec<[f64; 3]> },
-    Mesh { mesh: String },
+    Vertices(Vec<[f64; 3]>),
+    Mesh(String),
     Generator { generator: String, size: f64 },
+}
+
+/// The keys a shape may have; `size` goes with `generator` only.
+const SHAPE_KEYS: [&str; 4] = ["vertices", "mesh", "generator", "size"];
+
+/// Reads `shapes.NAME`: exactly one of `vertices`, `mesh` and `generator` (with `size`). A
+/// second source is an error naming both keys, not silently ignored.
+fn shape_spec(name: &str, value: &Value) -> Result<ShapeSpec> {
+    let usage = "expected {\"vertices\": [[x,y,z], ...]}, {\"mesh\": \"file.stl|obj\"} or \
+                 {\"generator\": \"dodecahedron\", \"size\": 1.0}";
+    let Some(obj) = value.as_object() else {
+        bail!("shapes.{name}: {usage}");
+    };
+    if let Some(key) = obj.keys().find(|k| !SHAPE_KEYS.contains(&k.as_str())) {
+        bail!("shapes.{name}.{key}: unknown key; allowed: vertices, mesh, generator (with size)");
+    }
+    let given: Vec<&str> = SHAPE_KEYS[..3]
+        .iter()
+        .copied()
+        .filter(|k| obj.contains_key(*k))
+        .collect();
+    let source = match given.as_slice() {
+        [one] => *one,
+        [] => bail!("shapes.{name}: {usage}"),
+        many => bail!(
+            "shapes.{name}: give exactly one of \"vertices\", \"mesh\" and \"generator\", got {}",
+            many.iter()
+                .map(|k| format!("\"{k}\""))
+                .collect::<Vec<_>>()
+                .join(" and ")
+        ),
+    };
+    if source != "generator" && obj.contains_key("size") {
+        bail!("shapes.{name}.size: only a \"generator\" takes a size, not \"{source}\"");
+    }
+    let field = |key: &str| &obj[key];
+    Ok(match source {
+        "vertices" => ShapeSpec::Vertices(
+            serde_json::from_value(field("vertices").clone())
+                .map_err(|e| anyhow!("shapes.{name}.vertices: expected [[x,y,z], ...]: {e}"))?,
+        ),
+        "mesh" => ShapeSpec::Mesh(
+            field("mesh")
+                .as_str()
+                .ok_or_else(|| anyhow!("shapes.{name}.mesh: expected a file name (a string)"))?
+                .to_string(),
+        ),
+        _ => ShapeSpec::Generator {
+            generator: field("generator")
+                .as_str()
+                .ok_or_else(|| anyhow!("shapes.{name}.generator: expected a name (a string)"))?
+                .to_string(),
+            size: obj.get("size").and_then(Value::as_f64).ok_or_else(|| {
+                anyhow!("shapes.{name}.size: a generator needs a size (circumscribed diameter)")
+            })?,
+        },
+    })
 }
 
 #[derive(Deserialize)]
@@ -97,14 +152,8 @@ fn load_shapes(
 ) -> Result<BTreeMap<String, PlacedShape>> {
     let mut out = BTreeMap::new();
     for (name, value) in shapes {
-        let spec: ShapeSpec = serde_json::from_value(value.clone()).map_err(|_| {
-            anyhow!(
-                "shapes.{name}: expected {{\"vertices\": [[x,y,z], ...]}}, {{\"mesh\": \"file.stl|obj\"}} \
-                 or {{\"generator\": \"dodecahedron\", \"size\": 1.0}}"
-            )
-        })?;
-        let template = match spec {
-            ShapeSpec::Vertices { vertices } => {
+        let template = match shape_spec(name, value)? {
+            ShapeSpec::Vertices(vertices) => {
                 let pts: Vec<_> = vertices
                     .iter()
                     .map(|v| nalgebra::Point3::new(v[0], v[1], v[2]))
@@ -112,7 +161,7 @@ fn load_shapes(
                 ConvexTemplate::from_points(name, &pts)
                     .map_err(|e| anyhow!("shapes.{name}.vertices: {e}"))?
             }
-            ShapeSpec::Mesh { mesh } => ConvexTemplate::from_file(&base.join(&mesh))
+            ShapeSpec::Mesh(mesh) => ConvexTemplate::from_file(&base.join(&mesh))
                 .map_err(|e| anyhow!("shapes.{name}.mesh: {e}"))?,
             ShapeSpec::Generator { generator, size } => Generator::parse(&generator, size)
                 .and_then(|g| g.build())

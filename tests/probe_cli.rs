@@ -148,6 +148,27 @@ fn bad_input_names_the_pair_and_field() {
             r#"{"shapes": {}, "pairs": [], "extra": 1}"#.to_string(),
             vec!["unknown field", "extra"],
         ),
+        // Two sources: the generator used to be ignored silently.
+        (
+            r#"{"shapes": {"g": {"mesh": "../../meshes/particles/cube.stl", "generator": "dodecahedron", "size": 1.0}}, "pairs": []}"#
+                .to_string(),
+            vec![
+                r#"shapes.g: give exactly one of "vertices", "mesh" and "generator", got "mesh" and "generator""#,
+            ],
+        ),
+        (
+            format!(r#"{{"shapes": {{"v": {{"vertices": {CUBE}, "size": 2.0}}}}, "pairs": []}}"#),
+            vec![r#"shapes.v.size: only a "generator" takes a size, not "vertices""#],
+        ),
+        (
+            r#"{"shapes": {"g": {"generator": "cube", "size": 1.0, "colour": 1}}, "pairs": []}"#
+                .to_string(),
+            vec!["shapes.g.colour: unknown key; allowed: vertices, mesh, generator (with size)"],
+        ),
+        (
+            r#"{"shapes": {"g": {"generator": "cube"}}, "pairs": []}"#.to_string(),
+            vec!["shapes.g.size: a generator needs a size"],
+        ),
     ];
     for (json, needles) in cases {
         let (ok, _, err) = probe("overlap", &json, &[]);
