@@ -222,9 +222,20 @@ fn vec_json(v: &Vector3<f64>) -> Value {
     json!([v.x, v.y, v.z])
 }
 
+/// `|S|` at or below this fraction of `V^(2/3)` is reported as zero, with no normal. S is the
+/// vector area of B's part of the overlap surface; when that part is (nearly) closed, as for
+/// coincident bodies or one inside the other, S is a sum of terms that cancel, and what is left
+/// is rounding noise (about 1e-16 of `V^(2/3)` in f64, 1e-7 in f32) whose direction means
+/// nothing and differs between precisions. Genuine contacts have `|S|` of order `V^(2/3)` or
+/// more (a thin lens: far more).
+pub const CLOSED_SURFACE_TOL: f64 = 1e-5;
+
 /// JSON of one pair's result (fields of the `probe overlap` output).
 pub fn overlap_json(intersects: bool, o: &Overlap<f64>) -> Value {
-    if o.volume > 0.0 {
+    if o.volume > 0.0 && o.area() <= CLOSED_SURFACE_TOL * o.volume.powf(2.0 / 3.0) {
+        json!({"intersects": intersects, "volume": o.volume, "dv_dxb": [0.0, 0.0, 0.0],
+               "area": 0.0, "normal": null, "centroid": vec_json(&o.centroid)})
+    } else if o.volume > 0.0 {
         let normal = o.normal().map(|n| vec_json(&n)).unwrap_or(Value::Null);
         json!({"intersects": intersects, "volume": o.volume, "dv_dxb": vec_json(&o.dv_dxb),
                "area": o.area(), "normal": normal, "centroid": vec_json(&o.centroid)})

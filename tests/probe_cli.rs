@@ -180,6 +180,45 @@ fn bad_input_names_the_pair_and_field() {
 }
 
 #[test]
+fn coincident_bodies_have_no_normal_in_either_precision() {
+    // B = A: B's part of the overlap surface is all of B's closed surface, so S = 0 and the
+    // normal is undefined; it used to be a "unit" vector of rounding noise, another one in f32.
+    let q = [0.8, 0.6, 0.0, 0.0];
+    let same = pose([0.3, 0.2, 0.1], q);
+    let json = format!(
+        r#"{{"shapes": {{"d": {{"generator": "dodecahedron", "size": 1.0}}, "box": {{"vertices": {CUBE}}}}},
+             "pairs": [{{"a": "d", "b": "d", "pose_a": {same}, "pose_b": {same}}},
+                       {{"a": "box", "b": "box", "pose_a": {same}, "pose_b": {same}}},
+                       {{"a": "box", "b": "box", "pose_a": {same}, "pose_b": {}}}]}}"#,
+        pose([0.3, 0.7, 0.1], q)
+    );
+    for precision in ["f64", "f32"] {
+        let (ok, lines, err) = probe("overlap", &json, &["--precision", precision]);
+        assert!(ok, "{err}");
+        let tol = if precision == "f64" { 1e-12 } else { 1e-6 };
+        for (line, volume) in lines[..2].iter().zip([0.348_145_482_890_328_2, 1.0]) {
+            assert!(
+                (line["volume"].as_f64().unwrap() - volume).abs() < tol,
+                "{precision}: {line}"
+            );
+            assert!(line["normal"].is_null(), "{precision}: {line}");
+            assert_eq!(line["area"].as_f64(), Some(0.0), "{precision}: {line}");
+            assert_eq!(
+                line["dv_dxb"],
+                serde_json::json!([0.0, 0.0, 0.0]),
+                "{precision}"
+            );
+        }
+        // B moved by 0.5 along y: a genuine contact keeps its normal (area 1.005: the face
+        // areas B shows towards −y, the cube being turned about x).
+        let n = &lines[2]["normal"];
+        assert!(!n.is_null(), "{precision}: {}", lines[2]);
+        let area = lines[2]["area"].as_f64().unwrap();
+        assert!((area - 1.004_987_562_112_089).abs() < tol, "{}", lines[2]);
+    }
+}
+
+#[test]
 fn shape_info_names_a_missing_file() {
     let run = |args: &[&str]| {
         let out = Command::new(polydem_bin())
