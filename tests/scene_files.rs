@@ -346,6 +346,18 @@ fn missing_files_and_bad_motions_are_errors() {
             && msg.contains("the header gives 2 triangles, which take 84 + 50 × 2 = 184 bytes, but the file has 150 bytes"),
         "{msg}"
     );
+    // Shapes a template cannot hold are refused before they are built, naming the limit.
+    let msg = error_naming(
+        &replace(
+            "generator = { kind = \"cube\", size = 1.0 }",
+            "generator = { kind = \"prism\", sides = 10000, diameter = 1.0, height = 1.0 }",
+        ),
+        "particle_types[0].generator",
+    );
+    assert!(
+        msg.contains("prism10000: sides = 10000") && msg.contains("sides must be 3 to 126"),
+        "{msg}"
+    );
     error_naming(&replace("rpm = 30.0 }", "}"), "walls[1].motion.rpm");
     error_naming(
         &replace("axis = [0.0, 0.0, 1.0], rpm", "axis = [0.0, 0.0, 0.0], rpm"),
