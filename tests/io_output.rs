@@ -462,7 +462,7 @@ fn particle_csv_round_trips_f64_exactly() {
 fn checkpoint() -> Checkpoint {
     let (t, tt) = templates();
     let mut particles = particles(6, 77, &t, &tt);
-    particles.force[2].y = f64::from_bits(0x7ff8_0000_0000_beef); // a NaN with a payload
+    particles.force[2].y = f64::from_bits(0x8000_0000_0000_beef); // a negative subnormal
     // A quaternion off unit length by rounding: must come back with the same bits.
     particles.orientation[1] =
         UnitQuaternion::new_unchecked(Quaternion::new(0.6, 0.8, 1e-17, -0.0));
@@ -533,9 +533,9 @@ fn checkpoint_round_trip_is_bitwise() {
     let bytes = std::fs::read(&path).unwrap();
     assert_eq!(&bytes[..8], MAGIC);
     let r = read_checkpoint(&path).unwrap();
-    // Re-encoding gives the same bytes: every float kept its bits (NaN payload included).
+    // Re-encoding gives the same bytes: every float kept its bits (subnormals included).
     assert_eq!(encode_checkpoint(&r, &path).unwrap(), bytes);
-    assert_eq!(r.particles.force[2].y.to_bits(), 0x7ff8_0000_0000_beef);
+    assert_eq!(r.particles.force[2].y.to_bits(), 0x8000_0000_0000_beef);
     assert_eq!(
         r.particles.orientation[1]
             .quaternion()
@@ -575,6 +575,60 @@ fn checkpoint_round_trip_is_bitwise() {
     };
     write_checkpoint(&path, &empty).unwrap();
     assert_eq!(read_checkpoint(&path).unwrap(), empty);
+}
+
+/// A checksum proves only that the file is the one written: a state that cannot be stepped is
+/// refused on read, naming the file, the field and the particle.
+#[test]
+fn checkpoints_with_bad_fields_are_rejected_naming_the_field() {
+    let dir = scratch("ckpt-fields");
+    let path = dir.join("fields.ckpt");
+    type Edit = fn(&mut Checkpoint);
+    let cases: [(Edit, &str); 9] = [
+        (|c| c.time = f64::NAN, "`time` is NaN"),
+        (
+            |c| c.time = 0.0,
+            "`step` 123456789012 and `time` 0 disagree",
+        ),
+        (
+            |c| c.particles.id[3] = c.particles.id[1],
+            "particle 3 (id 84): `id` appears twice",
+        ),
+        (
+            |c| c.next_id = 80,
+            "particle 1 (id 84): `id` is not below `next_id` = 80",
+        ),
+        (
+            |c| c.particles.scale[2] = -0.5,
+            "particle 2 (id 91): `scale` is -0.5",
+        ),
+        (
+            |c| c.particles.mass[0] = 0.0,
+            "particle 0 (id 77): `mass` is 0",
+        ),
+        (
+            |c| c.particles.inertia[5].z = f64::INFINITY,
+            "particle 5 (id 112): `inertia` is inf",
+        ),
+        (
+            |c| {
+                c.particles.orientation[4] =
+                    UnitQuaternion::new_unchecked(Quaternion::new(0.0, 0.0, 0.0, 0.0))
+            },
+            "particle 4 (id 105): `orientation` is (w 0, i 0, j 0, k 0) of norm 0",
+        ),
+        (
+            |c| c.particles.force[2].y = f64::NAN,
+            "particle 2 (id 91): `force` is [",
+        ),
+    ];
+    for (edit, want) in cases {
+        let mut c = checkpoint();
+        edit(&mut c);
+        write_checkpoint(&path, &c).unwrap();
+        let e = read_checkpoint(&path).expect_err(want).to_string();
+        assert!(e.contains("fields.ckpt") && e.contains(want), "{want}: {e}");
+    }
 }
 
 #[test]

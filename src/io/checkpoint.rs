@@ -20,6 +20,9 @@
 //!
 //! Written whole to `<path>.tmp-<pid>`, fsynced and renamed over `path` ([`super::write_atomic`]),
 //! so a run killed while writing leaves the previous checkpoint intact.
+//!
+//! Reading checks the layout, then every field ([`Checkpoint::validate`]): a sound checksum
+//! only proves that the bytes are those written.
 
 use crate::contact::history::{ContactHistory, ContactKey, ContactState};
 use crate::state::Particles;
@@ -272,13 +275,110 @@ pub fn decode_checkpoint(bytes: &[u8], path: &Path) -> Result<Checkpoint, Checkp
         b: &bytes[HEADER_LEN..body_end],
         at: 0,
     };
-    decode_payload(&mut r, found).map_err(|what| match what {
+    let c = decode_payload(&mut r, found).map_err(|what| match what {
         ReadFail::Short(what) => truncated(what),
         ReadFail::Bad(what) => CheckpointError::Corrupt {
             path: path_buf(),
             what,
         },
-    })
+    })?;
+    c.validate().map_err(|what| CheckpointError::Corrupt {
+        path: path_buf(),
+        what,
+    })?;
+    Ok(c)
+}
+
+/// Largest departure of a stored orientation's norm from 1: the integrator renormalises every
+/// step, so a sound checkpoint is within round-off of it.
+pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-6;
+
+impl Checkpoint {
+    /// Checks every field that does not need the scene: the time is finite, non-negative and
+    /// zero exactly at step 0; every particle float is finite; scale, mass and inertia are
+    /// positive; orientations have unit norm (within [`QUATERNION_NORM_TOLERANCE`]); ids are
+    /// unique and below `next_id`; contact springs are finite. A checksum only proves that the
+    /// file is the one written, not that what was written is a state that can be stepped, so
+    /// [`decode_checkpoint`] runs this on every read. The message names the field and the
+    /// first particle (index and id) or contact at fault, and what is allowed.
+    pub fn validate(&self) -> Result<(), String> {
+        let p = &self.particles;
+        let n = super::particle_count(p)?;
+        if !self.time.is_finite() || self.time < 0.0 {
+            return Err(format!("`time` is {}, must be finite and >= 0", self.time));
+        }
+        if (self.step == 0) != (self.time == 0.0) {
+            return Err(format!(
+                "`step` {} and `time` {} disagree: the time is 0 exactly at step 0",
+                self.step, self.time
+            ));
+        }
+        let mut ids = std::collections::HashSet::with_capacity(n);
+        for i in 0..n {
+            let id = p.id[i];
+            let at =
+                |field: &str, what: String| format!("particle {i} (id {id}): `{field}` {what}");
+            if id >= self.next_id {
+                return Err(at(
+                    "id",
+                    format!("is not below `next_id` = {}", self.next_id),
+                ));
+            }
+            if !ids.insert(id) {
+                return Err(at("id", "appears twice; ids must be unique".into()));
+            }
+            let positive = |field: &str, x: f64| {
+                if x.is_finite() && x > 0.0 {
+                    Ok(())
+                } else {
+                    Err(at(field, format!("is {x}, must be finite and > 0")))
+                }
+            };
+            positive("scale", p.scale[i])?;
+            positive("mass", p.mass[i])?;
+            for x in p.inertia[i].iter() {
+                positive("inertia", *x)?;
+            }
+            for (field, v) in [
+                ("position", &p.position[i]),
+                ("velocity", &p.velocity[i]),
+                ("angular_velocity", &p.angular_velocity[i]),
+                ("force", &p.force[i]),
+                ("torque", &p.torque[i]),
+            ] {
+                if !v.iter().all(|x| x.is_finite()) {
+                    return Err(at(
+                        field,
+                        format!("is [{}, {}, {}], must be finite", v.x, v.y, v.z),
+                    ));
+                }
+            }
+            let q = p.orientation[i].quaternion();
+            let norm = q.norm();
+            if !(norm.is_finite() && (norm - 1.0).abs() <= QUATERNION_NORM_TOLERANCE) {
+                return Err(at(
+                    "orientation",
+                    format!(
+                        "is (w {}, i {}, j {}, k {}) of norm {norm}, must be a unit quaternion \
+                         (norm within {QUATERNION_NORM_TOLERANCE} of 1)",
+                        q.w, q.i, q.j, q.k
+                    ),
+                ));
+            }
+        }
+        for (k, s) in self.history.entries() {
+            let finite = s.spring.iter().all(|x| x.is_finite())
+                && s.approach_speed.is_finite()
+                && s.twist.is_finite();
+            if !finite {
+                return Err(format!(
+                    "contact ({}, {}): spring, approach speed or twist is not finite",
+                    k.a, k.b
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 enum ReadFail {
