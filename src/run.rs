@@ -13,6 +13,7 @@ use crate::io::{
     write_atomic, write_checkpoint, write_particle_csv,
 };
 use crate::pipeline::{Simulation, SimulationError};
+use crate::scene::restart::{SECTIONS_RECORD, SceneFingerprint, check_against_scene};
 use crate::scene::{
     Inserter, InserterState, Scene, check_report, face_contact_times, impact_speed, load_scene,
 };
@@ -170,10 +171,22 @@ pub fn prepare_output_dir(dir: &Path, overwrite: bool, restart: bool) -> Result<
     Ok(())
 }
 
-/// Hash identifying a scene for restarts: the scene file's bytes.
-fn scene_hash(path: &Path) -> Result<u64> {
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    Ok(fnv1a64(&bytes))
+/// What identifies a scene for restarts: its parsed sections ([`SceneFingerprint`]), and the
+/// hash of the file's bytes that older checkpoints store.
+struct SceneId {
+    fingerprint: SceneFingerprint,
+    legacy: u64,
+}
+
+impl SceneId {
+    fn of(scene: &Scene, path: &Path) -> Result<Self> {
+        let bytes =
+            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        Ok(SceneId {
+            fingerprint: SceneFingerprint::of(scene),
+            legacy: fnv1a64(&bytes),
+        })
+    }
 }
 
 /// Picks the backend (DESIGN.md §5): `cuda` needs a usable GPU and NVRTC, `auto` takes the GPU
@@ -340,7 +353,7 @@ fn whole_run(comm: &dyn Comm, sim: &Simulation) -> GlobalStats {
 
 /// The checkpoint of the current state, particles by global id whatever the backend's order;
 /// in a decomposed run the whole run's state gathered on rank 0 (`None` on the other ranks).
-fn checkpoint_of(comm: &dyn Comm, sim: &Simulation, hash: u64) -> Result<Option<Checkpoint>> {
+fn checkpoint_of(comm: &dyn Comm, sim: &Simulation, id: &SceneId) -> Result<Option<Checkpoint>> {
     let inserter = serde_json::to_vec(&sim.inserter.state())?;
     let (particles, history, removed) = if comm.size() > 1 {
         let removed = comm.sum_u64(&[sim.stats.removed])[0];
@@ -364,8 +377,11 @@ fn checkpoint_of(comm: &dyn Comm, sim: &Simulation, hash: u64) -> Result<Option<
         rng_state: sim.inserter.state().rng,
         inserter,
         next_id: sim.next_id,
-        scene_hash: hash,
-        extra: vec![("removed".into(), removed.to_le_bytes().to_vec())],
+        scene_hash: id.fingerprint.hash(),
+        extra: vec![
+            ("removed".into(), removed.to_le_bytes().to_vec()),
+            (SECTIONS_RECORD.into(), id.fingerprint.record()),
+        ],
     }))
 }
 
@@ -378,7 +394,7 @@ fn stopped_unstable(
     comm: &dyn Comm,
     engine: &mut Engine,
     dir: &Path,
-    hash: u64,
+    id: &SceneId,
 ) -> anyhow::Error {
     let unstable = matches!(
         e.downcast_ref::<SimulationError>(),
@@ -407,7 +423,7 @@ fn stopped_unstable(
     let path = dir
         .join("checkpoints")
         .join(format!("unstable-step-{}.ckpt", sim.step));
-    let written = checkpoint_of(comm, sim, hash).and_then(|c| match c {
+    let written = checkpoint_of(comm, sim, id).and_then(|c| match c {
         Some(c) => {
             std::fs::create_dir_all(dir.join("checkpoints"))?;
             write_checkpoint(&path, &c).map_err(anyhow::Error::from)
@@ -425,10 +441,10 @@ fn stopped_unstable(
 
 /// Writes the checkpoint (a collective call in a decomposed run; rank 0 writes) and returns
 /// its path.
-fn save_checkpoint(comm: &dyn Comm, sim: &Simulation, dir: &Path, hash: u64) -> Result<PathBuf> {
+fn save_checkpoint(comm: &dyn Comm, sim: &Simulation, dir: &Path, id: &SceneId) -> Result<PathBuf> {
     let ckdir = dir.join("checkpoints");
     let path = ckdir.join(format!("step_{:010}.ckpt", sim.step));
-    if let Some(checkpoint) = checkpoint_of(comm, sim, hash)? {
+    if let Some(checkpoint) = checkpoint_of(comm, sim, id)? {
         std::fs::create_dir_all(&ckdir)
             .with_context(|| format!("{}: cannot create", ckdir.display()))?;
         write_checkpoint(&path, &checkpoint)?;
@@ -454,16 +470,25 @@ struct RestartHeader {
 fn read_restart(
     comm: &dyn Comm,
     path: &Path,
-    hash: u64,
+    scene: &Scene,
+    id: &SceneId,
 ) -> Result<(RestartHeader, Option<Checkpoint>)> {
     use crate::domain::pack::{Reader, Writer};
     let mut w = Writer::default();
     let mut local = None;
     if comm.rank() == 0 {
-        match read_checkpoint(path)
+        // The scene first: a state checked against the wrong scene would report the wrong
+        // field.
+        let checked = read_checkpoint(path)
             .map_err(anyhow::Error::from)
-            .and_then(|c| c.check_scene(hash, path).map(|_| c).map_err(Into::into))
-        {
+            .and_then(|c| {
+                id.fingerprint
+                    .check(&c, id.legacy)
+                    .and_then(|_| check_against_scene(&c, scene))
+                    .map_err(|e| anyhow!("checkpoint {}: {e}", path.display()))?;
+                Ok(c)
+            });
+        match checked {
             Ok(c) => {
                 let removed = c
                     .extra
@@ -549,7 +574,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
     } else {
         (choose_backend(opts.backend)?, 0)
     };
-    let hash = scene_hash(&opts.scene)?;
+    let hash = SceneId::of(&scene, &opts.scene)?;
     let dir = scene.output.dir.clone();
     if rank == 0 {
         prepare_output_dir(&dir, opts.overwrite, opts.restart.is_some())?;
@@ -561,7 +586,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
 
     let (sim, resumed) = match &opts.restart {
         Some(path) => {
-            let (header, local) = read_restart(&*comm, path, hash)?;
+            let (header, local) = read_restart(&*comm, path, &scene, &hash)?;
             let state: InserterState = serde_json::from_slice(&header.inserter)
                 .with_context(|| format!("{}: insertion state", path.display()))?;
             let inserter = Inserter::try_restore(&scene, &state)
@@ -669,7 +694,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
             break;
         }
         if let Err(e) = engine.step() {
-            return Err(stopped_unstable(e, &*comm, &mut engine, &dir, hash));
+            return Err(stopped_unstable(e, &*comm, &mut engine, &dir, &hash));
         }
         particle_steps += engine.host().particles.len() as u64;
         let (t, dt) = (engine.host().time, engine.host().dt);
@@ -680,7 +705,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
             out.series(engine.synced()?)?;
         }
         if checkpoint_at.due(t, dt) {
-            save_checkpoint(&*comm, engine.synced()?, &dir, hash)?;
+            save_checkpoint(&*comm, engine.synced()?, &dir, &hash)?;
         }
         let sim = engine.host();
         let done = sim.step - step0;
@@ -723,7 +748,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
             received
         };
         if let Some(signal) = crate::interrupt::stop_signal(counts) {
-            let path = save_checkpoint(&*comm, engine.synced()?, &dir, hash)?;
+            let path = save_checkpoint(&*comm, engine.synced()?, &dir, &hash)?;
             if rank == 0 {
                 tracing::warn!(
                     "interrupted by {} after step {}: checkpoint written to {}; resume with \
@@ -747,7 +772,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
         out.frame(sim)?;
         out.series(sim)?;
         if sim.scene.output.checkpoint_interval.is_some() {
-            save_checkpoint(&*comm, sim, &dir, hash)?;
+            save_checkpoint(&*comm, sim, &dir, &hash)?;
         }
     }
     let g = whole_run(&*comm, sim);

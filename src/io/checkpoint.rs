@@ -22,7 +22,8 @@
 //! so a run killed while writing leaves the previous checkpoint intact.
 //!
 //! Reading checks the layout, then every field ([`Checkpoint::validate`]): a sound checksum
-//! only proves that the bytes are those written.
+//! only proves that the bytes are those written. What needs the scene (particle kinds, masses,
+//! the time step, the scene's identity) is checked by [`crate::scene::restart`].
 
 use crate::contact::history::{ContactHistory, ContactKey, ContactState};
 use crate::state::Particles;

@@ -6,6 +6,7 @@
 //! returns a resolved [`Scene`]. `docs/scene.md` documents every key.
 
 mod insertion;
+pub mod restart;
 mod schema;
 mod validate;
 mod walls;

