@@ -728,12 +728,18 @@ impl Simulation {
         // A pair across two ranks is evaluated on both; it counts where its lower-id member
         // (the pair's first) is owned, so that sums over ranks count it once.
         let counted = |k: usize| self.pairs.pairs[k][0] < owned as u32;
-        let mut energy: f64 = outcomes
-            .iter()
-            .enumerate()
-            .filter(|(k, _)| counted(*k))
-            .map(|(_, o)| o.forces.elastic_energy)
-            .sum();
+        // Summed per particle in local order, each particle's pairs by partner id (the order
+        // of the force reduction above), not in pair-list order: the list's order depends on
+        // the step it was built at, which a restart changes, and the energy must not.
+        let listed = owned.min(pairs.offsets.len().saturating_sub(1));
+        let mut energy: f64 = 0.0;
+        for i in 0..listed {
+            for r in pairs.of(i) {
+                if !r.is_b && counted(r.pair as usize) {
+                    energy += outcomes[r.pair as usize].forces.elastic_energy;
+                }
+            }
+        }
         let mut wall_contacts = 0;
         for w in &wall_outcomes {
             energy += w.energy;
@@ -1186,17 +1192,29 @@ impl Simulation {
     pub fn energies(&self) -> (f64, f64, f64) {
         let p = &self.particles;
         let g = self.scene.gravity;
-        (0..p.len())
+        let mut terms: Vec<(u64, [f64; 3])> = (0..p.len())
             .into_par_iter()
             .map(|i| {
                 let wb = p.orientation[i].inverse_transform_vector(&p.angular_velocity[i]);
                 (
-                    0.5 * p.mass[i] * p.velocity[i].norm_squared(),
-                    0.5 * wb.component_mul(&p.inertia[i]).dot(&wb),
-                    -p.mass[i] * g.dot(&p.position[i]),
+                    p.id[i],
+                    [
+                        0.5 * p.mass[i] * p.velocity[i].norm_squared(),
+                        0.5 * wb.component_mul(&p.inertia[i]).dot(&wb),
+                        -p.mass[i] * g.dot(&p.position[i]),
+                    ],
                 )
             })
-            .reduce(|| (0.0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
+            .collect();
+        // Summed one by one in id order: a parallel reduction's grouping varies with the
+        // threads' work stealing, and the local order with the backend and a restart, either of
+        // which would change the last bits of a value that the state alone determines.
+        if !terms.windows(2).all(|w| w[0].0 < w[1].0) {
+            terms.sort_unstable_by_key(|t| t.0);
+        }
+        terms.iter().fold((0.0, 0.0, 0.0), |a, (_, e)| {
+            (a.0 + e[0], a.1 + e[1], a.2 + e[2])
+        })
     }
 }
 

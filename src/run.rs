@@ -227,9 +227,19 @@ struct Schedule {
 }
 
 impl Schedule {
-    fn new(interval: Option<f64>, now: f64) -> Self {
+    /// The schedule at time `now` (steps of `dt`): where [`Schedule::due`] would have left it
+    /// had the run stepped from 0 to `now`. The next event is found by the same accumulation
+    /// `due` does, not as `floor(now / i) · i`, whose round-off differs: a restart on an event
+    /// then repeats it, or skips one, where the uninterrupted run did not.
+    fn new(interval: Option<f64>, now: f64, dt: f64) -> Self {
         let next = match interval {
-            Some(i) if i > 0.0 => (now / i).floor() * i + i,
+            Some(i) if i > 0.0 => {
+                let mut next = i;
+                while next <= now + 0.5 * dt {
+                    next += i;
+                }
+                next
+            }
             _ => f64::INFINITY,
         };
         Schedule { interval, next }
@@ -258,6 +268,8 @@ struct Outputs {
     series: Option<SeriesWriter>,
     type_template: Vec<usize>,
     comm: Arc<dyn Comm>,
+    /// Step of the last series row (on every rank: the row's sums are collective).
+    series_step: Option<u64>,
 }
 
 impl Outputs {
@@ -318,7 +330,13 @@ impl Outputs {
         Ok(())
     }
 
+    /// Appends the series row of the current step, once: the closing row of a run that
+    /// ends on a series event is that event's row.
     fn series(&mut self, sim: &Simulation) -> Result<()> {
+        if self.series_step == Some(sim.step) {
+            return Ok(());
+        }
+        self.series_step = Some(sim.step);
         let g = whole_run(&*self.comm, sim);
         let (kt, kr, pg) = g.energies;
         if let Some(series) = self.series.as_mut() {
@@ -649,7 +667,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
         None
     };
     let series = match (rank, resumed) {
-        (0, true) => Some(SeriesWriter::resume(&series_path, &wall_names, sim.time)?),
+        (0, true) => Some(SeriesWriter::resume(&series_path, &wall_names, sim.step)?),
         (0, false) => Some(SeriesWriter::new(&series_path, &wall_names)?),
         _ => None,
     };
@@ -659,10 +677,13 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
         series,
         type_template,
         comm: comm.clone(),
+        // A resumed series ends at the checkpoint's step at most: its row there, if any, is
+        // kept, never written twice.
+        series_step: resumed.then_some(sim.step),
     };
-    let mut frame_at = Schedule::new(s.output.frame_interval, sim.time);
-    let mut series_at = Schedule::new(Some(s.output.series_interval), sim.time);
-    let mut checkpoint_at = Schedule::new(s.output.checkpoint_interval, sim.time);
+    let mut frame_at = Schedule::new(s.output.frame_interval, sim.time, sim.dt);
+    let mut series_at = Schedule::new(Some(s.output.series_interval), sim.time, sim.dt);
+    let mut checkpoint_at = Schedule::new(s.output.checkpoint_interval, sim.time, sim.dt);
     let end_time = s.simulation.end_time;
     let log_every = s.output.log_interval_steps.max(1);
     if !resumed {

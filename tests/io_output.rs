@@ -710,7 +710,8 @@ fn series_resume_drops_rows_after_the_cutoff() {
     let path = dir.join("series.csv");
     let walls = vec!["floor".to_string(), "lid, top".to_string()];
     let mut s = SeriesWriter::new(&path, &walls).unwrap();
-    for step in 0..5 {
+    // Step 1 twice, as older builds wrote a run's last row: the resumed series has it once.
+    for step in [0, 1, 1, 2, 3, 4] {
         s.append(&row(step, 2)).unwrap();
     }
     assert!(s.append(&row(5, 1)).is_err());
@@ -720,7 +721,7 @@ fn series_resume_drops_rows_after_the_cutoff() {
     text.push_str("5,0.5,1.2");
     std::fs::write(&path, &text).unwrap();
 
-    let mut s = SeriesWriter::resume(&path, &walls, 2.0 * 0.1).unwrap();
+    let mut s = SeriesWriter::resume(&path, &walls, 2).unwrap();
     s.append(&row(3, 2)).unwrap();
     drop(s);
     let text = std::fs::read_to_string(&path).unwrap();
@@ -749,7 +750,7 @@ fn series_resume_drops_rows_after_the_cutoff() {
         assert_eq!(f(12), r.wall_forces[1].y.to_bits());
     }
     // Another scene's walls: refused, naming the file.
-    let e = SeriesWriter::resume(&path, &["floor".to_string()], 1.0)
+    let e = SeriesWriter::resume(&path, &["floor".to_string()], 1)
         .err()
         .unwrap()
         .to_string();

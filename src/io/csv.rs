@@ -78,11 +78,13 @@ impl SeriesWriter {
         Self::open_append(path, wall_names.len())
     }
 
-    /// Continues the series of a run restarted at time `after_time`: keeps the header and the
-    /// rows with `time <= after_time`, drops the later ones (and a last row cut short by a
-    /// kill), and appends from there. A missing file starts a new series; a file whose header
+    /// Continues the series of a run restarted at step `after_step`: keeps the header and the
+    /// rows of steps up to `after_step`, each step once (an older build wrote a run's last row
+    /// twice), drops the later ones (and a last row cut short by a kill), and appends from
+    /// there. Rows are matched by step, an integer, not by time, whose printed digits the
+    /// restart would have to reproduce. A missing file starts a new series; a file whose header
     /// does not match `wall_names` is an error (another scene's series).
-    pub fn resume(path: &Path, wall_names: &[String], after_time: f64) -> io::Result<Self> {
+    pub fn resume(path: &Path, wall_names: &[String], after_step: u64) -> io::Result<Self> {
         let text = match fs::read_to_string(path) {
             Ok(t) => t,
             Err(e) if e.kind() == io::ErrorKind::NotFound => return Self::new(path, wall_names),
@@ -99,18 +101,23 @@ impl SeriesWriter {
             ));
         }
         let mut kept = header.clone();
+        let mut last: Option<u64> = None;
         for (k, line) in text[header.len()..].split_inclusive('\n').enumerate() {
             if !line.ends_with('\n') {
                 break; // a row cut short by a kill: the restart writes it again
             }
-            let time = line
+            let step = line
                 .split(',')
-                .nth(1)
-                .and_then(|t| t.trim().parse::<f64>().ok())
-                .ok_or_else(|| invalid_data(path, format!("row {}: no time column", k + 1)))?;
-            if time > after_time {
+                .next()
+                .and_then(|t| t.trim().parse::<u64>().ok())
+                .ok_or_else(|| invalid_data(path, format!("row {}: no step column", k + 1)))?;
+            if step > after_step {
                 break;
             }
+            if last.is_some_and(|l| step <= l) {
+                continue; // a repeated row
+            }
+            last = Some(step);
             kept.push_str(line);
         }
         super::write_atomic(path, kept.as_bytes())?;
