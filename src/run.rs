@@ -10,7 +10,7 @@ use crate::domain::{Comm, SerialComm};
 use crate::io::checkpoint::fnv1a64;
 use crate::io::{
     Checkpoint, FrameView, FrameWriter, SeriesRow, SeriesWriter, WallView, read_checkpoint,
-    write_atomic, write_checkpoint, write_particle_csv,
+    remove_temporary_files, write_atomic, write_checkpoint, write_particle_csv,
 };
 use crate::pipeline::{Simulation, SimulationError};
 use crate::scene::restart::{SECTIONS_RECORD, SceneFingerprint, check_against_scene};
@@ -596,6 +596,15 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
     let dir = scene.output.dir.clone();
     if rank == 0 {
         prepare_output_dir(&dir, opts.overwrite, opts.restart.is_some())?;
+        // Leftovers of writes killed in an earlier run: never read, they would pile up.
+        let removed = remove_temporary_files(&dir)?;
+        if !removed.is_empty() {
+            tracing::info!(
+                "removed {} temporary file(s) left by a killed run in {}",
+                removed.len(),
+                dir.display()
+            );
+        }
     }
     comm.barrier();
     let type_template: Vec<usize> = scene.particle_types.iter().map(|t| t.template).collect();

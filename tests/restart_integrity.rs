@@ -308,3 +308,30 @@ fn restarted_series_equals_the_uninterrupted_one_byte_for_byte() {
     assert_eq!(steps, (0..=800).step_by(50).collect::<Vec<u64>>());
     assert!(full == part, "series differ:\n{full}\n---\n{part}");
 }
+
+#[test]
+fn a_run_removes_temporary_files_left_in_its_output_folder() {
+    let dir = temp_dir("tmp-clean");
+    let scene = scene(&dir);
+    let out = dir.join("out");
+    std::fs::create_dir_all(out.join("checkpoints")).unwrap();
+    let ours = [
+        out.join("series.csv.tmp-4242"),
+        out.join("checkpoints/latest.ckpt.tmp-17"),
+    ];
+    let theirs = [
+        out.join("notes.tmp-draft"),
+        out.join("data.tmp"),
+        dir.join("elsewhere.ckpt.tmp-99"),
+    ];
+    for p in ours.iter().chain(&theirs) {
+        std::fs::write(p, b"left over").unwrap();
+    }
+    first_run(&scene, &out, "5");
+    for p in &ours {
+        assert!(!p.exists(), "{} was left", p.display());
+    }
+    for p in &theirs {
+        assert!(p.exists(), "{} was removed", p.display());
+    }
+}

@@ -34,6 +34,43 @@ pub fn temporary_path(path: &Path) -> PathBuf {
     PathBuf::from(name)
 }
 
+/// Whether `name` is a temporary name of [`temporary_path`]: `<name>.tmp-<digits>`.
+pub fn is_temporary_name(name: &str) -> bool {
+    name.rsplit_once(".tmp-").is_some_and(|(stem, pid)| {
+        !stem.is_empty() && !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit())
+    })
+}
+
+/// Removes the temporary files ([`temporary_path`]) that killed writes left in `dir` and the
+/// folders below it, and returns their paths. Only names of that exact pattern are touched;
+/// symbolic links are neither removed nor followed. Meant for the start of a run, before it
+/// writes anything: a folder that another running process writes to would lose its files in
+/// progress.
+pub fn remove_temporary_files(dir: &Path) -> io::Result<Vec<PathBuf>> {
+    let mut removed = Vec::new();
+    let mut dirs = vec![dir.to_path_buf()];
+    while let Some(d) = dirs.pop() {
+        let entries = match fs::read_dir(&d) {
+            Ok(e) => e,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => continue,
+            Err(e) => return Err(with_path(e, &d)),
+        };
+        for entry in entries {
+            let entry = entry.map_err(|e| with_path(e, &d))?;
+            let kind = entry.file_type().map_err(|e| with_path(e, &entry.path()))?;
+            let path = entry.path();
+            if kind.is_dir() {
+                dirs.push(path);
+            } else if kind.is_file() && entry.file_name().to_str().is_some_and(is_temporary_name) {
+                fs::remove_file(&path).map_err(|e| with_path(e, &path))?;
+                removed.push(path);
+            }
+        }
+    }
+    removed.sort();
+    Ok(removed)
+}
+
 /// Writes `bytes` to `path` atomically: to [`temporary_path`], fsync, rename over `path`, fsync
 /// the directory (so the rename itself survives a crash). A reader sees the old file or the new
 /// one, never a mixture; on error the temporary file is removed and `path` is untouched.
@@ -152,6 +189,17 @@ pub(crate) fn particle_count(p: &crate::state::Particles) -> Result<usize, Strin
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn temporary_names_are_ours_only() {
+        assert!(is_temporary_name("series.csv.tmp-123"));
+        assert!(is_temporary_name(
+            &temporary_path(Path::new("latest.ckpt")).to_string_lossy()
+        ));
+        for other in ["a.tmp", "a.tmp-", "a.tmp-12x", ".tmp-12", "notes.tmp-draft"] {
+            assert!(!is_temporary_name(other), "{other}");
+        }
+    }
 
     #[test]
     fn base64_matches_rfc4648_vectors() {
