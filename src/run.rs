@@ -461,7 +461,7 @@ fn stopped_unstable(
 /// its path.
 fn save_checkpoint(comm: &dyn Comm, sim: &Simulation, dir: &Path, id: &SceneId) -> Result<PathBuf> {
     let ckdir = dir.join("checkpoints");
-    let path = ckdir.join(format!("step_{:010}.ckpt", sim.step));
+    let path = checkpoint_path(dir, sim.step);
     if let Some(checkpoint) = checkpoint_of(comm, sim, id)? {
         std::fs::create_dir_all(&ckdir)
             .with_context(|| format!("{}: cannot create", ckdir.display()))?;
@@ -471,6 +471,69 @@ fn save_checkpoint(comm: &dyn Comm, sim: &Simulation, dir: &Path, id: &SceneId) 
     }
     comm.barrier();
     Ok(path)
+}
+
+/// The periodic checkpoints (those of the `checkpoint_interval` schedule) on disk, oldest first,
+/// pruned to the newest `output.checkpoint_keep`. `latest.ckpt`, the checkpoint of an
+/// interrupt or of the end of a run off the schedule, and `unstable-step-*.ckpt` are never
+/// among them, so never deleted.
+struct KeptCheckpoints {
+    keep: Option<u64>,
+    periodic: std::collections::VecDeque<PathBuf>,
+}
+
+impl KeptCheckpoints {
+    /// The periodic checkpoints already on disk in `dir` at step `step` (a restart): the steps
+    /// the schedule fires at, found by replaying it with the run's own time accumulation.
+    fn new(scene: &Scene, dir: &Path, step: u64) -> Self {
+        let keep = scene.output.checkpoint_keep;
+        let mut periodic = std::collections::VecDeque::new();
+        if keep.is_some() && step > 0 {
+            let dt = scene.time_step();
+            let mut at = Schedule::new(scene.output.checkpoint_interval, 0.0, dt);
+            let mut t = 0.0;
+            for k in 1..=step {
+                t += dt;
+                if at.due(t, dt) {
+                    let path = checkpoint_path(dir, k);
+                    if path.is_file() {
+                        periodic.push_back(path);
+                    }
+                }
+            }
+        }
+        KeptCheckpoints { keep, periodic }
+    }
+
+    /// Records the periodic checkpoint just written at `path` and, on rank 0, deletes the
+    /// oldest beyond the number kept.
+    fn push(&mut self, rank: usize, path: PathBuf) -> Result<()> {
+        let Some(keep) = self.keep else {
+            return Ok(());
+        };
+        if self.periodic.back() != Some(&path) {
+            self.periodic.push_back(path);
+        }
+        while self.periodic.len() as u64 > keep {
+            if let Some(old) = self.periodic.pop_front()
+                && rank == 0
+            {
+                std::fs::remove_file(&old)
+                    .or_else(|e| match e.kind() {
+                        std::io::ErrorKind::NotFound => Ok(()),
+                        _ => Err(e),
+                    })
+                    .with_context(|| format!("{}: cannot delete", old.display()))?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The file of the checkpoint at `step`.
+fn checkpoint_path(dir: &Path, step: u64) -> PathBuf {
+    dir.join("checkpoints")
+        .join(format!("step_{step:010}.ckpt"))
 }
 
 /// What every rank needs of a checkpoint to restart: all but the particles and history, which
@@ -693,6 +756,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
     let mut frame_at = Schedule::new(s.output.frame_interval, sim.time, sim.dt);
     let mut series_at = Schedule::new(Some(s.output.series_interval), sim.time, sim.dt);
     let mut checkpoint_at = Schedule::new(s.output.checkpoint_interval, sim.time, sim.dt);
+    let mut kept = KeptCheckpoints::new(s, &dir, sim.step);
     let end_time = s.simulation.end_time;
     let log_every = s.output.log_interval_steps.max(1);
     if !resumed {
@@ -735,7 +799,8 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
             out.series(engine.synced()?)?;
         }
         if checkpoint_at.due(t, dt) {
-            save_checkpoint(&*comm, engine.synced()?, &dir, &hash)?;
+            let path = save_checkpoint(&*comm, engine.synced()?, &dir, &hash)?;
+            kept.push(rank, path)?;
         }
         let sim = engine.host();
         let done = sim.step - step0;

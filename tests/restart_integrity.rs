@@ -335,3 +335,67 @@ fn a_run_removes_temporary_files_left_in_its_output_folder() {
         assert!(p.exists(), "{} was removed", p.display());
     }
 }
+
+#[test]
+fn checkpoint_keep_prunes_old_periodic_checkpoints_only() {
+    let dir = temp_dir("ckpt-keep");
+    let scene = scene(&dir);
+    let text = std::fs::read_to_string(&scene).unwrap().replace(
+        "checkpoint_interval = 0.004",
+        "checkpoint_interval = 0.002\ncheckpoint_keep = 2",
+    );
+    std::fs::write(&scene, &text).unwrap();
+    let out = dir.join("out");
+    std::fs::create_dir_all(out.join("checkpoints")).unwrap();
+    let unstable = out.join("checkpoints/unstable-step-0000000050.ckpt");
+    std::fs::write(&unstable, b"kept").unwrap();
+    // Periodic checkpoints every 100 steps; the run ends off the schedule at 550.
+    let ckpt = first_run(&scene, &out, "550");
+    let names = |out: &Path| {
+        let mut v: Vec<String> = std::fs::read_dir(out.join("checkpoints"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+            .collect();
+        v.sort();
+        v
+    };
+    assert_eq!(
+        names(&out),
+        [
+            "latest.ckpt",
+            "step_0000000400.ckpt",
+            "step_0000000500.ckpt",
+            "step_0000000550.ckpt",
+            "unstable-step-0000000050.ckpt"
+        ]
+    );
+    // A restart counts the periodic checkpoints already there.
+    run(&restart_args(&scene, &ckpt, &out, "150"));
+    assert_eq!(
+        names(&out),
+        [
+            "latest.ckpt",
+            "step_0000000550.ckpt",
+            "step_0000000600.ckpt",
+            "step_0000000700.ckpt",
+            "unstable-step-0000000050.ckpt"
+        ]
+    );
+    // 0 is refused, naming the key.
+    std::fs::write(
+        &scene,
+        text.replace("checkpoint_keep = 2", "checkpoint_keep = 0"),
+    )
+    .unwrap();
+    let err = run_fails(&[
+        scene.to_str().unwrap(),
+        "--backend",
+        "cpu",
+        "--max-steps",
+        "1",
+    ]);
+    assert!(
+        err.contains("output.checkpoint_keep") && err.contains("at least 1"),
+        "{err}"
+    );
+}

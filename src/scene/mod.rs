@@ -284,6 +284,9 @@ pub struct OutputSettings {
     pub series_interval: f64,
     /// Steps between progress log lines.
     pub log_interval_steps: u64,
+    /// Periodic checkpoints kept, the newest (`latest.ckpt` and the checkpoints of a stop are
+    /// always kept); `None`: all.
+    pub checkpoint_keep: Option<u64>,
 }
 
 /// Contact parameters for every pair of materials, symmetric.

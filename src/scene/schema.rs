@@ -304,6 +304,8 @@ pub struct OutputSection {
     pub checkpoint_interval: Option<f64>,
     pub series_interval: Option<f64>,
     pub log_interval_steps: Option<u64>,
+    /// Periodic checkpoints kept (the newest; ≥ 1); default all.
+    pub checkpoint_keep: Option<u64>,
 }
 
 /// Source positions of every key and value in a parsed document, by full dotted path

@@ -757,6 +757,18 @@ impl Validator<'_> {
         if log_interval_steps == 0 {
             self.err("output.log_interval_steps", "must be at least 1");
         }
+        if o.checkpoint_keep == Some(0) {
+            self.err(
+                "output.checkpoint_keep",
+                "must be at least 1 (leave it out to keep every checkpoint)",
+            );
+        }
+        if o.checkpoint_keep.is_some() && checkpoint_interval.is_none() {
+            self.err(
+                "output.checkpoint_keep",
+                "needs output.checkpoint_interval (there are no periodic checkpoints to keep)",
+            );
+        }
         OutputSettings {
             dir,
             frame_interval,
@@ -765,6 +777,7 @@ impl Validator<'_> {
             checkpoint_interval,
             series_interval,
             log_interval_steps,
+            checkpoint_keep: o.checkpoint_keep,
         }
     }
 }
