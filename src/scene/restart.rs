@@ -168,13 +168,11 @@ pub fn check_against_scene(c: &Checkpoint, scene: &Scene) -> Result<(), String> 
         let at = |field: &str, what: String| format!("particle {i} (id {id}): `{field}` {what}");
         let kind = p.kind[i] as usize;
         if kind >= types {
-            return Err(at(
-                "kind",
-                format!(
-                    "is {kind}, the scene has {types} particle type(s) (kind 0 to {})",
-                    types as i64 - 1
-                ),
-            ));
+            let allowed = match types {
+                0 => "the scene has no particle types".to_string(),
+                n => format!("the scene has {n} particle type(s), kind 0 to {}", n - 1),
+            };
+            return Err(at("kind", format!("is {kind}, {allowed}")));
         }
         let ptype = &scene.particle_types[kind];
         let s = p.scale[i];
