@@ -315,7 +315,8 @@ fn a_run_removes_temporary_files_left_in_its_output_folder() {
     let dir = temp_dir("tmp-clean");
     let scene = scene(&dir);
     let out = dir.join("out");
-    std::fs::create_dir_all(out.join("checkpoints")).unwrap();
+    // A run killed while writing (its temporary files left), continued in the same folder.
+    let ckpt = first_run(&scene, &out, "5");
     let ours = [
         out.join("series.csv.tmp-4242"),
         out.join("checkpoints/latest.ckpt.tmp-17"),
@@ -328,7 +329,7 @@ fn a_run_removes_temporary_files_left_in_its_output_folder() {
     for p in ours.iter().chain(&theirs) {
         std::fs::write(p, b"left over").unwrap();
     }
-    first_run(&scene, &out, "5");
+    run(&restart_args(&scene, &ckpt, &out, "5"));
     for p in &ours {
         assert!(!p.exists(), "{} was left", p.display());
     }
@@ -347,11 +348,11 @@ fn checkpoint_keep_prunes_old_periodic_checkpoints_only() {
     );
     std::fs::write(&scene, &text).unwrap();
     let out = dir.join("out");
-    std::fs::create_dir_all(out.join("checkpoints")).unwrap();
-    let unstable = out.join("checkpoints/unstable-step-0000000050.ckpt");
-    std::fs::write(&unstable, b"kept").unwrap();
     // Periodic checkpoints every 100 steps; the run ends off the schedule at 550.
     let ckpt = first_run(&scene, &out, "550");
+    // A guard stop's checkpoint is never pruned.
+    let unstable = out.join("checkpoints/unstable-step-0000000050.ckpt");
+    std::fs::write(&unstable, b"kept").unwrap();
     let names = |out: &Path| {
         let mut v: Vec<String> = std::fs::read_dir(out.join("checkpoints"))
             .unwrap()
