@@ -15,7 +15,9 @@ pub use insertion::{
     DEFAULT_MAX_ATTEMPTS, InsertReport, Inserter, InserterState, Insertion, InsertionMode,
     OrientationMode, Region,
 };
-pub use validate::{DEFAULT_FIELDS, DEFAULT_GRAVITY, DEFAULT_LOG_INTERVAL};
+pub use validate::{
+    DEFAULT_FIELDS, DEFAULT_GRAVITY, DEFAULT_LOG_INTERVAL, HOST_BYTES_PER_PARTICLE, physical_memory,
+};
 pub use walls::{PlacedMesh, Wall, WallMotion, WallPlacement, load_wall_mesh, place_mesh};
 
 use crate::rng::Rng;

@@ -16,6 +16,29 @@ pub const DEFAULT_FIELDS: [&str; 5] = ["id", "type", "velocity", "angular_veloci
 /// Default steps between progress log lines.
 pub const DEFAULT_LOG_INTERVAL: u64 = 1000;
 
+/// Host memory a particle takes at the least (bytes): its state in [`crate::state::Particles`]
+/// (id, kind, scale, mass, position, velocity, angular velocity, force, torque, inertia,
+/// orientation) plus its bounding radius and the neighbour list's reference position. The run
+/// needs more (pair list, contact history, output copies): this bound only refuses what
+/// certainly cannot run.
+pub const HOST_BYTES_PER_PARTICLE: u64 = {
+    use std::mem::size_of;
+    (size_of::<u64>()
+        + size_of::<u32>()
+        + 3 * size_of::<f64>()
+        + 7 * size_of::<Vector3<f64>>()
+        + size_of::<nalgebra::UnitQuaternion<f64>>()) as u64
+};
+
+/// Physical memory of this machine in bytes (`MemTotal` of `/proc/meminfo`); `None` where it
+/// cannot be read, and then no memory bound is applied.
+pub fn physical_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
+
 pub(super) fn build(text: &str, base: &Path, file_name: &str) -> Result<Scene, SceneError> {
     let index = match toml::de::DeTable::parse(text) {
         Ok(doc) => SpanIndex::new(text, doc.get_ref()),
@@ -683,7 +706,43 @@ impl Validator<'_> {
                 lattice,
             });
         }
+        self.start_memory(&out);
         out
+    }
+
+    /// Refuses count insertions whose particles, all placed at the start, cannot fit in this
+    /// machine's memory: they would otherwise be allocated one by one until the process is
+    /// killed, long after `polydem check` said the scene was fine.
+    fn start_memory(&mut self, insertions: &[Insertion]) {
+        let counts: Vec<(usize, u64)> = insertions
+            .iter()
+            .enumerate()
+            .filter_map(|(k, ins)| match ins.mode {
+                InsertionMode::Count(n) => Some((k, n)),
+                _ => None,
+            })
+            .collect();
+        let total: u128 = counts.iter().map(|&(_, n)| n as u128).sum();
+        let Some(&(largest, _)) = counts.iter().max_by_key(|&&(_, n)| n) else {
+            return;
+        };
+        let need = total * HOST_BYTES_PER_PARTICLE as u128;
+        let Some(have) = physical_memory() else {
+            return;
+        };
+        if need > have as u128 {
+            let gib = |b: f64| b / (1u64 << 30) as f64;
+            self.err(
+                &format!("insertions[{largest}].count"),
+                format!(
+                    "{total} particles placed at the start need at least {:.1} GiB of memory \
+                     ({HOST_BYTES_PER_PARTICLE} bytes each for the particle state alone), more \
+                     than this machine's {:.1} GiB; lower count",
+                    gib(need as f64),
+                    gib(have as f64)
+                ),
+            );
+        }
     }
 
     fn output(&mut self, o: &schema::OutputSection) -> OutputSettings {

@@ -1,0 +1,94 @@
+//! Scene limits that a run cannot meet are refused up front, with the numbers: particle counts
+//! beyond the machine's memory, wall speeds the step cannot resolve, domains whose coordinates
+//! cannot resolve the particles; the step warnings of `polydem check` are logged by `polydem
+//! run`; particles leaving a closed domain stop the run unless the scene allows it.
+
+mod common;
+
+use common::repo_root;
+use polydem::scene::{HOST_BYTES_PER_PARTICLE, Scene, SceneError, parse_scene};
+
+/// A small valid scene: cubes of 1 cm in a closed box with a floor; `{INSERT}` is replaced by
+/// the insertion's count, rate or lattice keys.
+const BASE: &str = r#"
+[simulation]
+dt = 1.0e-5
+end_time = 0.01
+
+[domain]
+min = [-0.5, -0.5, -0.1]
+max = [0.5, 0.5, 0.5]
+
+[[materials]]
+name = "glass"
+youngs_modulus = 5.0e7
+poisson_ratio = 0.25
+density = 2500.0
+
+[[material_pairs]]
+materials = ["glass", "glass"]
+restitution = 0.5
+friction = 0.4
+
+[[particle_types]]
+name = "grain"
+material = "glass"
+generator = { kind = "cube", size = 1.0 }
+scale = 0.01
+
+[[insertions]]
+type = "grain"
+region = { kind = "box", min = [-0.1, -0.1, 0.1], max = [0.1, 0.1, 0.3] }
+count = 20
+"#;
+
+fn parse(text: &str) -> Result<Scene, SceneError> {
+    parse_scene(text, &repo_root(), "test.toml")
+}
+
+fn replace(from: &str, to: &str) -> String {
+    assert!(BASE.contains(from), "BASE lacks {from:?}");
+    BASE.replacen(from, to, 1)
+}
+
+/// The message of the rejected `text`, which must name `key`.
+fn error_naming(text: &str, key: &str) -> String {
+    match parse(text) {
+        Ok(_) => panic!("scene should be rejected for {key}"),
+        Err(e) => {
+            let msg = e.to_string();
+            assert!(msg.contains("test.toml"), "no file: {msg}");
+            assert!(
+                e.keys().contains(&key),
+                "error does not name key {key}: keys {:?}, message:\n{msg}",
+                e.keys()
+            );
+            msg
+        }
+    }
+}
+
+/// A lattice of 1e12 points holds `count = 1e12`, but 1e12 particles need at least 236 TB: the
+/// scene is refused at parse time (so by `check` too) with the memory it would need, instead of
+/// `run` allocating until it is killed.
+#[test]
+fn count_beyond_memory_is_refused_with_the_bytes_needed() {
+    let text = replace(
+        "region = { kind = \"box\", min = [-0.1, -0.1, 0.1], max = [0.1, 0.1, 0.3] }\ncount = 20",
+        "region = { kind = \"box\", min = [-0.5, -0.5, -0.1], max = [0.5, 0.5, 0.5] }\n\
+         count = 1000000000000\nlattice = [0.0001, 0.0001, 0.00006]",
+    );
+    let msg = error_naming(&text, "insertions[0].count");
+    assert_eq!(HOST_BYTES_PER_PARTICLE, 236);
+    let gib = 1e12 * 236.0 / (1u64 << 30) as f64;
+    assert!(
+        msg.contains(&format!(
+            "1000000000000 particles placed at the start need at least {gib:.1} GiB"
+        )),
+        "{msg}"
+    );
+    assert!(msg.contains("236 bytes each"), "{msg}");
+    assert!(msg.contains("GiB; lower count"), "{msg}");
+    // The same lattice with a count that fits in memory is accepted.
+    parse(&text.replace("count = 1000000000000", "count = 1000")).unwrap();
+}
