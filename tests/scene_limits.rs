@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::repo_root;
+use common::{polydem_bin, repo_root, temp_dir};
 use polydem::scene::{HOST_BYTES_PER_PARTICLE, Scene, SceneError, parse_scene};
 
 /// A small valid scene: cubes of 1 cm in a closed box with a floor; `{INSERT}` is replaced by
@@ -91,4 +91,44 @@ fn count_beyond_memory_is_refused_with_the_bytes_needed() {
     assert!(msg.contains("GiB; lower count"), "{msg}");
     // The same lattice with a count that fits in memory is accepted.
     parse(&text.replace("count = 1000000000000", "count = 1000")).unwrap();
+}
+
+/// `polydem run` logs the step warnings of `polydem check`, word for word, and lists them in
+/// summary.json: a scene at 20 × the safe face step ran with no word before.
+#[test]
+fn run_logs_the_step_warnings_of_check() {
+    let dir = temp_dir("run-dt-warning");
+    let path = dir.join("fast.toml");
+    let scene = parse(BASE).unwrap();
+    let contact = polydem::scene::critical_time_step(&scene)
+        .contact_time
+        .unwrap();
+    let dt = 20.0 * polydem::run::SAFE_FACE_FRACTION * contact;
+    std::fs::write(&path, replace("dt = 1.0e-5", &format!("dt = {dt:e}"))).unwrap();
+    let report = polydem::run::check(&path).unwrap();
+    let warnings: Vec<String> = serde_json::from_value(report["warnings"].clone()).unwrap();
+    assert_eq!(warnings.len(), 1, "{report}");
+    assert!(
+        warnings[0].contains("exceeds 0.05 of the face-to-face contact time")
+            && warnings[0].contains("(1.000 × it)"),
+        "{}",
+        warnings[0]
+    );
+    let out = std::process::Command::new(polydem_bin())
+        .args(["run", "--backend", "cpu", "--max-steps", "2", "--out"])
+        .arg(dir.join("out"))
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&warnings[0]),
+        "run did not log {:?}:\n{stderr}",
+        warnings[0]
+    );
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("out/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["warnings"], serde_json::json!(warnings));
+    let _ = std::fs::remove_dir_all(&dir);
 }
