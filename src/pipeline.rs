@@ -29,7 +29,7 @@ use crate::geometry::sphere::sphere_lens;
 use crate::geometry::{Overlap, PosedPolytope};
 use crate::integrate::{drift, half_kick};
 use crate::neighbor::{Bounds, PairList};
-use crate::scene::{Inserter, Scene, SceneError};
+use crate::scene::{Inserter, LeavingDomain, Scene, SceneError};
 use crate::stability::{Instability, StabilityGuard};
 use crate::state::Particles;
 use nalgebra::{Isometry3, Vector3};
@@ -74,6 +74,15 @@ pub enum SimulationError {
     },
     #[error(transparent)]
     Decomposition(#[from] DecompositionError),
+    #[error(
+        "step {step}: {count} particle(s) left the domain through a closed face: {particles}. Nothing in the scene lets particles out there: close the gap in the walls, enlarge [domain], lower the step (`polydem check`), or set domain.on_leaving = \"remove\" for an outflow (removed particles are counted in summary.json)"
+    )]
+    LeftDomain {
+        step: u64,
+        count: usize,
+        /// Up to five of them, by id: id, position and the face crossed.
+        particles: String,
+    },
     #[error("step {step}: {message}")]
     Domain { step: u64, message: String },
     #[error(
@@ -443,6 +452,14 @@ impl Simulation {
             })
             .collect();
         if !outside.is_empty() {
+            if self.scene.domain.on_leaving == LeavingDomain::Error {
+                return Err(self.left_domain(&outside));
+            }
+            tracing::debug!(
+                step = self.step,
+                removed = outside.len(),
+                "particles left the domain and were removed"
+            );
             remove_particles(&mut self.particles, &outside);
             self.stats.removed += outside.len() as u64;
             self.dirty = true;
@@ -453,6 +470,50 @@ impl Simulation {
         }
         self.timers.exchange += t0.elapsed().as_secs_f64();
         Ok(())
+    }
+
+    /// The error for the particles at local indices `outside`, which left the domain through
+    /// a closed face: up to five of them by id, each with its position and the face crossed.
+    fn left_domain(&self, outside: &[usize]) -> SimulationError {
+        const SHOWN: usize = 5;
+        let (b, p) = (&self.bounds, &self.particles);
+        let mut by_id = outside.to_vec();
+        by_id.sort_by_key(|&i| p.id[i]);
+        let mut named: Vec<String> = by_id
+            .iter()
+            .take(SHOWN)
+            .map(|&i| {
+                let x = p.position[i];
+                let face = (0..3)
+                    .find_map(|k| {
+                        let axis = ["x", "y", "z"][k];
+                        if b.periodic[k] {
+                            None
+                        } else if x[k] < b.min[k] {
+                            Some(format!("{axis} min face ({axis} = {} m)", b.min[k]))
+                        } else if x[k] > b.max[k] {
+                            Some(format!("{axis} max face ({axis} = {} m)", b.max[k]))
+                        } else {
+                            None
+                        }
+                    })
+                    .unwrap_or_default();
+                format!(
+                    "particle {} at {:?} m (velocity {:?} m/s) crossed the {face}",
+                    p.id[i],
+                    x.as_slice(),
+                    p.velocity[i].as_slice()
+                )
+            })
+            .collect();
+        if outside.len() > SHOWN {
+            named.push(format!("and {} more", outside.len() - SHOWN));
+        }
+        SimulationError::LeftDomain {
+            step: self.step,
+            count: outside.len(),
+            particles: named.join("; "),
+        }
     }
 
     /// Insertion in a decomposed run: every rank runs the same inserter (same generator, same

@@ -403,7 +403,8 @@ fn checkpoint_of(comm: &dyn Comm, sim: &Simulation, id: &SceneId) -> Result<Opti
     }))
 }
 
-/// A run stopped by the stability guard (`crate::stability`) or a non-finite value: the last
+/// A run stopped by the stability guard (`crate::stability`), a non-finite value or a particle
+/// leaving the domain through a closed face (`domain.on_leaving`): the last
 /// scheduled checkpoint is left as it is, and the state at the stop is written beside it as
 /// `checkpoints/unstable-step-<step>.ckpt` for a post-mortem (or a restart with a smaller step),
 /// on one rank and when every value is finite. Other errors pass through unchanged.
@@ -416,7 +417,11 @@ fn stopped_unstable(
 ) -> anyhow::Error {
     let unstable = matches!(
         e.downcast_ref::<SimulationError>(),
-        Some(SimulationError::Unstable { .. } | SimulationError::NonFinite { .. })
+        Some(
+            SimulationError::Unstable { .. }
+                | SimulationError::NonFinite { .. }
+                | SimulationError::LeftDomain { .. }
+        )
     );
     if !unstable {
         return e;
@@ -811,11 +816,15 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
         let sim = engine.host();
         let done = sim.step - step0;
         // Whole-run counts at deterministic steps only: every rank joins the sums.
-        let (n_all, contacts_all) = if done % 100 == 0 || done % log_every == 0 {
+        let (n_all, contacts_all, removed_all) = if done % 100 == 0 || done % log_every == 0 {
             let g = whole_run(&*comm, sim);
-            (g.particles, g.stats.contacts + g.stats.wall_contacts)
+            (
+                g.particles,
+                g.stats.contacts + g.stats.wall_contacts,
+                g.stats.removed,
+            )
         } else {
-            (0, 0)
+            (0, 0, 0)
         };
         if let Some(b) = &bar {
             b.set_position(done);
@@ -828,8 +837,15 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
             let elapsed = start.elapsed().as_secs_f64();
             let rate = done as f64 / elapsed.max(1e-9);
             let eta = (total_steps.saturating_sub(done)) as f64 / rate.max(1e-9);
+            // Removed particles (domain.on_leaving = "remove") are named only when there are
+            // any, so that a closed scene's log reads as before.
+            let removed = if removed_all > 0 {
+                format!("  {removed_all} removed (left the domain)")
+            } else {
+                String::new()
+            };
             tracing::info!(
-                "step {} t = {:.5} s  {:.0} steps/s  {} particles  {} contacts  ETA {:.0} s",
+                "step {} t = {:.5} s  {:.0} steps/s  {} particles  {} contacts{removed}  ETA {:.0} s",
                 sim.step,
                 t,
                 rate,
@@ -877,6 +893,13 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
         }
     }
     let g = whole_run(&*comm, sim);
+    if rank == 0 && g.stats.removed > 0 {
+        tracing::info!(
+            "{} particles left the domain and were removed (domain.on_leaving = \"remove\"); \
+             summary.json: particles_removed",
+            g.stats.removed
+        );
+    }
     let (kt, kr, pg) = g.energies;
     let particle_steps = comm.sum_u64(&[particle_steps])[0];
     let threads = rayon::current_num_threads();

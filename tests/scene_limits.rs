@@ -132,3 +132,107 @@ fn run_logs_the_step_warnings_of_check() {
     assert_eq!(summary["warnings"], serde_json::json!(warnings));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Five cubes thrown down at 10 m/s in a closed box without walls: they cross the floor of the
+/// domain (z = 0) after about 450 steps.
+fn thrown_down(on_leaving: Option<&str>) -> String {
+    let leaving = on_leaving.map_or(String::new(), |v| format!("on_leaving = \"{v}\"\n"));
+    replace(
+        "[domain]\nmin = [-0.5, -0.5, -0.1]\n",
+        &format!("[domain]\nmin = [-0.5, -0.5, 0.0]\n{leaving}"),
+    )
+    .replace(
+        "region = { kind = \"box\", min = [-0.1, -0.1, 0.1], max = [0.1, 0.1, 0.3] }\ncount = 20",
+        "region = { kind = \"box\", min = [-0.2, -0.2, 0.03], max = [0.2, 0.2, 0.06] }\n\
+         count = 5\nvelocity = [0.0, 0.0, -10.0]",
+    )
+}
+
+/// A particle leaving a closed domain stops the run by default, before it is removed: the
+/// error names the step, the particle, its position and the face; with `on_leaving = "remove"`
+/// the particles are removed and counted. (They were removed silently before.)
+#[test]
+fn leaving_the_domain_is_an_error_unless_the_scene_allows_it() {
+    use polydem::pipeline::{Simulation, SimulationError};
+    let mut sim = Simulation::new(parse(&thrown_down(None)).unwrap()).unwrap();
+    let err = loop {
+        if let Err(e) = sim.step() {
+            break e;
+        }
+        assert!(sim.step < 2000, "no particle left the domain");
+    };
+    let msg = err.to_string();
+    let SimulationError::LeftDomain { step, count, .. } = err else {
+        panic!("expected LeftDomain, got {msg}");
+    };
+    assert_eq!(step, sim.step);
+    assert!((1..=5).contains(&count), "{msg}");
+    // Stopped before removal: all five are still there, the lowest below the floor.
+    assert_eq!(sim.particles.len(), 5);
+    let (lowest, i) = (0..5)
+        .map(|i| (sim.particles.position[i].z, i))
+        .fold((f64::INFINITY, 0), |a, b| if b.0 < a.0 { b } else { a });
+    assert!(lowest < 0.0);
+    let id = sim.particles.id[i];
+    assert!(
+        msg.starts_with(&format!(
+            "step {step}: {count} particle(s) left the domain through a closed face: "
+        )),
+        "{msg}"
+    );
+    assert!(msg.contains(&format!("particle {id} at [")), "{msg}");
+    assert!(msg.contains("crossed the z min face (z = 0 m)"), "{msg}");
+    assert!(msg.contains("domain.on_leaving = \"remove\""), "{msg}");
+    assert_eq!(sim.stats.removed, 0);
+
+    // Allowed: the same steps remove them and count them.
+    let mut sim = Simulation::new(parse(&thrown_down(Some("remove"))).unwrap()).unwrap();
+    while sim.step < 1000 {
+        sim.step().unwrap();
+    }
+    assert_eq!(sim.particles.len(), 0);
+    assert_eq!(sim.stats.removed, 5);
+}
+
+/// `polydem run` of the thrown-down scene: by default it fails (rc ≠ 0) with the error and
+/// writes the state at the stop; with `on_leaving = "remove"` it succeeds, summary.json counts
+/// the five removed particles and the log says so.
+#[test]
+fn run_reports_particles_leaving_the_domain() {
+    let dir = temp_dir("run-leaving");
+    let run = |name: &str, text: String| {
+        let path = dir.join(format!("{name}.toml"));
+        std::fs::write(&path, text).unwrap();
+        std::process::Command::new(polydem_bin())
+            .args(["run", "--backend", "cpu", "--max-steps", "1000", "--out"])
+            .arg(dir.join(name))
+            .arg(&path)
+            .output()
+            .unwrap()
+    };
+    let out = run("closed", thrown_down(None));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("left the domain through a closed face"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("crossed the z min face (z = 0 m)"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("unstable-step-"), "{stderr}");
+
+    let out = run("open", thrown_down(Some("remove")));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("open/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["particles_removed"], 5);
+    assert_eq!(summary["particles"], 0);
+    assert!(
+        stderr.contains("5 particles left the domain and were removed"),
+        "{stderr}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -257,6 +257,20 @@ pub struct Domain {
     pub max: Vector3<f64>,
     /// Periodic along x, y, z.
     pub periodic: [bool; 3],
+    /// What a particle that leaves through a closed face does (`domain.on_leaving`).
+    pub on_leaving: LeavingDomain,
+}
+
+/// What a particle whose centroid leaves the domain through a closed (non-periodic) face does
+/// (`domain.on_leaving`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LeavingDomain {
+    /// The run stops with [`crate::pipeline::SimulationError::LeftDomain`] before the particle
+    /// is removed: a particle lost through a wall or a closed face is a fault of the scene.
+    #[default]
+    Error,
+    /// The particle is removed (an outflow): counted in `summary.json` and the log.
+    Remove,
 }
 
 /// Which output formats are written.

@@ -148,6 +148,17 @@ pub struct DomainSection {
     /// Periodic axes `[x, y, z]`.
     #[serde(default)]
     pub periodic: [bool; 3],
+    /// What a particle leaving through a closed (non-periodic) face does: `"error"` (the
+    /// default) stops the run, `"remove"` removes it and counts it.
+    pub on_leaving: Option<LeavingName>,
+}
+
+/// Values of `domain.on_leaving`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum LeavingName {
+    Error,
+    Remove,
 }
 
 /// `[[materials]]`.

@@ -314,6 +314,10 @@ impl Validator<'_> {
             min,
             max,
             periodic: d.periodic,
+            on_leaving: match d.on_leaving {
+                Some(schema::LeavingName::Remove) => LeavingDomain::Remove,
+                Some(schema::LeavingName::Error) | None => LeavingDomain::Error,
+            },
         }
     }
 
