@@ -23,7 +23,7 @@
 //! drift (the GPU checks them in the same kernel), overlaps where the contact geometry is
 //! evaluated.
 
-use crate::scene::{GuardSettings, Scene, WallMotion};
+use crate::scene::{GuardSettings, Scene};
 use crate::state::Particles;
 use nalgebra::Vector3;
 
@@ -172,26 +172,7 @@ pub fn speed_scale(scene: &Scene, particles: &Particles, radius: &[f64], elastic
     let wall = scene
         .walls
         .iter()
-        .map(|w| match &w.motion {
-            WallMotion::Fixed => 0.0,
-            WallMotion::Translate { velocity } => velocity.norm(),
-            WallMotion::Sinusoidal {
-                amplitude,
-                frequency,
-                ..
-            } => std::f64::consts::TAU * frequency * amplitude.abs(),
-            WallMotion::Rotate { axis, origin, rpm } => {
-                let omega = WallMotion::omega(*rpm).abs();
-                w.triangles
-                    .iter()
-                    .flatten()
-                    .map(|x| {
-                        let r = x - origin;
-                        (r - axis.into_inner() * r.dot(axis)).norm() * omega
-                    })
-                    .fold(0.0, f64::max)
-            }
-        })
+        .map(|w| w.motion.max_speed(&w.triangles))
         .fold(0.0, f64::max);
     let placed = (0..particles.len())
         .map(|i| particles.velocity[i].norm() + particles.angular_velocity[i].norm() * radius[i])

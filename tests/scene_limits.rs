@@ -236,3 +236,60 @@ fn run_reports_particles_leaving_the_domain() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `BASE` with a 0.1 m paddle turning about z at `rpm`.
+fn paddle(rpm: &str) -> String {
+    format!(
+        "{BASE}\n[[materials]]\nname = \"steel\"\nyoungs_modulus = 2.0e11\npoisson_ratio = 0.3\n\
+         density = 7800.0\n\n[[material_pairs]]\nmaterials = [\"glass\", \"steel\"]\n\
+         restitution = 0.6\nfriction = 0.3\n\n[[walls]]\nname = \"paddle\"\n\
+         mesh = \"meshes/walls/plane.stl\"\nmaterial = \"steel\"\nscale = 0.1\n\
+         translate = [0.0, 0.0, 0.4]\nmotion = {{ kind = \"rotate\", axis = [0.0, 0.0, 1.0], rpm = {rpm} }}\n"
+    )
+}
+
+/// A wall moving more than a tenth of the smallest particle radius per step is refused with
+/// the speeds and the largest rpm the step resolves: `rpm = 1e300` was accepted and particles
+/// vanished.
+#[test]
+fn wall_speed_is_bounded_by_what_the_step_resolves() {
+    let ok = parse(&paddle("30.0")).unwrap();
+    let w = &ok.walls[0];
+    // The paddle's fastest point: its corner, farthest from the z axis.
+    let reach = w
+        .triangles
+        .iter()
+        .flatten()
+        .map(|x| x.xy().norm())
+        .fold(0.0, f64::max);
+    assert!((reach - 0.05 * 2f64.sqrt()).abs() < 1e-12, "{reach}");
+    let r_min = ok.templates[0].equivalent_radius * 0.01;
+    let v_max = polydem::scene::MAX_WALL_STEP_FRACTION * r_min / 1e-5;
+    let rpm_max = v_max / (reach * std::f64::consts::TAU / 60.0);
+    for rpm in ["1e300", "-1e300", &format!("{:e}", 1.01 * rpm_max)] {
+        let msg = error_naming(&paddle(rpm), "walls[0].motion.rpm");
+        assert!(msg.contains("test.toml:"), "{msg}");
+        assert!(
+            msg.contains("wall \"paddle\" moves too fast for the time step"),
+            "{msg}"
+        );
+        assert!(
+            msg.contains(&format!("|rpm| ≤ {rpm_max:.4e} at this step")),
+            "{msg}"
+        );
+        assert!(msg.contains(&format!("radius {r_min:.4e} m")), "{msg}");
+    }
+    parse(&paddle(&format!("{:e}", 0.99 * rpm_max))).unwrap();
+    // A translating wall names its velocity.
+    let msg = error_naming(
+        &paddle("30.0").replace(
+            "{ kind = \"rotate\", axis = [0.0, 0.0, 1.0], rpm = 30.0 }",
+            "{ kind = \"translate\", velocity = [1.0e6, 0.0, 0.0] }",
+        ),
+        "walls[0].motion.velocity",
+    );
+    assert!(
+        msg.contains(&format!("|velocity| ≤ {v_max:.4e} m/s")),
+        "{msg}"
+    );
+}

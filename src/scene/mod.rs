@@ -16,7 +16,8 @@ pub use insertion::{
     OrientationMode, Region,
 };
 pub use validate::{
-    DEFAULT_FIELDS, DEFAULT_GRAVITY, DEFAULT_LOG_INTERVAL, HOST_BYTES_PER_PARTICLE, physical_memory,
+    DEFAULT_FIELDS, DEFAULT_GRAVITY, DEFAULT_LOG_INTERVAL, HOST_BYTES_PER_PARTICLE,
+    MAX_WALL_STEP_FRACTION, physical_memory,
 };
 pub use walls::{PlacedMesh, Wall, WallMotion, WallPlacement, load_wall_mesh, place_mesh};
 

@@ -16,6 +16,11 @@ pub const DEFAULT_FIELDS: [&str; 5] = ["id", "type", "velocity", "angular_veloci
 /// Default steps between progress log lines.
 pub const DEFAULT_LOG_INTERVAL: u64 = 1000;
 
+/// The most a wall's fastest point may move in one step, as a fraction of the smallest
+/// particle's volume-equivalent radius: a wall that jumps further passes through contacts in a
+/// few steps, which no contact law resolves.
+pub const MAX_WALL_STEP_FRACTION: f64 = 0.1;
+
 /// Host memory a particle takes at the least (bytes): its state in [`crate::state::Particles`]
 /// (id, kind, scale, mass, position, velocity, angular velocity, force, torque, inertia,
 /// orientation) plus its bounding radius and the neighbour list's reference position. The run
@@ -223,6 +228,7 @@ impl Validator<'_> {
             scene.simulation = simulation;
         }
         let ts = critical_time_step(&scene);
+        self.wall_speeds(&scene, ts.dt);
         if raw_output.series_interval.is_none() {
             scene.output.series_interval = scene.output.frame_interval.unwrap_or(100.0 * ts.dt);
         }
@@ -236,6 +242,59 @@ impl Validator<'_> {
             );
         }
         scene
+    }
+
+    /// Refuses walls whose fastest point moves more than [`MAX_WALL_STEP_FRACTION`] of the
+    /// smallest particle's radius in one step: a contact with such a wall is not resolved at
+    /// all (at `rpm = 1e300` particles simply vanished).
+    fn wall_speeds(&mut self, scene: &Scene, dt: f64) {
+        let r_min = scene
+            .particle_types
+            .iter()
+            .zip(&scene.scale_distributions)
+            .filter_map(|(p, d)| {
+                scene
+                    .templates
+                    .get(p.template)
+                    .map(|t| t.equivalent_radius * d.min_scale())
+            })
+            .fold(f64::INFINITY, f64::min);
+        if !(r_min.is_finite() && dt.is_finite()) {
+            return;
+        }
+        let limit = MAX_WALL_STEP_FRACTION * r_min;
+        for (i, w) in scene.walls.iter().enumerate() {
+            let speed = w.motion.max_speed(&w.triangles);
+            if speed * dt <= limit {
+                continue;
+            }
+            let v_max = limit / dt;
+            let (key, allowed) = match &w.motion {
+                WallMotion::Rotate { rpm, .. } => (
+                    "rpm",
+                    format!("|rpm| ≤ {:.4e} at this step", rpm.abs() * v_max / speed),
+                ),
+                WallMotion::Sinusoidal { frequency, .. } => (
+                    "frequency",
+                    format!(
+                        "2π × frequency × amplitude ≤ {v_max:.4e} m/s (frequency ≤ {:.4e} Hz at this amplitude)",
+                        frequency * v_max / speed
+                    ),
+                ),
+                _ => ("velocity", format!("|velocity| ≤ {v_max:.4e} m/s")),
+            };
+            self.err(
+                &format!("walls[{i}].motion.{key}"),
+                format!(
+                    "wall \"{}\" moves too fast for the time step: its fastest point moves at \
+                     {speed:.4e} m/s, {:.4e} m per step of dt = {dt:.4e} s, more than \
+                     {MAX_WALL_STEP_FRACTION} × the smallest particle radius {r_min:.4e} m; \
+                     allowed: {allowed} (or a smaller step)",
+                    w.name,
+                    speed * dt
+                ),
+            );
+        }
     }
 
     fn simulation(&mut self, s: &schema::SimulationSection) -> SimulationSettings {

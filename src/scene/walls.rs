@@ -118,6 +118,31 @@ impl WallMotion {
         }
     }
 
+    /// The largest speed of a point of `triangles` under this motion (m/s): for a rotation, the
+    /// point farthest from the axis; for an oscillation, the peak speed 2πfA.
+    pub fn max_speed(&self, triangles: &[[Vector3<f64>; 3]]) -> f64 {
+        match self {
+            WallMotion::Fixed => 0.0,
+            WallMotion::Translate { velocity } => velocity.norm(),
+            WallMotion::Sinusoidal {
+                amplitude,
+                frequency,
+                ..
+            } => TAU * frequency * amplitude.abs(),
+            WallMotion::Rotate { axis, origin, rpm } => {
+                let omega = Self::omega(*rpm).abs();
+                triangles
+                    .iter()
+                    .flatten()
+                    .map(|x| {
+                        let r = x - origin;
+                        (r - axis.into_inner() * r.dot(axis)).norm() * omega
+                    })
+                    .fold(0.0, f64::max)
+            }
+        }
+    }
+
     /// Angular velocity of the wall (rad/s) (zero except for rotation).
     pub fn angular_velocity(&self) -> Vector3<f64> {
         match self {
