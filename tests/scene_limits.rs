@@ -293,3 +293,42 @@ fn wall_speed_is_bounded_by_what_the_step_resolves() {
         "{msg}"
     );
 }
+
+/// Domains whose coordinates f64 cannot resolve to 1e-6 of the smallest particle radius are
+/// refused with the numbers: a periodic half-width of 1e15 m made false contacts, ±1e308 lost
+/// them all.
+#[test]
+fn domains_too_large_for_f64_are_refused() {
+    let domain = |lo: &str, hi: &str| {
+        replace(
+            "min = [-0.5, -0.5, -0.1]\nmax = [0.5, 0.5, 0.5]",
+            &format!(
+                "min = [{lo}, {lo}, -0.1]\nmax = [{hi}, {hi}, 0.5]\nperiodic = [true, true, false]"
+            ),
+        )
+    };
+    let r_min = parse(BASE).unwrap().min_equivalent_radius();
+    let need = polydem::scene::POSITION_RESOLUTION * r_min;
+    let bound = need / f64::EPSILON;
+    for (lo, hi, key, c) in [
+        ("-1e15", "1e15", "domain.max", 1e15),
+        ("-1e308", "1e308", "domain.max", 1e308),
+        ("-2e7", "0.5", "domain.min", 2e7),
+    ] {
+        let msg = error_naming(&domain(lo, hi), key);
+        let spacing = c * f64::EPSILON;
+        assert!(
+            msg.contains(&format!(
+                "{key}: coordinates up to {c:.4e} m are resolved in f64 only to {spacing:.4e} m"
+            )),
+            "{msg}"
+        );
+        assert!(msg.contains(&format!("radius {r_min:.4e} m")), "{msg}");
+        assert!(
+            msg.contains(&format!("|coordinates| ≤ {bound:.4e} m")),
+            "{msg}"
+        );
+    }
+    // Large but resolvable.
+    parse(&domain("-1e3", "1e3")).unwrap();
+}

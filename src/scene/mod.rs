@@ -17,7 +17,7 @@ pub use insertion::{
 };
 pub use validate::{
     DEFAULT_FIELDS, DEFAULT_GRAVITY, DEFAULT_LOG_INTERVAL, HOST_BYTES_PER_PARTICLE,
-    MAX_WALL_STEP_FRACTION, physical_memory,
+    MAX_WALL_STEP_FRACTION, POSITION_RESOLUTION, physical_memory,
 };
 pub use walls::{PlacedMesh, Wall, WallMotion, WallPlacement, load_wall_mesh, place_mesh};
 
@@ -485,6 +485,20 @@ impl Scene {
                     .map(|t| t.circumscribed_radius * d.max_scale())
             })
             .fold(0.0, f64::max)
+    }
+
+    /// Smallest volume-equivalent radius any particle type can have at its smallest scale
+    /// (infinite without particle types).
+    pub fn min_equivalent_radius(&self) -> f64 {
+        self.particle_types
+            .iter()
+            .zip(&self.scale_distributions)
+            .filter_map(|(p, d)| {
+                self.templates
+                    .get(p.template)
+                    .map(|t| t.equivalent_radius * d.min_scale())
+            })
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// Index of the particle type called `name`.

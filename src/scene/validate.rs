@@ -16,6 +16,11 @@ pub const DEFAULT_FIELDS: [&str; 5] = ["id", "type", "velocity", "angular_veloci
 /// Default steps between progress log lines.
 pub const DEFAULT_LOG_INTERVAL: u64 = 1000;
 
+/// The finest position difference contacts need, as a fraction of the smallest particle
+/// radius: overlaps of 1e-6 R are typical at rest under gravity, so the f64 spacing of every
+/// coordinate of the domain must be at most this.
+pub const POSITION_RESOLUTION: f64 = 1e-6;
+
 /// The most a wall's fastest point may move in one step, as a fraction of the smallest
 /// particle's volume-equivalent radius: a wall that jumps further passes through contacts in a
 /// few steps, which no contact law resolves.
@@ -227,6 +232,7 @@ impl Validator<'_> {
             simulation.neighbor.skin = 0.2 * scene.max_bounding_radius();
             scene.simulation = simulation;
         }
+        self.domain_resolution(&scene);
         let ts = critical_time_step(&scene);
         self.wall_speeds(&scene, ts.dt);
         if raw_output.series_interval.is_none() {
@@ -244,21 +250,44 @@ impl Validator<'_> {
         scene
     }
 
+    /// Refuses domains whose coordinates are too large for f64 to resolve the particles: the
+    /// spacing of f64 near the largest coordinate must be at most [`POSITION_RESOLUTION`] of the
+    /// smallest particle radius. Beyond it overlaps are rounding noise (false contacts at a
+    /// half-width of 1e15 m; at ±1e308 the domain's width overflows and every contact is lost).
+    fn domain_resolution(&mut self, scene: &Scene) {
+        let r_min = scene.min_equivalent_radius();
+        if !r_min.is_finite() {
+            return;
+        }
+        let d = &scene.domain;
+        let largest = |v: &Vector3<f64>| v.iter().map(|x| x.abs()).fold(0.0, f64::max);
+        let (key, c) = if largest(&d.max) >= largest(&d.min) {
+            ("domain.max", largest(&d.max))
+        } else {
+            ("domain.min", largest(&d.min))
+        };
+        let need = POSITION_RESOLUTION * r_min;
+        let spacing = c * f64::EPSILON;
+        let width_finite = (d.max - d.min).iter().all(|w| w.is_finite());
+        if spacing > need || !width_finite {
+            self.err(
+                key,
+                format!(
+                    "coordinates up to {c:.4e} m are resolved in f64 only to {spacing:.4e} m, \
+                     but contacts of the smallest particles (radius {r_min:.4e} m) need positions \
+                     to {POSITION_RESOLUTION} of it, {need:.4e} m; allowed: |coordinates| ≤ \
+                     {:.4e} m (shift the domain towards the origin or shrink it)",
+                    need / f64::EPSILON
+                ),
+            );
+        }
+    }
+
     /// Refuses walls whose fastest point moves more than [`MAX_WALL_STEP_FRACTION`] of the
     /// smallest particle's radius in one step: a contact with such a wall is not resolved at
     /// all (at `rpm = 1e300` particles simply vanished).
     fn wall_speeds(&mut self, scene: &Scene, dt: f64) {
-        let r_min = scene
-            .particle_types
-            .iter()
-            .zip(&scene.scale_distributions)
-            .filter_map(|(p, d)| {
-                scene
-                    .templates
-                    .get(p.template)
-                    .map(|t| t.equivalent_radius * d.min_scale())
-            })
-            .fold(f64::INFINITY, f64::min);
+        let r_min = scene.min_equivalent_radius();
         if !(r_min.is_finite() && dt.is_finite()) {
             return;
         }
