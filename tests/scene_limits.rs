@@ -332,3 +332,37 @@ fn domains_too_large_for_f64_are_refused() {
     // Large but resolvable.
     parse(&domain("-1e3", "1e3")).unwrap();
 }
+
+/// A missing section is named as the top-level key it is, without a line: a file with only
+/// `[simulation]` reported `simulation.domain`, one with only `[domain]` `domain.simulation`.
+#[test]
+fn a_missing_section_is_named_as_a_top_level_key() {
+    let cases = [
+        ("[simulation]\ndt = 1e-5\nend_time = 1.0\n", "domain"),
+        (
+            "[domain]\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\n",
+            "simulation",
+        ),
+        (
+            "[simulation]\ndt = 1e-5\nend_time = 1.0\n\n[output]\ndir = \"x\"\n",
+            "domain",
+        ),
+    ];
+    for (text, key) in cases {
+        let msg = error_naming(text, key);
+        assert_eq!(
+            msg,
+            format!("test.toml: {key}: missing required section [{key}]"),
+            "{text}"
+        );
+    }
+    // A key missing inside a section still names the section.
+    let msg = error_naming(
+        "[simulation]\ndt = 1e-5\n[domain]\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\n",
+        "simulation.end_time",
+    );
+    assert!(
+        msg.starts_with("test.toml:1: simulation.end_time: missing required key"),
+        "{msg}"
+    );
+}

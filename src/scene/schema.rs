@@ -432,6 +432,9 @@ fn walk_value(path: &str, v: &toml::de::DeValue<'_>, out: &mut Vec<SpanEntry>) {
     }
 }
 
+/// The sections every scene file must have: fields of [`SceneFile`] only.
+pub const ROOT_REQUIRED: [&str; 2] = ["simulation", "domain"];
+
 /// Rewrites a serde message about the key at `path` into (full key, message in scene terms).
 pub fn explain_serde_message(path: &str, message: &str) -> (String, String) {
     let quoted = |rest: &str| rest.split('`').nth(1).unwrap_or("").to_string();
@@ -464,7 +467,13 @@ pub fn explain_serde_message(path: &str, message: &str) -> (String, String) {
         return (key, msg);
     }
     if let Some(rest) = message.strip_prefix("missing field ") {
-        return (full(&quoted(rest)), "missing required key".to_string());
+        let name = quoted(rest);
+        // The document's span can equal its only section's, which would make a missing
+        // section look like a key of that section (`simulation.domain`).
+        if ROOT_REQUIRED.contains(&name.as_str()) {
+            return (name.clone(), format!("missing required section [{name}]"));
+        }
+        return (full(&name), "missing required key".to_string());
     }
     if let Some(rest) = message.strip_prefix("unknown variant ") {
         return (

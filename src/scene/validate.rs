@@ -66,7 +66,12 @@ pub(super) fn build(text: &str, base: &Path, file_name: &str) -> Result<Scene, S
     let raw: SceneFile = toml::from_str(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
         let (key, message) = schema::explain_serde_message(&index.path_at(&span), e.message());
-        let line = e.span().map(|s| index.line_col(text, s.start).0);
+        // A missing section is nowhere in the file: no line to point at.
+        let line = if schema::ROOT_REQUIRED.contains(&key.as_str()) {
+            None
+        } else {
+            e.span().map(|s| index.line_col(text, s.start).0)
+        };
         SceneError::Invalid {
             file: file_name.to_string(),
             errors: vec![KeyError { key, line, message }],
