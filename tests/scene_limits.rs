@@ -366,3 +366,80 @@ fn a_missing_section_is_named_as_a_top_level_key() {
         "{msg}"
     );
 }
+
+/// A communicator of `size` ranks for decompositions that need no collective.
+struct Ranks(usize);
+
+impl polydem::domain::Comm for Ranks {
+    fn rank(&self) -> usize {
+        0
+    }
+    fn size(&self) -> usize {
+        self.0
+    }
+    fn barrier(&self) {}
+    fn all_gather(&self, _: &[u8]) -> Vec<Vec<u8>> {
+        unreachable!("no collective expected")
+    }
+    fn all_to_all(&self, _: &[Vec<u8>]) -> Vec<Vec<u8>> {
+        unreachable!("no collective expected")
+    }
+    fn neighbor_exchange(&self, _: &[(usize, Vec<u8>)], _: &[usize]) -> Vec<Vec<u8>> {
+        unreachable!("no collective expected")
+    }
+    fn broadcast(&self, _: &mut Vec<u8>, _: usize) {}
+    fn abort(&self, code: i32) -> ! {
+        panic!("abort {code}")
+    }
+}
+
+/// Decomposition errors name the file, the line and the key like validation's: a grid that
+/// does not match the rank count or is too fine names `parallel.grid`, a domain too narrow for
+/// the ranks names `domain`. They had no `file:line: key` before.
+#[test]
+fn decomposition_errors_name_file_line_and_key() {
+    use polydem::domain::Parallel;
+    use std::sync::Arc;
+    let decompose = |parallel: &str, ranks: usize| {
+        let text = format!("{BASE}\n[parallel]\n{parallel}\n");
+        let scene = parse(&text).unwrap();
+        let line = |key: &str| {
+            1 + text
+                .lines()
+                .position(|l| l.starts_with(key))
+                .unwrap_or_else(|| panic!("{key}"))
+        };
+        let err = Parallel::new(Arc::new(Ranks(ranks)), &scene)
+            .err()
+            .expect("refused")
+            .to_string();
+        (err, line("grid ="), line("[domain]"))
+    };
+    let (err, grid_line, _) = decompose("decomposition = \"grid\"\ngrid = [2, 1, 2]", 2);
+    assert!(
+        err.contains(&format!(
+            "test.toml:{grid_line}: parallel.grid: `[parallel] grid = [2, 1, 2]` has 4 subdomains but the run has 2 ranks"
+        )),
+        "{err}"
+    );
+    let (err, grid_line, _) = decompose("decomposition = \"grid\"\ngrid = [1, 1, 200]", 200);
+    assert!(
+        err.contains(&format!(
+            "test.toml:{grid_line}: parallel.grid: `[parallel] grid = [1, 1, 200]` makes subdomains 3e-3 m wide along z"
+        )),
+        "{err}"
+    );
+    let text = format!("{BASE}\n[parallel]\ndecomposition = \"grid\"\n");
+    let scene = parse(&text).unwrap();
+    let err = Parallel::new(Arc::new(Ranks(100_000)), &scene)
+        .err()
+        .expect("refused")
+        .to_string();
+    let domain_line = 1 + text.lines().position(|l| l == "[domain]").unwrap();
+    assert!(
+        err.contains(&format!(
+            "test.toml:{domain_line}: domain: 100000 ranks cannot split the domain [1.0, 1.0, 0.6] m"
+        )),
+        "{err}"
+    );
+}

@@ -81,6 +81,19 @@ pub enum DecompositionError {
     },
 }
 
+impl DecompositionError {
+    /// The scene key the error is about: the grid when one was given, else the domain, whose
+    /// extent is too small for the rank count.
+    pub fn scene_key(&self) -> &'static str {
+        match self {
+            DecompositionError::TooManyRanks { .. } => "domain",
+            DecompositionError::GridMismatch { .. } | DecompositionError::GridTooFine { .. } => {
+                "parallel.grid"
+            }
+        }
+    }
+}
+
 /// The subdomains of all ranks.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Subdomains {

@@ -22,7 +22,7 @@ pub use comm::{Comm, SerialComm};
 pub use decomposition::{Aabb, DecompositionError, Subdomains};
 
 use crate::neighbor::Bounds;
-use crate::scene::{BalanceWeight, Decomposition, ParallelSettings, Scene};
+use crate::scene::{BalanceWeight, Decomposition, ParallelSettings, Scene, SceneError};
 use crate::state::Particles;
 use halo::{Ghosts, HaloPlan};
 use nalgebra::Vector3;
@@ -72,7 +72,14 @@ impl Parallel {
     /// The decomposition of `scene` over `comm`'s ranks before any particle exists: the given
     /// or chosen grid, or for bisection the volume-halving cuts (redrawn at the first rebuild
     /// that finds the load imbalanced).
-    pub fn new(comm: Arc<dyn Comm>, scene: &Scene) -> Result<Self, DecompositionError> {
+    ///
+    /// A decomposition that cannot be made is an error naming the scene file, the line and the
+    /// key to change ([`DecompositionError::scene_key`]).
+    pub fn new(comm: Arc<dyn Comm>, scene: &Scene) -> Result<Self, SceneError> {
+        Self::decompose(comm, scene).map_err(|e| scene.key_error(e.scene_key(), e.to_string()))
+    }
+
+    fn decompose(comm: Arc<dyn Comm>, scene: &Scene) -> Result<Self, DecompositionError> {
         let domain = Bounds {
             min: scene.domain.min,
             max: scene.domain.max,

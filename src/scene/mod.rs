@@ -124,6 +124,9 @@ pub struct Scene {
     pub output: OutputSettings,
     /// `[parallel]`.
     pub parallel: ParallelSettings,
+    /// The line of each key in the file, by full dotted path, for errors found after
+    /// validation ([`Scene::key_error`]).
+    pub key_lines: Vec<(String, usize)>,
 }
 
 /// How subdomains are laid out over the ranks (`[parallel] decomposition`).
@@ -499,6 +502,31 @@ impl Scene {
                     .map(|t| t.equivalent_radius * d.min_scale())
             })
             .fold(f64::INFINITY, f64::min)
+    }
+
+    /// 1-based line of `key` in the scene file, or of its nearest ancestor that is there.
+    pub fn line_of(&self, key: &str) -> Option<usize> {
+        let mut p = key;
+        loop {
+            if let Some((_, line)) = self.key_lines.iter().find(|(k, _)| k == p) {
+                return Some(*line);
+            }
+            let cut = p.rfind(['.', '['])?;
+            p = &p[..cut];
+        }
+    }
+
+    /// An error about `key` found after validation (say by the domain decomposition, which
+    /// needs the rank count), in the same `file:line: key: message` form as validation's.
+    pub fn key_error(&self, key: &str, message: impl Into<String>) -> SceneError {
+        SceneError::Invalid {
+            file: self.file.display().to_string(),
+            errors: vec![KeyError {
+                key: key.to_string(),
+                line: self.line_of(key),
+                message: message.into(),
+            }],
+        }
     }
 
     /// Index of the particle type called `name`.

@@ -356,6 +356,21 @@ impl SpanIndex {
         (line, col)
     }
 
+    /// Every path in the file with the 1-based line of its key (kept by [`super::Scene`] so
+    /// that errors found after validation, such as the domain decomposition's, name a line).
+    pub fn key_lines(&self) -> Vec<(String, usize)> {
+        self.entries
+            .iter()
+            .map(|e| {
+                let line = self
+                    .line_starts
+                    .partition_point(|&s| s <= e.key.start)
+                    .max(1);
+                (e.path.clone(), line)
+            })
+            .collect()
+    }
+
     /// 1-based line of `path`, or of its nearest ancestor that is in the file.
     pub fn line_of(&self, path: &str) -> Option<usize> {
         let mut p = path;

@@ -220,6 +220,7 @@ impl Validator<'_> {
             walls,
             output,
             parallel,
+            key_lines: self.index.key_lines(),
         };
         scene.insertions = self.insertions(&raw.insertions, &scene);
         if !self.errors.is_empty() {
