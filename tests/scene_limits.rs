@@ -443,3 +443,63 @@ fn decomposition_errors_name_file_line_and_key() {
         "{err}"
     );
 }
+
+/// Unknown keys and type errors no longer hide each other or the value errors: every one is
+/// listed, in one error, with its line (only the first schema error was shown before).
+#[test]
+fn schema_and_value_errors_are_listed_together() {
+    let text = BASE
+        .replacen("end_time = 0.01", "end_time = 0.01\ndtt = 1.0\nseed = \"x\"", 1)
+        .replacen("density = 2500.0", "density = -2500.0 # kg/m³", 1)
+        .replacen(
+            "count = 20",
+            "count = 20\nregion2 = 1\n\n[parallell]\ngrid = [1, 1, 1]\n\n[output]\nformats = [\"vtu\", 3]\nfieldz = []",
+            1,
+        )
+        .replacen(
+            "region = { kind = \"box\", min = [-0.1, -0.1, 0.1], max = [0.1, 0.1, 0.3] }",
+            "region = { kind = \"box\", mni = [0.0, 0.0, 0.0], min = [-0.1, -0.1, 0.1], max = [0.1, 0.1, 0.3] }",
+            1,
+        );
+    let err = parse(&text).expect_err("rejected");
+    let msg = err.to_string();
+    let line = |needle: &str| 1 + text.lines().position(|l| l.contains(needle)).unwrap();
+    let mut keys = err.keys();
+    keys.sort();
+    assert_eq!(
+        keys,
+        [
+            "insertions[0].region.mni",
+            "insertions[0].region2",
+            "materials[0].density",
+            "output.fieldz",
+            "output.formats[1]",
+            "parallell",
+            "simulation.dtt",
+            "simulation.seed",
+        ],
+        "{msg}"
+    );
+    assert!(
+        msg.contains("test.toml: 8 errors in the scene file:"),
+        "{msg}"
+    );
+    for (needle, key) in [
+        ("dtt = 1.0", "simulation.dtt: unknown key"),
+        ("seed = \"x\"", "simulation.seed: "),
+        (
+            "density = -2500.0",
+            "materials[0].density: must be a positive finite number, got -2500",
+        ),
+        ("mni = ", "insertions[0].region.mni: unknown key"),
+        ("region2 = 1", "insertions[0].region2: unknown key"),
+        ("[parallell]", "parallell: unknown key"),
+        ("formats = ", "output.formats[1]: "),
+        ("fieldz = []", "output.fieldz: unknown key"),
+    ] {
+        assert!(
+            msg.contains(&format!("test.toml:{}: {key}", line(needle))),
+            "{key}:\n{msg}"
+        );
+    }
+}

@@ -371,6 +371,14 @@ impl SpanIndex {
             .collect()
     }
 
+    /// Byte spans of the key and the value at exactly `path`.
+    pub fn spans_of(&self, path: &str) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>)> {
+        self.entries
+            .iter()
+            .find(|e| e.path == path)
+            .map(|e| (e.key.clone(), e.value.clone()))
+    }
+
     /// 1-based line of `path`, or of its nearest ancestor that is in the file.
     pub fn line_of(&self, path: &str) -> Option<usize> {
         let mut p = path;

@@ -63,24 +63,50 @@ pub(super) fn build(text: &str, base: &Path, file_name: &str) -> Result<Scene, S
             });
         }
     };
-    let raw: SceneFile = toml::from_str(text).map_err(|e| {
+    // Schema errors (unknown keys, wrong types) are collected one at a time: each offending
+    // key is blanked out of the text (spaces, so every span and line stays where it was) and
+    // the text is read again, so that all of them are listed together and the value checks
+    // still run on what remains. A missing required key cannot be blanked away: reading stops
+    // there with what was found.
+    let mut errors: Vec<KeyError> = Vec::new();
+    let mut current = text.to_string();
+    let raw: SceneFile = loop {
+        let e = match toml::from_str::<SceneFile>(&current) {
+            Ok(raw) => break raw,
+            Err(e) => e,
+        };
         let span = e.span().unwrap_or(0..0);
-        let (key, message) = schema::explain_serde_message(&index.path_at(&span), e.message());
+        let path = index.path_at(&span);
+        let (key, message) = schema::explain_serde_message(&path, e.message());
         // A missing section is nowhere in the file: no line to point at.
         let line = if schema::ROOT_REQUIRED.contains(&key.as_str()) {
             None
         } else {
             e.span().map(|s| index.line_col(text, s.start).0)
         };
-        SceneError::Invalid {
-            file: file_name.to_string(),
-            errors: vec![KeyError { key, line, message }],
+        let missing = e.message().starts_with("missing field ");
+        // A key blanked for its type is then missing: it was reported already.
+        if !(missing && errors.iter().any(|k| k.key == key)) {
+            errors.push(KeyError { key, line, message });
         }
-    })?;
+        let blanked = (!missing && errors.len() < 100)
+            .then(|| blank_key(&current, &index, &path))
+            .flatten();
+        match blanked {
+            Some(t) if toml::de::DeTable::parse(&t).is_ok() => current = t,
+            _ => {
+                return Err(SceneError::Invalid {
+                    file: file_name.to_string(),
+                    errors,
+                });
+            }
+        }
+    };
+    errors.sort_by_key(|e| e.line);
     let mut v = Validator {
         base,
         index: &index,
-        errors: Vec::new(),
+        errors,
     };
     let scene = v.scene(raw, file_name);
     if v.errors.is_empty() {
@@ -91,6 +117,63 @@ pub(super) fn build(text: &str, base: &Path, file_name: &str) -> Result<Scene, S
             errors: v.errors,
         })
     }
+}
+
+/// `text` with the key at `path` and its value replaced by spaces (newlines kept, so spans and
+/// lines do not move), with the comma that separated it in an inline table or array, and with
+/// its whole `[header]` line when it is a table header. `None` when `path` is not in the file.
+fn blank_key(text: &str, index: &SpanIndex, path: &str) -> Option<String> {
+    let (key, value) = index.spans_of(path)?;
+    let bytes = text.as_bytes();
+    let (mut start, mut end) = (key.start.min(value.start), key.end.max(value.end));
+    let line_start = text[..key.start].rfind('\n').map_or(0, |i| i + 1);
+    // A key whose line starts with `[` is a table header (an array element's path ends in `]`).
+    if !path.ends_with(']') && text[line_start..].trim_start().starts_with('[') {
+        // A table header: its keys follow it up to the next header, and would otherwise be
+        // read as keys of the table before it.
+        start = line_start;
+        let mut pos = text[start..].find('\n').map_or(text.len(), |i| start + i);
+        while pos < text.len() {
+            let next = pos + 1;
+            if text[next..].trim_start().starts_with('[') {
+                break;
+            }
+            pos = text[next..].find('\n').map_or(text.len(), |i| next + i);
+        }
+        end = end.max(pos);
+    } else {
+        let mut after = end;
+        while after < bytes.len() && (bytes[after] == b' ' || bytes[after] == b'\t') {
+            after += 1;
+        }
+        if bytes.get(after) == Some(&b',') {
+            end = after + 1;
+        } else {
+            let mut before = start;
+            while before > 0 && (bytes[before - 1] == b' ' || bytes[before - 1] == b'\t') {
+                before -= 1;
+            }
+            if before > 0 && bytes[before - 1] == b',' {
+                start = before - 1;
+            }
+        }
+    }
+    if start >= end
+        || end > text.len()
+        || !text.is_char_boundary(start)
+        || !text.is_char_boundary(end)
+    {
+        return None;
+    }
+    let blank: String = text[start..end]
+        .chars()
+        .map(|c| match c {
+            '\n' => "\n".to_string(),
+            // As many spaces as the character has bytes: offsets must not move.
+            c => " ".repeat(c.len_utf8()),
+        })
+        .collect();
+    Some(format!("{}{blank}{}", &text[..start], &text[end..]))
 }
 
 /// Collects key errors while turning the raw sections into resolved ones; section-specific
