@@ -364,7 +364,7 @@ impl Validator<'_> {
                 format!(
                     "coordinates up to {c:.4e} m are resolved in f64 only to {spacing:.4e} m, \
                      but contacts of the smallest particles (radius {r_min:.4e} m) need positions \
-                     to {POSITION_RESOLUTION} of it, {need:.4e} m; allowed: |coordinates| ≤ \
+                     to {POSITION_RESOLUTION:e} of it, {need:.4e} m; allowed: |coordinates| ≤ \
                      {:.4e} m (shift the domain towards the origin or shrink it)",
                     need / f64::EPSILON
                 ),
