@@ -194,24 +194,24 @@ fn leaving_the_domain_is_an_error_unless_the_scene_allows_it() {
     assert_eq!(sim.stats.removed, 5);
 }
 
-/// `polydem run` of the thrown-down scene: by default it fails (rc ≠ 0) with the error and
-/// writes the state at the stop; with `on_leaving = "remove"` it succeeds, summary.json counts
-/// the five removed particles and the log says so.
-#[test]
-fn run_reports_particles_leaving_the_domain() {
-    let dir = temp_dir("run-leaving");
+/// `polydem run` of the thrown-down scene on `backend`: by default it fails (rc ≠ 0) with the
+/// error and writes the state at the stop; with `on_leaving = "remove"` it succeeds,
+/// summary.json counts the five removed particles and the log says so. Returns the error's
+/// first line (it names the step).
+fn leaving_run(backend: &str) -> String {
+    let dir = temp_dir(&format!("run-leaving-{backend}"));
     let run = |name: &str, text: String| {
         let path = dir.join(format!("{name}.toml"));
         std::fs::write(&path, text).unwrap();
         std::process::Command::new(polydem_bin())
-            .args(["run", "--backend", "cpu", "--max-steps", "1000", "--out"])
+            .args(["run", "--backend", backend, "--max-steps", "1000", "--out"])
             .arg(dir.join(name))
             .arg(&path)
             .output()
             .unwrap()
     };
     let out = run("closed", thrown_down(None));
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
     assert!(!out.status.success(), "{stderr}");
     assert!(
         stderr.contains("left the domain through a closed face"),
@@ -222,6 +222,11 @@ fn run_reports_particles_leaving_the_domain() {
         "{stderr}"
     );
     assert!(stderr.contains("unstable-step-"), "{stderr}");
+    let first = stderr
+        .lines()
+        .find(|l| l.contains("left the domain through a closed face"))
+        .unwrap_or_default()
+        .to_string();
 
     let out = run("open", thrown_down(Some("remove")));
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -235,6 +240,23 @@ fn run_reports_particles_leaving_the_domain() {
         "{stderr}"
     );
     let _ = std::fs::remove_dir_all(&dir);
+    let at = first.find("step ").expect("the error names the step");
+    first[at..].to_string()
+}
+
+#[test]
+fn run_reports_particles_leaving_the_domain() {
+    leaving_run("cpu");
+}
+
+/// The same on the GPU (double precision): the same rule, and the same particles at the same
+/// step as on the CPU.
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn particles_leaving_the_domain_on_the_gpu_follow_the_same_rule() {
+    let (cpu, gpu) = (leaving_run("cpu"), leaving_run("cuda"));
+    println!("CPU: {cpu}\nGPU: {gpu}");
+    assert_eq!(cpu, gpu);
 }
 
 /// `BASE` with a 0.1 m paddle turning about z at `rpm`.
