@@ -357,6 +357,24 @@ impl Outputs {
 }
 
 /// The whole run's observables: this rank's on one rank, sums over ranks otherwise.
+/// The whole run's particles, contacts (with walls) and removed particles, for the progress
+/// line: counts only, without [`whole_run`]'s energies, which sum every particle in id order
+/// and would cost a sort of the GPU's host copy every hundred steps.
+fn whole_run_counts(comm: &dyn Comm, sim: &Simulation) -> (u64, u64, u64) {
+    let s = &sim.stats;
+    let local = [
+        sim.particles.len() as u64,
+        s.contacts + s.wall_contacts,
+        s.removed,
+    ];
+    if comm.size() > 1 {
+        let u = comm.sum_u64(&local);
+        (u[0], u[1], u[2])
+    } else {
+        (local[0], local[1], local[2])
+    }
+}
+
 fn whole_run(comm: &dyn Comm, sim: &Simulation) -> GlobalStats {
     if comm.size() > 1 {
         return global_stats(comm, sim);
@@ -817,12 +835,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
         let done = sim.step - step0;
         // Whole-run counts at deterministic steps only: every rank joins the sums.
         let (n_all, contacts_all, removed_all) = if done % 100 == 0 || done % log_every == 0 {
-            let g = whole_run(&*comm, sim);
-            (
-                g.particles,
-                g.stats.contacts + g.stats.wall_contacts,
-                g.stats.removed,
-            )
+            whole_run_counts(&*comm, sim)
         } else {
             (0, 0, 0)
         };
