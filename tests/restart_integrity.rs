@@ -10,83 +10,6 @@ use polydem::io::{read_checkpoint, write_checkpoint};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// 60 frictional dodecahedra dropped into an open box and onto each other, with a rate insertion
-/// still running at the restart point, so that the checkpoint must carry contacts with
-/// tangential history, the insertion state and the random state.
-fn scene(dir: &Path) -> std::path::PathBuf {
-    let root = repo_root();
-    let text = format!(
-        r#"gravity = [0.0, 0.0, -9.81]
-[simulation]
-dt = 2e-5
-end_time = 10.0
-seed = 11
-[domain]
-min = [-0.06, -0.06, -0.01]
-max = [0.06, 0.06, 0.2]
-[[materials]]
-name = "grain"
-youngs_modulus = 1e6
-poisson_ratio = 0.3
-density = 2500.0
-[[materials]]
-name = "steel"
-youngs_modulus = 2e11
-poisson_ratio = 0.3
-density = 7800.0
-[[material_pairs]]
-materials = ["grain", "grain"]
-restitution = 0.5
-friction = 0.5
-[[material_pairs]]
-materials = ["grain", "steel"]
-restitution = 0.5
-friction = 0.4
-[[particle_types]]
-name = "d"
-material = "grain"
-generator = {{ kind = "dodecahedron", size = 0.012 }}
-scale = {{ distribution = "uniform", min = 0.8, max = 1.2 }}
-[[insertions]]
-type = "d"
-region = {{ kind = "box", min = [-0.04, -0.04, 0.005], max = [0.04, 0.04, 0.05] }}
-count = 40
-velocity = [0.0, 0.0, -2.0]
-[[insertions]]
-type = "d"
-region = {{ kind = "box", min = [-0.04, -0.04, 0.06], max = [0.04, 0.04, 0.1] }}
-rate = 2000.0
-total = 20
-[[walls]]
-name = "box"
-mesh = "{}"
-material = "steel"
-[output]
-dir = "out"
-frame_interval = 0.002
-formats = ["vtu", "csv"]
-checkpoint_interval = 0.004
-"#,
-        root.join("meshes/walls/box_open_top.stl").display()
-    );
-    let path = dir.join("scene.toml");
-    std::fs::write(&path, text).unwrap();
-    path
-}
-
-fn run(args: &[&str]) {
-    let out = Command::new(polydem_bin())
-        .arg("run")
-        .args(args)
-        .output()
-        .expect("run polydem");
-    assert!(
-        out.status.success(),
-        "polydem run {args:?} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
 /// Runs polydem expecting failure; returns its stderr (which must not show a panic).
 fn run_fails(args: &[&str]) -> String {
     let out = Command::new(polydem_bin())
@@ -105,7 +28,7 @@ fn run_fails(args: &[&str]) -> String {
 
 /// A run of `steps` steps of `scene` into `out`, its `latest.ckpt` returned.
 fn first_run(scene: &Path, out: &Path, steps: &str) -> PathBuf {
-    run(&[
+    polydem_run(&[
         scene.to_str().unwrap(),
         "--backend",
         "cpu",
@@ -140,7 +63,7 @@ fn restart_args<'a>(
 #[test]
 fn checkpoints_with_bad_contents_are_refused_naming_the_field() {
     let dir = temp_dir("ckpt-contents");
-    let scene = scene(&dir);
+    let scene = restart_scene(&dir);
     let good = read_checkpoint(&first_run(&scene, &dir.join("first"), "100")).unwrap();
     let bad = dir.join("bad.ckpt");
     let out = dir.join("out");
@@ -188,7 +111,7 @@ fn checkpoints_with_bad_contents_are_refused_naming_the_field() {
     }
     // The unedited state restarts.
     write_checkpoint(&bad, &good).unwrap();
-    run(&restart_args(&scene, &bad, &out, "10"));
+    polydem_run(&restart_args(&scene, &bad, &out, "10"));
 }
 
 /// A closed OBJ cube of half side `h`, outward triangles.
@@ -233,7 +156,7 @@ fn cube_obj(h: f64) -> String {
 #[test]
 fn restart_accepts_harmless_edits_and_lists_the_sections_that_differ() {
     let dir = temp_dir("scene-edits");
-    let scene_path = scene(&dir);
+    let scene_path = restart_scene(&dir);
     // The particles from a mesh file and the wall from a copy, both edited below.
     std::fs::write(dir.join("grain.obj"), cube_obj(0.003)).unwrap();
     let wall = repo_root().join("meshes/walls/box_open_top.stl");
@@ -256,7 +179,7 @@ fn restart_accepts_harmless_edits_and_lists_the_sections_that_differ() {
         .replace("frame_interval = 0.002", "frame_interval = 0.004")
         .replace("[output]\n", "[output]\nlog_interval_steps = 7\n");
     std::fs::write(&scene_path, &edited).unwrap();
-    run(&args);
+    polydem_run(&args);
 
     // A changed friction: refused, naming the section.
     std::fs::write(
@@ -291,14 +214,14 @@ fn restart_accepts_harmless_edits_and_lists_the_sections_that_differ() {
 #[test]
 fn restarted_series_equals_the_uninterrupted_one_byte_for_byte() {
     let dir = temp_dir("series-restart");
-    let scene = scene(&dir);
+    let scene = restart_scene(&dir);
     let text = std::fs::read_to_string(&scene)
         .unwrap()
         .replace("[output]\n", "[output]\nseries_interval = 0.001\n");
     std::fs::write(&scene, text).unwrap();
     first_run(&scene, &dir.join("full"), "4000");
     let ckpt = first_run(&scene, &dir.join("part"), "2000");
-    run(&restart_args(&scene, &ckpt, &dir.join("part"), "2000"));
+    polydem_run(&restart_args(&scene, &ckpt, &dir.join("part"), "2000"));
     let full = std::fs::read_to_string(dir.join("full/series.csv")).unwrap();
     let part = std::fs::read_to_string(dir.join("part/series.csv")).unwrap();
     let steps: Vec<u64> = full
@@ -313,7 +236,7 @@ fn restarted_series_equals_the_uninterrupted_one_byte_for_byte() {
 #[test]
 fn a_run_removes_temporary_files_left_in_its_output_folder() {
     let dir = temp_dir("tmp-clean");
-    let scene = scene(&dir);
+    let scene = restart_scene(&dir);
     let out = dir.join("out");
     // A run killed while writing (its temporary files left), continued in the same folder.
     let ckpt = first_run(&scene, &out, "5");
@@ -329,7 +252,7 @@ fn a_run_removes_temporary_files_left_in_its_output_folder() {
     for p in ours.iter().chain(&theirs) {
         std::fs::write(p, b"left over").unwrap();
     }
-    run(&restart_args(&scene, &ckpt, &out, "5"));
+    polydem_run(&restart_args(&scene, &ckpt, &out, "5"));
     for p in &ours {
         assert!(!p.exists(), "{} was left", p.display());
     }
@@ -341,7 +264,7 @@ fn a_run_removes_temporary_files_left_in_its_output_folder() {
 #[test]
 fn checkpoint_keep_prunes_old_periodic_checkpoints_only() {
     let dir = temp_dir("ckpt-keep");
-    let scene = scene(&dir);
+    let scene = restart_scene(&dir);
     let text = std::fs::read_to_string(&scene).unwrap().replace(
         "checkpoint_interval = 0.004",
         "checkpoint_interval = 0.002\ncheckpoint_keep = 2",
@@ -372,7 +295,7 @@ fn checkpoint_keep_prunes_old_periodic_checkpoints_only() {
         ]
     );
     // A restart counts the periodic checkpoints already there.
-    run(&restart_args(&scene, &ckpt, &out, "150"));
+    polydem_run(&restart_args(&scene, &ckpt, &out, "150"));
     assert_eq!(
         names(&out),
         [

@@ -5,93 +5,15 @@ mod common;
 
 use common::*;
 use polydem::io::read_checkpoint;
-use std::path::Path;
 use std::process::Command;
-
-/// 60 frictional dodecahedra dropped into an open box and onto each other, with a rate insertion
-/// still running at the restart point, so that the checkpoint must carry contacts with
-/// tangential history, the insertion state and the random state.
-fn scene(dir: &Path) -> std::path::PathBuf {
-    let root = repo_root();
-    let text = format!(
-        r#"gravity = [0.0, 0.0, -9.81]
-[simulation]
-dt = 2e-5
-end_time = 10.0
-seed = 11
-[domain]
-min = [-0.06, -0.06, -0.01]
-max = [0.06, 0.06, 0.2]
-[[materials]]
-name = "grain"
-youngs_modulus = 1e6
-poisson_ratio = 0.3
-density = 2500.0
-[[materials]]
-name = "steel"
-youngs_modulus = 2e11
-poisson_ratio = 0.3
-density = 7800.0
-[[material_pairs]]
-materials = ["grain", "grain"]
-restitution = 0.5
-friction = 0.5
-[[material_pairs]]
-materials = ["grain", "steel"]
-restitution = 0.5
-friction = 0.4
-[[particle_types]]
-name = "d"
-material = "grain"
-generator = {{ kind = "dodecahedron", size = 0.012 }}
-scale = {{ distribution = "uniform", min = 0.8, max = 1.2 }}
-[[insertions]]
-type = "d"
-region = {{ kind = "box", min = [-0.04, -0.04, 0.005], max = [0.04, 0.04, 0.05] }}
-count = 40
-velocity = [0.0, 0.0, -2.0]
-[[insertions]]
-type = "d"
-region = {{ kind = "box", min = [-0.04, -0.04, 0.06], max = [0.04, 0.04, 0.1] }}
-rate = 2000.0
-total = 20
-[[walls]]
-name = "box"
-mesh = "{}"
-material = "steel"
-[output]
-dir = "out"
-frame_interval = 0.002
-formats = ["vtu", "csv"]
-checkpoint_interval = 0.004
-"#,
-        root.join("meshes/walls/box_open_top.stl").display()
-    );
-    let path = dir.join("scene.toml");
-    std::fs::write(&path, text).unwrap();
-    path
-}
-
-fn run(args: &[&str]) {
-    let out = Command::new(polydem_bin())
-        .arg("run")
-        .args(args)
-        .output()
-        .expect("run polydem");
-    assert!(
-        out.status.success(),
-        "polydem run {args:?} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 #[test]
 fn restart_continues_bitwise_and_outputs_are_written() {
     let dir = temp_dir("restart");
-    let scene = scene(&dir);
+    let scene = restart_scene(&dir);
     let s = scene.to_str().unwrap();
     let (full, first, second) = (dir.join("full"), dir.join("first"), dir.join("second"));
-    run(&[
+    polydem_run(&[
         s,
         "--backend",
         "cpu",
@@ -100,7 +22,7 @@ fn restart_continues_bitwise_and_outputs_are_written() {
         "--max-steps",
         "800",
     ]);
-    run(&[
+    polydem_run(&[
         s,
         "--backend",
         "cpu",
@@ -117,7 +39,7 @@ fn restart_continues_bitwise_and_outputs_are_written() {
         "the restart point should have live contacts"
     );
     std::fs::create_dir_all(&second).unwrap();
-    run(&[
+    polydem_run(&[
         s,
         "--backend",
         "cpu",
@@ -167,7 +89,7 @@ fn restart_continues_bitwise_and_outputs_are_written() {
 #[test]
 fn check_reports_time_steps_and_counts() {
     let dir = temp_dir("check");
-    let scene = scene(&dir);
+    let scene = restart_scene(&dir);
     let out = Command::new(polydem_bin())
         .arg("check")
         .arg(&scene)
@@ -200,7 +122,7 @@ fn interrupted_run_restarts_bitwise(signal: &str, expected: i32) {
     use std::io::{BufRead, BufReader};
     use std::process::Stdio;
     let dir = temp_dir(&format!("ctrl-c{signal}"));
-    let scene = scene(&dir);
+    let scene = restart_scene(&dir);
     // Log every 20 steps, so the test sees the run going before it interrupts it.
     let text = std::fs::read_to_string(&scene)
         .unwrap()
@@ -258,7 +180,7 @@ fn interrupted_run_restarts_bitwise(signal: &str, expected: i32) {
     // Restart for 50 more steps and compare with an uninterrupted run of k + 50 steps.
     let (resumed, full) = (dir.join("resumed"), dir.join("full"));
     let ckpt = stopped.join("checkpoints/latest.ckpt");
-    run(&[
+    polydem_run(&[
         s,
         "--backend",
         "cpu",
@@ -269,7 +191,7 @@ fn interrupted_run_restarts_bitwise(signal: &str, expected: i32) {
         "--max-steps",
         "50",
     ]);
-    run(&[
+    polydem_run(&[
         s,
         "--backend",
         "cpu",
@@ -299,11 +221,11 @@ fn interrupted_run_restarts_bitwise(signal: &str, expected: i32) {
 #[test]
 fn a_used_output_folder_needs_overwrite_or_restart() {
     let dir = temp_dir("reuse-out");
-    let scene = scene(&dir);
+    let scene = restart_scene(&dir);
     let s = scene.to_str().unwrap();
     let out = dir.join("out");
     let o = out.to_str().unwrap();
-    run(&[s, "--backend", "cpu", "--out", o, "--max-steps", "20"]);
+    polydem_run(&[s, "--backend", "cpu", "--out", o, "--max-steps", "20"]);
     let again = |extra: &[&str]| {
         Command::new(polydem_bin())
             .args([
@@ -358,7 +280,7 @@ fn a_used_output_folder_needs_overwrite_or_restart() {
     let notes_only = dir.join("notes_only");
     std::fs::create_dir_all(&notes_only).unwrap();
     std::fs::write(notes_only.join("README"), "x").unwrap();
-    run(&[
+    polydem_run(&[
         s,
         "--backend",
         "cpu",

@@ -314,3 +314,81 @@ pub fn engine(
 ) -> polydem::backend::Engine {
     polydem::backend::Engine::new(sim, device).expect("backend")
 }
+
+/// 60 frictional dodecahedra dropped into an open box and onto each other, with a rate insertion
+/// still running at the restart point, so that the checkpoint must carry contacts with
+/// tangential history, the insertion state and the random state.
+pub fn restart_scene(dir: &std::path::Path) -> std::path::PathBuf {
+    let root = repo_root();
+    let text = format!(
+        r#"gravity = [0.0, 0.0, -9.81]
+[simulation]
+dt = 2e-5
+end_time = 10.0
+seed = 11
+[domain]
+min = [-0.06, -0.06, -0.01]
+max = [0.06, 0.06, 0.2]
+[[materials]]
+name = "grain"
+youngs_modulus = 1e6
+poisson_ratio = 0.3
+density = 2500.0
+[[materials]]
+name = "steel"
+youngs_modulus = 2e11
+poisson_ratio = 0.3
+density = 7800.0
+[[material_pairs]]
+materials = ["grain", "grain"]
+restitution = 0.5
+friction = 0.5
+[[material_pairs]]
+materials = ["grain", "steel"]
+restitution = 0.5
+friction = 0.4
+[[particle_types]]
+name = "d"
+material = "grain"
+generator = {{ kind = "dodecahedron", size = 0.012 }}
+scale = {{ distribution = "uniform", min = 0.8, max = 1.2 }}
+[[insertions]]
+type = "d"
+region = {{ kind = "box", min = [-0.04, -0.04, 0.005], max = [0.04, 0.04, 0.05] }}
+count = 40
+velocity = [0.0, 0.0, -2.0]
+[[insertions]]
+type = "d"
+region = {{ kind = "box", min = [-0.04, -0.04, 0.06], max = [0.04, 0.04, 0.1] }}
+rate = 2000.0
+total = 20
+[[walls]]
+name = "box"
+mesh = "{}"
+material = "steel"
+[output]
+dir = "out"
+frame_interval = 0.002
+formats = ["vtu", "csv"]
+checkpoint_interval = 0.004
+"#,
+        root.join("meshes/walls/box_open_top.stl").display()
+    );
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// `polydem run ARGS`, asserting that it succeeds.
+pub fn polydem_run(args: &[&str]) {
+    let out = std::process::Command::new(polydem_bin())
+        .arg("run")
+        .args(args)
+        .output()
+        .expect("run polydem");
+    assert!(
+        out.status.success(),
+        "polydem run {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
