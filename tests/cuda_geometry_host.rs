@@ -965,6 +965,33 @@ fn parity(what: &str, produce: Producer) {
     }
 }
 
+/// Runs the harness in `mode` (`--spheres`, `--law`) on the cases `text` and returns the lines
+/// that differ from the Rust results `want`, each as "C++ …\nRust …".
+fn harness_mismatches(mode: &str, tag: &str, text: String, want: &[String]) -> Vec<String> {
+    let root = repo_root();
+    let dir = temp_dir(tag);
+    let exe = build_harness(&root, &dir);
+    let cases = dir.join("cases.txt");
+    std::fs::write(&cases, text).unwrap();
+    let out = Command::new(&exe).arg(mode).arg(&cases).output().unwrap();
+    assert!(
+        out.status.success(),
+        "harness failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let got: Vec<String> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| l.trim_end().to_string())
+        .collect();
+    assert_eq!(got.len(), want.len());
+    got.iter()
+        .zip(want)
+        .filter(|(g, w)| g.trim() != w.trim())
+        .map(|(g, w)| format!("C++  {g}\nRust {w}"))
+        .collect()
+}
+
 /// The sphere fast path (`cuda/sphere.cuh`) against `geometry::sphere`, bit for bit, on random
 /// lenses (apart, touching, shallow, deep, nested, radius ratios up to 1:10) and random caps
 /// under triangles (disk inside, across edges and corners, apart, sphere behind the plane).
@@ -1020,33 +1047,7 @@ fn cuda_sphere_headers_match_the_rust_reference_bitwise() {
         put_overlap(&mut l, &o);
         want.push(l);
     }
-    let root = repo_root();
-    let dir = temp_dir("cuda-sphere-host");
-    let exe = build_harness(&root, &dir);
-    let cases = dir.join("spheres.txt");
-    std::fs::write(&cases, text).unwrap();
-    let out = Command::new(&exe)
-        .arg("--spheres")
-        .arg(&cases)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "harness failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let got: Vec<String> = String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| l.trim_end().to_string())
-        .collect();
-    assert_eq!(got.len(), want.len());
-    let mismatches: Vec<_> = got
-        .iter()
-        .zip(&want)
-        .filter(|(g, w)| g.trim() != w.trim())
-        .map(|(g, w)| format!("C++  {g}\nRust {w}"))
-        .collect();
+    let mismatches = harness_mismatches("--spheres", "cuda-sphere-host", text, &want);
     println!(
         "{} sphere cases, {contacts} with some overlap, {} differ",
         want.len(),
@@ -1263,33 +1264,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         hex(&mut l, after.twist);
         want.push(l);
     }
-    let root = repo_root();
-    let dir = temp_dir("cuda-law-host");
-    let exe = build_harness(&root, &dir);
-    let cases = dir.join("law.txt");
-    std::fs::write(&cases, text).unwrap();
-    let out = Command::new(&exe)
-        .arg("--law")
-        .arg(&cases)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "harness failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let got: Vec<String> = String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| l.trim_end().to_string())
-        .collect();
-    assert_eq!(got.len(), want.len());
-    let mismatches: Vec<_> = got
-        .iter()
-        .zip(&want)
-        .filter(|(g, w)| g.trim() != w.trim())
-        .map(|(g, w)| format!("C++  {g}\nRust {w}"))
-        .collect();
+    let mismatches = harness_mismatches("--law", "cuda-law-host", text, &want);
     println!(
         "{} cases ({n} sin/cos, {n} cbrt, {n} law; law branches: window {}, first-touch share \
          {}, inside {}, sliding {}, twist capped {}, spheres {}), {} differ",
