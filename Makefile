@@ -13,7 +13,8 @@
 # `make lint` is not part of `make test`: clippy builds every target a second time in check mode
 # (on a 2-core machine about two minutes more from cold, criterion included), and formatting or
 # lint findings are review findings, not failed tests, so they should not stop a user's
-# `make test` or CI from reporting what the tests say. Run `make lint` before committing.
+# `make test` from reporting what the tests say. CI (.ci/run) runs `make test`, then
+# `make lint`. Run `make lint` before committing.
 
 SHELL := /bin/bash
 .SHELLFLAGS := -eu -o pipefail -c
