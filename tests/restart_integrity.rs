@@ -173,11 +173,15 @@ fn restart_accepts_harmless_edits_and_lists_the_sections_that_differ() {
     let out = dir.join("out");
     let args = restart_args(&scene_path, &ckpt, &out, "5");
 
-    // A comment, a longer end time and other output settings: accepted.
+    // A comment, a longer end time, other output settings, a relaxed guard and an outflow
+    // allowed (what a run they stopped is continued with): accepted.
     let edited = format!("# a comment\n{text}")
         .replace("end_time = 10.0", "end_time = 20.0")
         .replace("frame_interval = 0.002", "frame_interval = 0.004")
-        .replace("[output]\n", "[output]\nlog_interval_steps = 7\n");
+        .replace("[output]\n", "[output]\nlog_interval_steps = 7\n")
+        .replace("[domain]\n", "[domain]\non_leaving = \"remove\"\n")
+        + "\n[simulation.guard]\nmax_overlap = 0.2\n";
+    assert!(edited.contains("on_leaving"), "the scene's [domain] line");
     std::fs::write(&scene_path, &edited).unwrap();
     polydem_run(&args);
 

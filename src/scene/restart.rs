@@ -21,8 +21,9 @@ pub const SECTIONS_RECORD: &str = "scene_sections";
 /// Each section is hashed (FNV-1a 64, the same on every platform and run) from the `Debug` text
 /// of its resolved values: floats print with the shortest digits that parse back to the same
 /// bits, so two scenes hash equal exactly when their values are equal. `simulation.end_time`,
-/// `[output]` and `[parallel]` are left out: changing them does not change the state a step
-/// produces, and a restart is how a run is extended or its output changed.
+/// `[simulation.guard]`, `domain.on_leaving`, `[output]` and `[parallel]` are left out:
+/// changing them does not change the state a step produces, and a restart is how a run is
+/// extended, its output changed, or a run the guard or a lost particle stopped continued.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct SceneFingerprint {
     /// `(section, hash)` in file order, e.g. `("walls[0] (box)", …)`.
@@ -36,8 +37,13 @@ impl SceneFingerprint {
         let mut add = |name: String, text: String| sections.push((name, fnv1a64(text.as_bytes())));
         let mut sim = scene.simulation.clone();
         sim.end_time = 0.0; // may change on a restart
+        // The guard and the leaving rule only decide whether a run stops: a run stopped by
+        // either is continued with them relaxed.
+        sim.guard = Default::default();
         add("simulation".into(), format!("{sim:?}"));
-        add("domain".into(), format!("{:?}", scene.domain));
+        let mut domain = scene.domain;
+        domain.on_leaving = Default::default();
+        add("domain".into(), format!("{domain:?}"));
         add("gravity".into(), format!("{:?}", scene.gravity));
         for (i, m) in scene.materials.iter().enumerate() {
             add(format!("materials[{i}] ({})", m.name), format!("{m:?}"));
@@ -143,7 +149,8 @@ impl SceneFingerprint {
         };
         Err(format!(
             "written for another scene: {list}; a restart may change only \
-             `simulation.end_time`, `[output]` and `[parallel]`"
+             `simulation.end_time`, `[simulation.guard]`, `domain.on_leaving`, `[output]` and \
+             `[parallel]`"
         ))
     }
 }
