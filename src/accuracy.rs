@@ -270,8 +270,8 @@ struct CaseRunner {
 /// The repository root (its `meshes/`): `POLYDEM_ROOT`, else the working folder, else the
 /// source tree this binary was built from.
 fn repo_root() -> PathBuf {
-    if let Some(r) = std::env::var_os("POLYDEM_ROOT") {
-        return PathBuf::from(r);
+    if let Some(r) = &crate::tuning::Tuning::get().root {
+        return r.clone();
     }
     let here = PathBuf::from(".");
     if here.join("meshes/particles/cylinder_42.stl").is_file() {

@@ -21,3 +21,4 @@ pub mod scene;
 pub mod shape;
 pub mod stability;
 pub mod state;
+pub mod tuning;

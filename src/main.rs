@@ -154,6 +154,7 @@ fn main() {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default)),
         )
         .init();
+    polydem::tuning::Tuning::get().log();
     if comm.size() > 1 {
         // A panic on one rank must end the run on all: unwinding would finalize MPI here while
         // the others wait in a collective.

@@ -200,7 +200,7 @@ impl Simulation {
                 hunt_crossley_alpha(e)
             })
             .collect();
-        let cell = 2.0 * scene.max_bounding_radius() + scene.simulation.neighbor.skin;
+        let cell = scene.cutoff();
         let walls = scene
             .walls
             .iter()
@@ -649,7 +649,7 @@ impl Simulation {
     /// the facets that reach the rank's box plus the halo; moving walls and single-rank runs
     /// keep every facet.
     fn restrict_walls(&mut self) {
-        let cell = 2.0 * self.scene.max_bounding_radius() + self.scene.simulation.neighbor.skin;
+        let cell = self.scene.cutoff();
         let region = self.parallel.as_deref().map(|p| {
             let b = p.own_box().grown(p.subdomains.halo);
             (b.lo, b.hi)

@@ -142,13 +142,7 @@ mod mpi_comm {
         fn round_limit(ranks: usize) -> u64 {
             // POLYDEM_MPI_ROUND_BYTES lowers it, so that tests can drive small runs through
             // many rounds.
-            static SET: std::sync::OnceLock<Option<u64>> = std::sync::OnceLock::new();
-            let set = *SET.get_or_init(|| {
-                std::env::var("POLYDEM_MPI_ROUND_BYTES")
-                    .ok()
-                    .and_then(|v| v.parse::<u64>().ok())
-                    .filter(|&b| b > 0)
-            });
+            let set = crate::tuning::Tuning::get().mpi_round_bytes;
             let most = (i32::MAX as u64 / ranks.max(1) as u64).clamp(1, 1 << 30);
             set.map_or(most, |b| b.min(most))
         }
@@ -309,10 +303,8 @@ mod mpi_comm {
 /// only then is MPI initialized, so a plain `polydem run` never waits on a process manager.
 /// `POLYDEM_MPI=0` or `1` overrides the guess.
 pub fn launched_under_mpi() -> bool {
-    match std::env::var("POLYDEM_MPI").ok().as_deref() {
-        Some("0") => return false,
-        Some("1") => return true,
-        _ => {}
+    if let Some(set) = crate::tuning::Tuning::get().mpi {
+        return set;
     }
     [
         "OMPI_COMM_WORLD_SIZE",

@@ -63,10 +63,9 @@ pub struct Parallel {
 }
 
 impl Parallel {
-    /// The halo width for `scene`: the pair-list cutoff, twice the largest bounding radius plus
-    /// the skin.
+    /// The halo width for `scene`: the pair-list cutoff ([`Scene::cutoff`]).
     pub fn halo_width(scene: &Scene) -> f64 {
-        2.0 * scene.max_bounding_radius() + scene.simulation.neighbor.skin
+        scene.cutoff()
     }
 
     /// The decomposition of `scene` over `comm`'s ranks before any particle exists: the given

@@ -490,6 +490,13 @@ impl Scene {
             .fold(0.0, f64::max)
     }
 
+    /// The neighbour cutoff: the farthest two particles' centroids can be and still be listed
+    /// as a candidate pair, `2 r_max + skin` (the largest bounding diameter plus the skin). It
+    /// sizes the binning cells, the facet grids of the walls and the decomposition's halo.
+    pub fn cutoff(&self) -> f64 {
+        2.0 * self.max_bounding_radius() + self.simulation.neighbor.skin
+    }
+
     /// Smallest volume-equivalent radius any particle type can have at its smallest scale
     /// (infinite without particle types).
     pub fn min_equivalent_radius(&self) -> f64 {

@@ -510,7 +510,7 @@ impl CudaSimulation {
     pub(super) fn wall_check(&mut self, t: f64) -> (u64, f64) {
         let half_skin = 0.5 * self.skin;
         let g = self.grid;
-        let grow = 2.0 * self.host.scene.max_bounding_radius() + self.skin;
+        let grow = self.host.scene.cutoff();
         let Some(w) = &mut self.walls else {
             return (0, 0.0);
         };

@@ -126,38 +126,20 @@ impl KernelConfig {
         // 27; a box spanning more walks the facet grid in id order instead):
         // POLYDEM_WALL_MERGE_CELLS sets it (0–64), so that tests can drive every particle down
         // the walk.
-        if let Ok(v) = std::env::var("POLYDEM_WALL_MERGE_CELLS") {
-            match v.parse::<u32>().ok().filter(|&n| n <= 64) {
-                Some(n) => d.push(format!("-DPD_WALL_MERGE_CELLS={n}")),
-                None => eprintln!(
-                    "warning: POLYDEM_WALL_MERGE_CELLS={v:?} is not 0-64; the default (27) is used"
-                ),
-            }
+        let tuning = crate::tuning::Tuning::get();
+        if let Some(n) = tuning.wall_merge_cells {
+            d.push(format!("-DPD_WALL_MERGE_CELLS={n}"));
         }
         // Register cap of the lean pair kernels: DEFAULT_PAIR_MAX_REGISTERS (for spheres
         // DEFAULT_SPHERE_PAIR_MAX_REGISTERS) unless POLYDEM_PAIR_MAX_REGISTERS gives another
         // (24–255), or 0 for none (a tuning knob).
-        let cap = match std::env::var("POLYDEM_PAIR_MAX_REGISTERS") {
-            Ok(v) => {
-                let n = v
-                    .parse::<u32>()
-                    .ok()
-                    .filter(|n| *n == 0 || (24..=255).contains(n));
-                if n.is_none() {
-                    eprintln!(
-                        "warning: POLYDEM_PAIR_MAX_REGISTERS={v:?} is not 0 or 24-255; the pair kernel is built uncapped"
-                    );
-                }
-                n
-            }
-            Err(_) => Some(if self.spheres {
-                DEFAULT_SPHERE_PAIR_MAX_REGISTERS
-            } else {
-                DEFAULT_PAIR_MAX_REGISTERS
-            }),
-        };
-        if let Some(n) = cap.filter(|&n| n > 0) {
-            d.push(format!("-DPD_PAIR_MAX_REGISTERS={n}"));
+        let cap = tuning.pair_max_registers.unwrap_or(if self.spheres {
+            DEFAULT_SPHERE_PAIR_MAX_REGISTERS
+        } else {
+            DEFAULT_PAIR_MAX_REGISTERS
+        });
+        if cap > 0 {
+            d.push(format!("-DPD_PAIR_MAX_REGISTERS={cap}"));
         }
         if phase_clocks() {
             d.push("-DPD_PHASE_CLOCKS=1".into());
@@ -189,8 +171,7 @@ pub const DEFAULT_SPHERE_PAIR_MAX_REGISTERS: u32 = 96;
 /// Whether the pair kernels are built to time their phases (`POLYDEM_PHASE_CLOCKS` set, a
 /// profiling build: `clock64()` sums per phase, printed after every pair stage).
 pub fn phase_clocks() -> bool {
-    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *ON.get_or_init(|| std::env::var_os("POLYDEM_PHASE_CLOCKS").is_some())
+    crate::tuning::Tuning::get().phase_clocks
 }
 
 /// `file` with its `#include "…"` lines replaced by the named sources (each once, as
@@ -284,9 +265,8 @@ pub fn compile_in(
 /// `$XDG_CACHE_HOME/polydem/ptx`, else `~/.cache/polydem/ptx`.
 pub fn ptx_cache_dir() -> Option<std::path::PathBuf> {
     use std::path::PathBuf;
-    match std::env::var_os("POLYDEM_PTX_CACHE") {
-        Some(v) if v.is_empty() || v == "0" => None,
-        Some(v) => Some(PathBuf::from(v)),
+    match &crate::tuning::Tuning::get().ptx_cache {
+        Some(set) => set.clone(),
         None => std::env::var_os("XDG_CACHE_HOME")
             .map(PathBuf::from)
             .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))

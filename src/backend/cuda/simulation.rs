@@ -55,13 +55,7 @@ pub(super) fn cfg(n: usize) -> LaunchConfig {
 /// blocks of 128 would occupy 16 of an H100's 132); `POLYDEM_CUDA_BLOCK` fixes the block size
 /// of every kernel instead (for tuning).
 pub(super) fn cfg_with(n: usize, preferred: u32) -> LaunchConfig {
-    static FIXED: std::sync::OnceLock<Option<u32>> = std::sync::OnceLock::new();
-    let fixed = *FIXED.get_or_init(|| {
-        std::env::var("POLYDEM_CUDA_BLOCK")
-            .ok()
-            .and_then(|v| v.parse::<u32>().ok())
-            .filter(|b| (32..=1024).contains(b) && b % 32 == 0)
-    });
+    let fixed = crate::tuning::Tuning::get().cuda_block;
     // Enough blocks for two per multiprocessor of the largest current GPUs (132 SMs).
     let block = fixed.unwrap_or(if n >= 264 * preferred as usize {
         preferred
@@ -438,7 +432,7 @@ impl CudaSimulation {
             periodic: s.domain.periodic,
         };
         let skin = s.simulation.neighbor.skin;
-        let cutoff = 2.0 * s.max_bounding_radius() + skin;
+        let cutoff = s.cutoff();
         // A rank of a decomposed run bins on the whole domain's grid (ghosts keep their true
         // centroids), sized for the whole run's particles.
         let particles = match host.parallel.as_deref() {

@@ -69,7 +69,7 @@ impl CudaSimulation {
         if s.walls.is_empty() {
             return Ok(());
         }
-        let cell = 2.0 * s.max_bounding_radius() + self.skin;
+        let cell = s.cutoff();
         let mut info = Vec::new();
         let (mut triangles, mut prisms, mut starts, mut items) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new());

@@ -1,0 +1,185 @@
+//! Process-wide tuning and test knobs read from `POLYDEM_*` environment variables.
+//!
+//! Every such variable is read here, once per process ([`Tuning::get`]), and `polydem run`
+//! logs the ones set at start ([`Tuning::log`]), so that a run's log says which knobs shaped it.
+//! None of them changes results: they choose launch shapes, caches, profiling builds and the
+//! MPI start-up, or drive rare code paths in tests. A value outside what a knob allows is
+//! reported and the default kept.
+
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+/// The knobs, as read from the environment.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Tuning {
+    /// `POLYDEM_CUDA_BLOCK`: one block size for every kernel (32–1024, a multiple of 32)
+    /// instead of the per-launch choice.
+    pub cuda_block: Option<u32>,
+    /// `POLYDEM_WALL_MERGE_CELLS`: most grid cells merged per particle and wall when the wall
+    /// list is built (0–64; default 27), so that tests can drive every particle down the walk
+    /// of the facet grid.
+    pub wall_merge_cells: Option<u32>,
+    /// `POLYDEM_PAIR_MAX_REGISTERS`: register cap of the lean pair kernels (24–255, or 0 for
+    /// none) instead of the defaults of `backend::cuda::kernels`.
+    pub pair_max_registers: Option<u32>,
+    /// `POLYDEM_PHASE_CLOCKS` set: the pair kernels are built to time their phases.
+    pub phase_clocks: bool,
+    /// `POLYDEM_PTX_CACHE`: the PTX cache folder; `Some(None)` when set to `0` or empty (no
+    /// cache), `None` when unset (the default folder).
+    pub ptx_cache: Option<Option<PathBuf>>,
+    /// `POLYDEM_MPI_ROUND_BYTES`: a lower bound on the bytes one collective round moves, so
+    /// that tests can drive small runs through many rounds.
+    pub mpi_round_bytes: Option<u64>,
+    /// `POLYDEM_MPI`: `0` or `1` overrides the guess whether an MPI launcher started the
+    /// process.
+    pub mpi: Option<bool>,
+    /// `POLYDEM_ROOT`: the repository root (its `meshes/`) for `polydem bench accuracy`.
+    pub root: Option<PathBuf>,
+    /// What was set but not allowed, one line each (the default is kept).
+    pub rejected: Vec<String>,
+}
+
+impl Tuning {
+    /// The knobs of this process, read on first use.
+    pub fn get() -> &'static Tuning {
+        static TUNING: OnceLock<Tuning> = OnceLock::new();
+        TUNING.get_or_init(|| Tuning::from_vars(|k| std::env::var_os(k)))
+    }
+
+    /// The knobs from `var` (the environment, or a table in tests).
+    pub fn from_vars(var: impl Fn(&str) -> Option<std::ffi::OsString>) -> Tuning {
+        let mut t = Tuning::default();
+        let text = |k: &str| var(k).map(|v| v.to_string_lossy().into_owned());
+        let mut number = |k: &str, allowed: &str, ok: &dyn Fn(u64) -> bool| -> Option<u64> {
+            let v = text(k)?;
+            match v.trim().parse::<u64>().ok().filter(|&n| ok(n)) {
+                Some(n) => Some(n),
+                None => {
+                    t.rejected
+                        .push(format!("{k}={v:?} is not {allowed}; the default is used"));
+                    None
+                }
+            }
+        };
+        let cuda_block = number("POLYDEM_CUDA_BLOCK", "a multiple of 32 in 32-1024", &|b| {
+            (32..=1024).contains(&b) && b % 32 == 0
+        });
+        let wall_merge_cells = number("POLYDEM_WALL_MERGE_CELLS", "0-64", &|n| n <= 64);
+        let pair_max_registers = number("POLYDEM_PAIR_MAX_REGISTERS", "0 or 24-255", &|n| {
+            n == 0 || (24..=255).contains(&n)
+        });
+        let mpi_round_bytes = number("POLYDEM_MPI_ROUND_BYTES", "a positive count", &|b| b > 0);
+        t.cuda_block = cuda_block.map(|b| b as u32);
+        t.wall_merge_cells = wall_merge_cells.map(|n| n as u32);
+        t.pair_max_registers = pair_max_registers.map(|n| n as u32);
+        t.mpi_round_bytes = mpi_round_bytes;
+        t.phase_clocks = var("POLYDEM_PHASE_CLOCKS").is_some();
+        t.ptx_cache = var("POLYDEM_PTX_CACHE")
+            .map(|v| (!(v.is_empty() || v == "0")).then(|| PathBuf::from(v)));
+        t.mpi = match text("POLYDEM_MPI").as_deref() {
+            None => None,
+            Some("0") => Some(false),
+            Some("1") => Some(true),
+            Some(v) => {
+                t.rejected.push(format!(
+                    "POLYDEM_MPI={v:?} is not 0 or 1; the launcher is guessed from the environment"
+                ));
+                None
+            }
+        };
+        t.root = var("POLYDEM_ROOT").map(PathBuf::from);
+        t
+    }
+
+    /// The knobs that are set, as `NAME=value` (empty when none is).
+    pub fn set(&self) -> Vec<String> {
+        let mut v = Vec::new();
+        let mut put = |k: &str, x: Option<String>| {
+            if let Some(x) = x {
+                v.push(format!("{k}={x}"));
+            }
+        };
+        put("POLYDEM_CUDA_BLOCK", self.cuda_block.map(|x| x.to_string()));
+        put(
+            "POLYDEM_WALL_MERGE_CELLS",
+            self.wall_merge_cells.map(|x| x.to_string()),
+        );
+        put(
+            "POLYDEM_PAIR_MAX_REGISTERS",
+            self.pair_max_registers.map(|x| x.to_string()),
+        );
+        put("POLYDEM_PHASE_CLOCKS", self.phase_clocks.then(String::new));
+        put(
+            "POLYDEM_PTX_CACHE",
+            self.ptx_cache.as_ref().map(|c| {
+                c.as_ref()
+                    .map_or_else(|| "0".into(), |p| p.display().to_string())
+            }),
+        );
+        put(
+            "POLYDEM_MPI_ROUND_BYTES",
+            self.mpi_round_bytes.map(|x| x.to_string()),
+        );
+        put("POLYDEM_MPI", self.mpi.map(|x| u8::from(x).to_string()));
+        put(
+            "POLYDEM_ROOT",
+            self.root.as_ref().map(|p| p.display().to_string()),
+        );
+        v
+    }
+
+    /// Logs the knobs that are set and those refused.
+    pub fn log(&self) {
+        let set = self.set();
+        if !set.is_empty() {
+            tracing::info!("tuning from the environment: {}", set.join(", "));
+        }
+        for r in &self.rejected {
+            tracing::warn!("{r}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn from(pairs: &[(&str, &str)]) -> Tuning {
+        let pairs: Vec<(String, String)> = pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
+        Tuning::from_vars(|k| pairs.iter().find(|(n, _)| n == k).map(|(_, v)| v.into()))
+    }
+
+    #[test]
+    fn unset_knobs_keep_the_defaults() {
+        assert_eq!(from(&[]), Tuning::default());
+        assert!(from(&[]).set().is_empty());
+    }
+
+    #[test]
+    fn knobs_are_parsed_and_bad_values_refused_by_name() {
+        let t = from(&[
+            ("POLYDEM_CUDA_BLOCK", "96"),
+            ("POLYDEM_WALL_MERGE_CELLS", "0"),
+            ("POLYDEM_PAIR_MAX_REGISTERS", "20"),
+            ("POLYDEM_PTX_CACHE", "0"),
+            ("POLYDEM_MPI", "1"),
+            ("POLYDEM_MPI_ROUND_BYTES", "777"),
+        ]);
+        assert_eq!(t.cuda_block, Some(96));
+        assert_eq!(t.wall_merge_cells, Some(0));
+        assert_eq!(t.pair_max_registers, None);
+        assert_eq!(t.ptx_cache, Some(None));
+        assert_eq!(t.mpi, Some(true));
+        assert_eq!(t.mpi_round_bytes, Some(777));
+        assert_eq!(t.rejected.len(), 1, "{:?}", t.rejected);
+        assert!(t.rejected[0].starts_with("POLYDEM_PAIR_MAX_REGISTERS=\"20\""));
+        let bad = from(&[("POLYDEM_CUDA_BLOCK", "100"), ("POLYDEM_MPI", "yes")]);
+        assert_eq!(bad.cuda_block, None);
+        assert_eq!(bad.mpi, None);
+        assert_eq!(bad.rejected.len(), 2);
+        assert!(t.set().contains(&"POLYDEM_CUDA_BLOCK=96".to_string()));
+    }
+}
