@@ -384,7 +384,7 @@ dir = "{}"
             self.dir.join("out").display(),
             p = spec.periodic,
         );
-        let scene = parse_scene(&text, &self.root, "accuracy.toml").map_err(|e| anyhow!("{e}"))?;
+        let scene = parse_scene(&text, &self.root, "accuracy.toml")?;
         Ok(Simulation::new(scene)?)
     }
 
@@ -761,7 +761,7 @@ dir = "{}"
         let text = text.replace("dt_fraction = 0.05", &format!("dt_fraction = {f}"));
         // Relative paths of the file (its meshes) resolve against its own folder.
         let base = path.parent().unwrap_or(&self.root);
-        let scene = parse_scene(&text, base, "pour.toml").map_err(|e| anyhow!("{e}"))?;
+        let scene = parse_scene(&text, base, "pour.toml")?;
         let end = scene.simulation.end_time;
         let sim = Simulation::new(scene)?;
         let mut e = Engine::new(sim, device)?;

@@ -2,9 +2,10 @@
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+use polydem::backend::BackendChoice;
 use polydem::domain::{Comm, SerialComm};
 use polydem::probe::{Precision, probe_overlap, probe_wall};
-use polydem::run::{BackendChoice, RunOptions};
+use polydem::run::RunOptions;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -247,20 +248,17 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
             if scene.as_os_str() == "accuracy" && !scene.exists() {
                 use polydem::accuracy::{AccuracyOptions, FULL_FRACTIONS, SHORT_FRACTIONS};
                 use polydem::backend::Device;
-                let devices = match polydem::run::choose_backend(backend)? {
-                    "cuda" => {
-                        use polydem::backend::cuda::Precision;
-                        gpu_precision
+                use polydem::backend::cuda::Precision;
+                let serial = SerialComm;
+                let devices =
+                    match polydem::backend::select_device(backend, Precision::Double, &serial)? {
+                        Device::Cuda { ordinal, .. } => gpu_precision
                             .map_or(vec![Precision::Double, Precision::Mixed], |p| vec![p])
                             .into_iter()
-                            .map(|precision| Device::Cuda {
-                                ordinal: 0,
-                                precision,
-                            })
-                            .collect()
-                    }
-                    _ => vec![Device::Cpu],
-                };
+                            .map(|precision| Device::Cuda { ordinal, precision })
+                            .collect(),
+                        Device::Cpu => vec![Device::Cpu],
+                    };
                 let fractions = fractions.unwrap_or_else(|| {
                     if full {
                         FULL_FRACTIONS.to_vec()

@@ -1,97 +1,125 @@
 //! One handle on a simulation stepped by either backend, for the driver, the benchmark and the
-//! tests that hold the backends to the same results: the CPU [`Simulation`] or the GPU
-//! [`CudaSimulation`] with its host copy synced on demand.
+//! tests that hold the backends to the same results.
 
-use super::cuda::{CudaSimulation, Precision};
+use super::cuda::CudaSimulation;
+use super::{Backend, Device};
+use crate::domain::Comm;
 use crate::pipeline::Simulation;
-use anyhow::{Result, anyhow};
+use crate::scene::Scene;
+use anyhow::Result;
+use std::sync::Arc;
 
-/// Where an [`Engine`] steps.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Device {
-    /// The CPU backend (rayon).
-    Cpu,
-    /// GPU `ordinal`, with the pair geometry in `precision`.
-    Cuda {
-        ordinal: usize,
-        precision: Precision,
+/// What an [`Engine`] starts from.
+pub enum Start {
+    /// A simulation whose forces are evaluated (new or refreshed) or restored from a
+    /// checkpoint: the backend continues from its stored forces.
+    State(Box<Simulation>),
+    /// A new run of `scene` on `comm`'s ranks: particles of count insertions placed, the first
+    /// forces evaluated by the backend that steps it (on the GPU by the GPU, so that a GPU run
+    /// is bitwise the same from its first step).
+    Scene {
+        scene: Box<Scene>,
+        comm: Arc<dyn Comm>,
     },
 }
 
-/// A simulation on the CPU, or on the GPU with a host copy synced for output.
-pub enum Engine {
-    Cpu(Box<Simulation>),
-    Cuda(Box<CudaSimulation>),
+impl From<Simulation> for Start {
+    fn from(sim: Simulation) -> Self {
+        Start::State(Box::new(sim))
+    }
+}
+
+/// A simulation on the backend of its [`Device`]: the only way to make a backend.
+pub struct Engine {
+    backend: Box<dyn Backend>,
+    device: Device,
 }
 
 impl Engine {
-    /// Moves `sim` (created with [`Simulation::new`], or refreshed or restored: its forces are
-    /// evaluated) onto `device`.
-    pub fn new(sim: Simulation, device: Device) -> Result<Self> {
-        Ok(match device {
-            Device::Cpu => Engine::Cpu(Box::new(sim)),
-            Device::Cuda { ordinal, precision } => Engine::Cuda(Box::new(
-                CudaSimulation::new(sim, ordinal, precision).map_err(|e| anyhow!("{e}"))?,
-            )),
-        })
+    /// Starts `start` on `device`.
+    pub fn new(start: impl Into<Start>, device: Device) -> Result<Self> {
+        let backend: Box<dyn Backend> = match (start.into(), device) {
+            (Start::State(sim), Device::Cpu) => sim,
+            (Start::Scene { scene, comm }, Device::Cpu) => {
+                Box::new(Simulation::new_parallel(*scene, comm)?)
+            }
+            (Start::State(sim), Device::Cuda { ordinal, precision }) => {
+                Box::new(CudaSimulation::new(*sim, ordinal, precision)?)
+            }
+            (Start::Scene { scene, comm }, Device::Cuda { ordinal, precision }) => {
+                let host = Simulation::new_parallel_unevaluated(*scene, comm)?;
+                let mut c = CudaSimulation::new(host, ordinal, precision)?;
+                c.evaluate_first_forces()?;
+                Box::new(c)
+            }
+        };
+        if let Device::Cuda { precision, .. } = device {
+            tracing::info!(
+                "kernels compiled for {} ({precision:?} pair geometry)",
+                backend.describe()
+            );
+        }
+        Ok(Engine { backend, device })
+    }
+
+    /// Where it steps.
+    pub fn device(&self) -> Device {
+        self.device
     }
 
     /// Advances one time step.
     pub fn step(&mut self) -> Result<()> {
-        match self {
-            // A simulation error keeps its type, so that the run can tell a stability stop.
-            Engine::Cpu(s) => s.step().map_err(anyhow::Error::new),
-            Engine::Cuda(c) => c.step().map_err(|e| match e {
-                super::cuda::CudaError::Simulation(s) => anyhow::Error::new(s),
-                other => anyhow!("{other}"),
-            }),
-        }
+        self.backend.step()
     }
 
-    /// The host simulation: time, step, dt, scene and particle count are always current; the
-    /// particle state and statistics only after [`Engine::synced`].
+    /// See [`Backend::host`].
     pub fn host(&self) -> &Simulation {
-        match self {
-            Engine::Cpu(s) => s,
-            Engine::Cuda(c) => &c.host,
-        }
+        self.backend.host()
     }
 
-    /// The host simulation with the device state copied in.
+    /// See [`Backend::host_mut`].
+    pub fn host_mut(&mut self) -> &mut Simulation {
+        self.backend.host_mut()
+    }
+
+    /// The host simulation with the backend's state copied in.
     pub fn synced(&mut self) -> Result<&Simulation> {
-        match self {
-            Engine::Cpu(s) => Ok(s),
-            Engine::Cuda(c) => c.sync_host().map_err(|e| anyhow!("{e}")),
-        }
+        self.backend.sync()
     }
 
-    /// Changes the state between steps (a prescribed motion, say): on the GPU the state is
-    /// copied to the host, changed there and uploaded with its contact history, and the next
-    /// step rebuilds the pair list.
+    /// See [`Backend::edit`].
     pub fn edit(&mut self, f: impl FnOnce(&mut Simulation)) -> Result<()> {
-        match self {
-            Engine::Cpu(s) => {
-                f(s);
-                Ok(())
+        let mut f = Some(f);
+        self.backend.edit(&mut |sim| {
+            if let Some(f) = f.take() {
+                f(sim)
             }
-            Engine::Cuda(c) => c.edit_host(f).map_err(|e| anyhow!("{e}")),
-        }
+        })
     }
 
     /// Particle–particle and particle–wall contacts of the last force evaluation; on the GPU
     /// this copies only the contact flags.
     pub fn contact_counts(&mut self) -> Result<(u64, u64)> {
-        match self {
-            Engine::Cpu(s) => Ok((s.stats.contacts, s.stats.wall_contacts)),
-            Engine::Cuda(c) => c.contact_counts().map_err(|e| anyhow!("{e}")),
-        }
+        self.backend.contact_counts()
+    }
+
+    /// See [`Backend::device_bytes`].
+    pub fn device_bytes(&self) -> Option<usize> {
+        self.backend.device_bytes()
+    }
+
+    /// See [`Backend::candidate_pairs`].
+    pub fn candidate_pairs(&self) -> Option<usize> {
+        self.backend.candidate_pairs()
+    }
+
+    /// See [`Backend::describe`].
+    pub fn describe(&self) -> String {
+        self.backend.describe()
     }
 
     /// "cpu" or "cuda".
     pub fn backend_name(&self) -> &'static str {
-        match self {
-            Engine::Cpu(_) => "cpu",
-            Engine::Cuda(_) => "cuda",
-        }
+        self.backend.name()
     }
 }

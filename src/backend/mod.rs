@@ -1,102 +1,153 @@
-//! Compute backends and their detection (DESIGN.md §5).
+//! Compute backends: one [`Backend`] trait, its CPU ([`cpu`]) and CUDA ([`cuda`])
+//! implementations side by side, and the [`Engine`] that is the only way to make one.
 //!
-//! cudarc loads `libcuda` and `libnvrtc` at run time, so the binary builds and runs on machines
-//! without CUDA. Detection checks that each library is present before calling into it (cudarc
-//! panics when a library it is asked to use is missing), and never panics itself: a machine
-//! without a usable GPU simply gets the CPU backend, with the reason in the log.
+//! A backend steps a [`Simulation`]: the CPU backend is the simulation itself (rayon), the
+//! CUDA backend keeps the particle state on the GPU and a host copy that it syncs on demand
+//! (docs/design.md §5). The choice is made once, from the command line's [`BackendChoice`]
+//! to the [`Device`] it resolves to ([`select_device`]); nothing downstream compares names.
 
+pub mod cpu;
 pub mod cuda;
+mod detect;
 mod engine;
 
-pub use engine::{Device, Engine};
+pub use detect::{CudaInfo, GpuInfo, cuda_info};
+pub use engine::{Engine, Start};
 
-use serde::Serialize;
+use crate::domain::Comm;
+use crate::pipeline::Simulation;
+use anyhow::{Result, bail};
+use cuda::Precision;
 
-/// A GPU as the driver reports it.
-#[derive(Clone, Debug, Serialize)]
-pub struct GpuInfo {
-    /// Device ordinal.
-    pub ordinal: usize,
-    /// Marketing name, e.g. "NVIDIA H100 80GB HBM3".
-    pub name: String,
-    /// Compute capability (major, minor); NVRTC compiles for `sm_<major><minor>`.
-    pub compute_capability: (i32, i32),
-    /// Total device memory in bytes.
-    pub total_memory: usize,
+/// What steps a simulation: the operations the driver, the benchmark and the tests need of
+/// either backend. Every method leaves the simulation steppable; errors of the step that
+/// the run reports as a stability stop keep their type ([`crate::pipeline::SimulationError`]).
+pub trait Backend {
+    /// Advances one time step (the stages of docs/design.md §1).
+    fn step(&mut self) -> Result<()>;
+
+    /// The host simulation: time, step, dt, scene and particle count are always current; the
+    /// particle state and statistics only after [`Backend::sync`].
+    fn host(&self) -> &Simulation;
+
+    /// The host simulation for its bookkeeping (timers, counters), which the backend does
+    /// not hold elsewhere; its particle state may be stale (see [`Backend::host`]).
+    fn host_mut(&mut self) -> &mut Simulation;
+
+    /// The host simulation with the backend's state copied in.
+    fn sync(&mut self) -> Result<&Simulation>;
+
+    /// Changes the state between steps (a prescribed motion, say): the state is made current
+    /// on the host, changed there by `f` and taken back with its contact history; the next
+    /// step rebuilds the pair list.
+    fn edit(&mut self, f: &mut dyn FnMut(&mut Simulation)) -> Result<()>;
+
+    /// Particle–particle and particle–wall contacts of the last force evaluation.
+    fn contact_counts(&mut self) -> Result<(u64, u64)>;
+
+    /// Bytes of device memory held for the simulation's buffers (`None` on the CPU, whose
+    /// memory is the host's).
+    fn device_bytes(&self) -> Option<usize>;
+
+    /// Candidate pairs of the current neighbour list, where the backend counts them apart
+    /// from the host (`None`: see the host's list).
+    fn candidate_pairs(&self) -> Option<usize>;
+
+    /// What it runs on, for logs and reports ("CPU, 16 threads", the GPU's name).
+    fn describe(&self) -> String;
+
+    /// The backend's name in summaries: "cpu" or "cuda".
+    fn name(&self) -> &'static str;
 }
 
-/// What the CUDA installation offers.
-#[derive(Clone, Debug, Serialize)]
-pub struct CudaInfo {
-    /// Driver API version as `major.minor` (e.g. 13.0), when libcuda loads.
-    pub driver_version: Option<String>,
-    /// NVRTC version as `major.minor`, when libnvrtc loads.
-    pub nvrtc_version: Option<String>,
-    /// Visible GPUs.
-    pub gpus: Vec<GpuInfo>,
-    /// Why CUDA cannot be used, when it cannot.
-    pub unavailable: Option<String>,
+/// Which backend a run asks for (`--backend`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendChoice {
+    /// CUDA when a usable GPU is present, else the CPU.
+    Auto,
+    /// The CPU (rayon).
+    Cpu,
+    /// CUDA.
+    Cuda,
 }
 
-/// Queries the driver and NVRTC without panicking.
-pub fn cuda_info() -> CudaInfo {
-    let mut info = CudaInfo {
-        driver_version: None,
-        nvrtc_version: None,
-        gpus: Vec::new(),
-        unavailable: None,
-    };
-    // SAFETY: these only try to open the shared libraries.
-    let (has_driver, has_nvrtc) = unsafe {
-        (
-            cudarc::driver::sys::is_culib_present(),
-            cudarc::nvrtc::sys::is_culib_present(),
-        )
-    };
-    if has_nvrtc {
-        let (mut major, mut minor) = (0, 0);
-        // SAFETY: the library is present; nvrtcVersion writes two ints.
-        let status = unsafe { cudarc::nvrtc::sys::nvrtcVersion(&mut major, &mut minor) };
-        if status == cudarc::nvrtc::sys::nvrtcResult::NVRTC_SUCCESS {
-            info.nvrtc_version = Some(format!("{major}.{minor}"));
+/// Where an [`Engine`] steps: a [`BackendChoice`] resolved on this machine and rank.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Device {
+    /// The CPU backend (rayon).
+    Cpu,
+    /// GPU `ordinal`, with the pair geometry in `precision`.
+    Cuda {
+        ordinal: usize,
+        precision: Precision,
+    },
+}
+
+impl Device {
+    /// The arithmetic of the pair geometry as summaries name it: "double" on the CPU.
+    pub fn precision_name(&self) -> String {
+        match self {
+            Device::Cpu => "double".into(),
+            Device::Cuda { precision, .. } => format!("{precision:?}").to_lowercase(),
         }
     }
-    if !has_driver {
-        info.unavailable = Some("libcuda (the NVIDIA driver) is not installed".into());
-        return info;
-    }
-    let mut version = 0;
-    // SAFETY: the library is present; cuDriverGetVersion writes one int.
-    if unsafe { cudarc::driver::sys::cuDriverGetVersion(&mut version) }
-        == cudarc::driver::sys::CUresult::CUDA_SUCCESS
-    {
-        info.driver_version = Some(format!("{}.{}", version / 1000, (version % 1000) / 10));
-    }
-    let count = match cudarc::driver::CudaContext::device_count() {
-        Ok(n) => n,
-        Err(e) => {
-            info.unavailable = Some(format!("the CUDA driver reports an error: {e}"));
-            return info;
+}
+
+/// Resolves `choice` for this rank of `comm` (docs/design.md §5): `cuda` needs a usable GPU and
+/// NVRTC, `auto` takes the GPU when there is one and says in the log why it does not. Every
+/// rank of a decomposed run steps on the same backend (their collectives differ): with `auto`,
+/// one rank without a usable GPU puts all on the CPU (an explicit `cuda` has already failed on
+/// that rank, which ends the run on all). A GPU rank drives its node-local rank modulo the
+/// GPUs it sees (docs/design.md §6).
+pub fn select_device(
+    choice: BackendChoice,
+    precision: Precision,
+    comm: &dyn Comm,
+) -> Result<Device> {
+    let info = cuda_info();
+    let gpu = match (choice, &info.unavailable, info.gpus.first()) {
+        (BackendChoice::Cpu, _, _) => false,
+        (_, None, Some(g)) => {
+            tracing::info!("running on GPU 0: {}", g.name);
+            true
+        }
+        (BackendChoice::Cuda, Some(why), _) => bail!("--backend cuda: {why}; use --backend cpu"),
+        (BackendChoice::Cuda, None, None) => {
+            bail!("--backend cuda: no GPU found; use --backend cpu")
+        }
+        (BackendChoice::Auto, Some(why), _) => {
+            tracing::info!("running on the CPU: {why}");
+            false
+        }
+        (BackendChoice::Auto, None, None) => {
+            tracing::info!("running on the CPU");
+            false
         }
     };
-    for ordinal in 0..count.max(0) as usize {
-        match cudarc::driver::CudaContext::new(ordinal) {
-            Ok(ctx) => info.gpus.push(GpuInfo {
-                ordinal,
-                name: ctx.name().unwrap_or_else(|e| format!("unknown ({e})")),
-                compute_capability: ctx.compute_capability().unwrap_or((0, 0)),
-                total_memory: ctx.total_mem().unwrap_or(0),
-            }),
-            Err(e) => {
-                info.unavailable = Some(format!("GPU {ordinal} cannot be opened: {e}"));
+    if comm.size() == 1 {
+        return Ok(if gpu {
+            Device::Cuda {
+                ordinal: 0,
+                precision,
             }
-        }
+        } else {
+            Device::Cpu
+        });
     }
-    if info.gpus.is_empty() && info.unavailable.is_none() {
-        info.unavailable = Some("the driver sees no GPU".into());
+    let cpu_somewhere = comm.any(!gpu);
+    if cpu_somewhere && gpu {
+        tracing::warn!("another rank has no usable GPU: all ranks run on the CPU");
     }
-    if info.nvrtc_version.is_none() && info.unavailable.is_none() {
-        info.unavailable = Some("libnvrtc (NVRTC, to compile the kernels) is not installed".into());
+    if cpu_somewhere {
+        return Ok(Device::Cpu);
     }
-    info
+    let gpus = info.gpus.len().max(1);
+    let local = crate::domain::comm::node_local_rank().unwrap_or(comm.rank());
+    let ordinal = local % gpus;
+    tracing::info!(
+        "{} ranks on the GPU: rank {} on GPU {ordinal} of {gpus}",
+        comm.size(),
+        comm.rank()
+    );
+    Ok(Device::Cuda { ordinal, precision })
 }

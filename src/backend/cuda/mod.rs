@@ -1,6 +1,7 @@
 //! The CUDA backend: host side (cudarc). Kernels live in `cuda/` and are compiled at run time by
 //! NVRTC ([`kernels`]); the structs they share with Rust are in [`layout`].
 
+mod backend;
 mod contacts;
 mod halo;
 pub mod kernels;

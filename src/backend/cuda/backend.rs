@@ -1,0 +1,57 @@
+//! [`CudaSimulation`] as a [`Backend`].
+
+use super::{CudaError, CudaSimulation};
+use crate::backend::Backend;
+use crate::pipeline::Simulation;
+use anyhow::Result;
+
+/// A simulation error keeps its own type (not wrapped in [`CudaError`]), so that the run can
+/// tell a stability stop from a failure of the device.
+fn unwrapped(e: CudaError) -> anyhow::Error {
+    match e {
+        CudaError::Simulation(s) => anyhow::Error::new(s),
+        other => anyhow::Error::new(other),
+    }
+}
+
+impl Backend for CudaSimulation {
+    fn step(&mut self) -> Result<()> {
+        CudaSimulation::step(self).map_err(unwrapped)
+    }
+
+    fn host(&self) -> &Simulation {
+        &self.host
+    }
+
+    fn host_mut(&mut self) -> &mut Simulation {
+        &mut self.host
+    }
+
+    fn sync(&mut self) -> Result<&Simulation> {
+        self.sync_host().map_err(unwrapped)
+    }
+
+    fn edit(&mut self, f: &mut dyn FnMut(&mut Simulation)) -> Result<()> {
+        self.edit_host(f).map_err(unwrapped)
+    }
+
+    fn contact_counts(&mut self) -> Result<(u64, u64)> {
+        CudaSimulation::contact_counts(self).map_err(unwrapped)
+    }
+
+    fn device_bytes(&self) -> Option<usize> {
+        Some(CudaSimulation::device_bytes(self))
+    }
+
+    fn candidate_pairs(&self) -> Option<usize> {
+        Some(CudaSimulation::candidate_pairs(self))
+    }
+
+    fn describe(&self) -> String {
+        self.device.clone()
+    }
+
+    fn name(&self) -> &'static str {
+        "cuda"
+    }
+}

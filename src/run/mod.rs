@@ -1,0 +1,353 @@
+//! `polydem run`, `polydem check` and `polydem bench`: the driver around the
+//! [`Engine`]'s step — output frames, time series, checkpoints and restarts, progress,
+//! signals, and the closing `summary.json` (stage 10 of docs/design.md §1).
+//!
+//! [`run_on`] is four parts, each a function here: [`start_or_restore`] (the engine on its
+//! device, fresh or from a checkpoint), [`Outputs::open`] (the output folder's writers and
+//! schedules), [`step_loop`] (steps, scheduled output, progress, signals) and [`finish`] (the
+//! closing output and the summary).
+
+mod bench;
+mod check;
+mod checkpoints;
+mod output;
+mod summary;
+
+pub use bench::{BenchOptions, bench, bench_on};
+pub use check::{ENERGY_FACE_FRACTION, SAFE_FACE_FRACTION, check, time_step_warnings};
+pub use output::{OUTPUT_ENTRIES, prepare_output_dir};
+
+use crate::backend::cuda::Precision;
+use crate::backend::{BackendChoice, Device, Engine, Start, select_device};
+use crate::domain::{Comm, SerialComm};
+use crate::io::{remove_temporary_files, write_atomic};
+use crate::pipeline::Simulation;
+use crate::scene::{Inserter, InserterState, load_scene};
+use anyhow::{Context, Result, anyhow};
+use checkpoints::{KeptCheckpoints, SceneId, read_restart, save_checkpoint, stopped_unstable};
+use output::{Outputs, Schedule};
+use serde_json::json;
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+use summary::{parallel_report, whole_run, whole_run_counts};
+
+/// Options of `polydem run`.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub scene: PathBuf,
+    pub backend: BackendChoice,
+    pub out: Option<PathBuf>,
+    pub restart: Option<PathBuf>,
+    /// Stop after this many steps (for tests and benchmarks); `None`: run to the end time.
+    pub max_steps: Option<u64>,
+    /// Arithmetic of the pair geometry on the GPU (the CPU backend is always f64).
+    pub precision: Precision,
+    /// Clear a previous run's output from the output folder ([`prepare_output_dir`]).
+    pub overwrite: bool,
+}
+
+/// `polydem run` on one rank: returns the summary it also writes to `summary.json`.
+pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
+    run_on(opts, Arc::new(SerialComm))
+}
+
+/// `polydem run` on the ranks of `comm` (one rank: [`run`]). Rank 0 returns the summary and
+/// writes `summary.json`; the other ranks return the same summary without writing it.
+pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Value> {
+    let mut scene = load_scene(&opts.scene)?;
+    if let Some(out) = &opts.out {
+        scene.output.dir = out.clone();
+    }
+    let device = select_device(opts.backend, opts.precision, &*comm)?;
+    let warnings = time_step_warnings(&scene);
+    if comm.rank() == 0 {
+        for msg in &warnings {
+            tracing::warn!("{msg}");
+        }
+    }
+    let id = SceneId::of(&scene, &opts.scene)?;
+    let dir = scene.output.dir.clone();
+    if comm.rank() == 0 {
+        prepare_output_dir(&dir, opts.overwrite, opts.restart.is_some())?;
+        // Leftovers of writes killed in an earlier run: never read, they would pile up.
+        let removed = remove_temporary_files(&dir)?;
+        if !removed.is_empty() {
+            tracing::info!(
+                "removed {} temporary file(s) left by a killed run in {}",
+                removed.len(),
+                dir.display()
+            );
+        }
+    }
+    comm.barrier();
+    let (mut engine, resumed) = start_or_restore(opts, scene, &comm, device, &id)?;
+    let mut out = Outputs::open(engine.host(), &dir, comm.clone(), resumed)?;
+    if !resumed {
+        out.frame(engine.synced()?)?;
+        out.series(engine.synced()?)?;
+    }
+    let ended = step_loop(opts, &mut engine, &mut out, &id)?;
+    finish(opts, &mut engine, &mut out, &id, ended, warnings)
+}
+
+/// The engine of a run on `device`: a new one from `scene`, or with `--restart` the
+/// checkpoint's state (read on rank 0, sent to every particle's owner by the first exchange).
+/// Returns it and whether it resumed a run.
+fn start_or_restore(
+    opts: &RunOptions,
+    scene: crate::scene::Scene,
+    comm: &Arc<dyn Comm>,
+    device: Device,
+    id: &SceneId,
+) -> Result<(Engine, bool)> {
+    let Some(path) = &opts.restart else {
+        let start = Start::Scene {
+            scene: Box::new(scene),
+            comm: comm.clone(),
+        };
+        return Ok((Engine::new(start, device)?, false));
+    };
+    let (header, local) = read_restart(&**comm, path, &scene, id)?;
+    let state: InserterState = serde_json::from_slice(&header.inserter)
+        .with_context(|| format!("{}: insertion state", path.display()))?;
+    let inserter =
+        Inserter::try_restore(&scene, &state).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let (particles, history) = local.map(|c| (c.particles, c.history)).unwrap_or_default();
+    let mut sim = Simulation::restore_parallel(
+        scene,
+        comm.clone(),
+        particles,
+        history,
+        inserter,
+        header.time,
+        header.step,
+        header.next_id,
+    )?;
+    // The removal count is the whole run's; rank 0 carries it.
+    sim.stats.removed = if comm.rank() == 0 { header.removed } else { 0 };
+    tracing::info!(
+        "restarted from {} at step {} (t = {} s) on {} rank(s)",
+        path.display(),
+        sim.step,
+        sim.time,
+        comm.size()
+    );
+    Ok((Engine::new(sim, device)?, true))
+}
+
+/// How the step loop ended.
+struct LoopEnd {
+    /// The step the loop started from.
+    first_step: u64,
+    /// Wall-clock seconds of the loop.
+    wall: f64,
+    /// Particle-steps done on this rank.
+    particle_steps: u64,
+    /// The signal that stopped the run (number, name), if one did.
+    stopped_by: Option<(i32, &'static str)>,
+}
+
+/// Steps to the end time (or `--max-steps`), writing the scheduled frames, series rows and
+/// checkpoints, showing progress, and stopping with a checkpoint on SIGINT or SIGTERM. A
+/// stability stop leaves the state at the stop beside the checkpoints ([`stopped_unstable`]).
+fn step_loop(
+    opts: &RunOptions,
+    engine: &mut Engine,
+    out: &mut Outputs,
+    id: &SceneId,
+) -> Result<LoopEnd> {
+    let comm = out.comm.clone();
+    let (rank, ranks) = (comm.rank(), comm.size());
+    let dir = out.dir.clone();
+    let sim = engine.host();
+    let s = &sim.scene;
+    let mut frame_at = Schedule::new(s.output.frame_interval, sim.time, sim.dt);
+    let mut series_at = Schedule::new(Some(s.output.series_interval), sim.time, sim.dt);
+    let mut checkpoint_at = Schedule::new(s.output.checkpoint_interval, sim.time, sim.dt);
+    let mut kept = KeptCheckpoints::new(s, &dir, sim.step);
+    let end_time = s.simulation.end_time;
+    let log_every = s.output.log_interval_steps.max(1);
+
+    let signals = crate::interrupt::StopSignals::install().map_err(anyhow::Error::msg)?;
+    let total_steps = ((end_time - sim.time) / sim.dt).ceil().max(0.0) as u64;
+    let bar = (rank == 0 && std::io::stderr().is_terminal()).then(|| {
+        let b = indicatif::ProgressBar::new(total_steps);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:40} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b
+    });
+    let start = Instant::now();
+    let (step0, mut particle_steps) = (engine.host().step, 0u64);
+    let mut stopped_by: Option<(i32, &str)> = None;
+    while engine.host().time + 0.5 * engine.host().dt < end_time {
+        if opts
+            .max_steps
+            .is_some_and(|m| engine.host().step - step0 >= m)
+        {
+            break;
+        }
+        if let Err(e) = engine.step() {
+            return Err(stopped_unstable(e, &*comm, engine, &dir, id));
+        }
+        particle_steps += engine.host().particles.len() as u64;
+        let (t, dt) = (engine.host().time, engine.host().dt);
+        if frame_at.due(t, dt) {
+            out.frame(engine.synced()?)?;
+        }
+        if series_at.due(t, dt) {
+            out.series(engine.synced()?)?;
+        }
+        if checkpoint_at.due(t, dt) {
+            let path = save_checkpoint(&*comm, engine.synced()?, &dir, id)?;
+            kept.push(rank, path)?;
+        }
+        let sim = engine.host();
+        let done = sim.step - step0;
+        // Whole-run counts at deterministic steps only: every rank joins the sums.
+        let (n_all, contacts_all, removed_all) =
+            if done.is_multiple_of(100) || done.is_multiple_of(log_every) {
+                whole_run_counts(&*comm, sim)
+            } else {
+                (0, 0, 0)
+            };
+        if let Some(b) = &bar {
+            b.set_position(done);
+            if done.is_multiple_of(100) {
+                b.set_message(format!(
+                    "t = {t:.4} s, {n_all} particles, {contacts_all} contacts"
+                ));
+            }
+        } else if done.is_multiple_of(log_every) && rank == 0 {
+            let elapsed = start.elapsed().as_secs_f64();
+            let rate = done as f64 / elapsed.max(1e-9);
+            let eta = (total_steps.saturating_sub(done)) as f64 / rate.max(1e-9);
+            // Removed particles (domain.on_leaving = "remove") are named only when there are
+            // any, so that a closed scene's log reads as before.
+            let removed = if removed_all > 0 {
+                format!("  {removed_all} removed (left the domain)")
+            } else {
+                String::new()
+            };
+            tracing::info!(
+                "step {} t = {:.5} s  {:.0} steps/s  {} particles  {} contacts{removed}  ETA {:.0} s",
+                sim.step,
+                t,
+                rate,
+                n_all,
+                contacts_all,
+                eta
+            );
+        }
+        // A signal reaches the ranks of a decomposed run at different moments: they agree on
+        // it after every step (one small sum), so that all stop after the same step, within
+        // the second mpirun leaves between its SIGTERM and SIGKILL (crate::interrupt).
+        let received = signals.received();
+        let counts = if ranks > 1 {
+            let c = comm.sum_u64(&received);
+            [c[0], c[1]]
+        } else {
+            received
+        };
+        if let Some(signal) = crate::interrupt::stop_signal(counts) {
+            let path = save_checkpoint(&*comm, engine.synced()?, &dir, id)?;
+            if rank == 0 {
+                tracing::warn!(
+                    "interrupted by {} after step {}: checkpoint written to {}; resume with \
+                     --restart {}",
+                    signal.1,
+                    engine.host().step,
+                    path.display(),
+                    path.display()
+                );
+            }
+            stopped_by = Some(signal);
+            break;
+        }
+    }
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    Ok(LoopEnd {
+        first_step: step0,
+        wall: start.elapsed().as_secs_f64(),
+        particle_steps,
+        stopped_by,
+    })
+}
+
+/// The closing frame, series row and checkpoint of a run that reached its end (not of one
+/// stopped by a signal, whose checkpoint is written), and `summary.json` (rank 0).
+fn finish(
+    opts: &RunOptions,
+    engine: &mut Engine,
+    out: &mut Outputs,
+    id: &SceneId,
+    ended: LoopEnd,
+    warnings: Vec<String>,
+) -> Result<serde_json::Value> {
+    let comm = out.comm.clone();
+    let (rank, ranks) = (comm.rank(), comm.size());
+    let dir = out.dir.clone();
+    let (backend_name, device) = (engine.backend_name(), engine.device());
+    let sim = engine.synced()?;
+    if ended.stopped_by.is_none() {
+        out.frame(sim)?;
+        out.series(sim)?;
+        if sim.scene.output.checkpoint_interval.is_some() {
+            save_checkpoint(&*comm, sim, &dir, id)?;
+        }
+    }
+    let g = whole_run(&*comm, sim);
+    if rank == 0 && g.stats.removed > 0 {
+        tracing::info!(
+            "{} particles left the domain and were removed (domain.on_leaving = \"remove\"); \
+             summary.json: particles_removed",
+            g.stats.removed
+        );
+    }
+    let (kt, kr, pg) = g.energies;
+    let particle_steps = comm.sum_u64(&[ended.particle_steps])[0];
+    let wall = ended.wall;
+    let threads = rayon::current_num_threads();
+    let parallel = parallel_report(&*comm, sim);
+    let stopped_by = ended.stopped_by;
+    let summary = json!({
+        "scene": opts.scene.display().to_string(),
+        "backend": backend_name,
+        "precision": device.precision_name(),
+        "ranks": ranks,
+        "parallel": parallel,
+        "threads": threads,
+        "steps": sim.step - ended.first_step,
+        "final_step": sim.step,
+        "simulated_time": sim.time,
+        "dt": sim.dt,
+        "wall_seconds": wall,
+        "particle_steps_per_second": particle_steps as f64 / wall.max(1e-12),
+        "particle_steps_per_second_per_thread": particle_steps as f64 / wall.max(1e-12) / threads as f64,
+        "particles": g.particles,
+        "particles_removed": g.stats.removed,
+        "contacts": g.stats.contacts,
+        "wall_contacts": g.stats.wall_contacts,
+        "energy": {"kinetic_translational": kt, "kinetic_rotational": kr, "potential_gravity": pg, "elastic": g.stats.elastic_energy},
+        "stage_seconds": sim.timers,
+        "interrupted": stopped_by.is_some(),
+        "signal": stopped_by.map(|s| s.1),
+        "exit_status": stopped_by.map_or(0, |s| crate::interrupt::exit_status(s.0)),
+        "warnings": warnings,
+    });
+    if rank == 0 {
+        write_atomic(
+            &dir.join("summary.json"),
+            serde_json::to_string_pretty(&summary)?.as_bytes(),
+        )
+        .with_context(|| format!("{}: cannot write summary.json", dir.display()))?;
+    }
+    Ok(summary)
+}
