@@ -385,7 +385,7 @@ dir = "{}"
             p = spec.periodic,
         );
         let scene = parse_scene(&text, &self.root, "accuracy.toml")?;
-        Ok(Simulation::new(scene)?)
+        Ok(Simulation::builder(scene).build()?)
     }
 
     fn run(&self, case: &str, device: Device, f: f64) -> Result<(f64, u64, String)> {
@@ -763,7 +763,7 @@ dir = "{}"
         let base = path.parent().unwrap_or(&self.root);
         let scene = parse_scene(&text, base, "pour.toml")?;
         let end = scene.simulation.end_time;
-        let sim = Simulation::new(scene)?;
+        let sim = Simulation::builder(scene).build()?;
         let mut e = Engine::new(sim, device)?;
         let mut steps = 0;
         while e.host().time + 0.5 * e.host().dt < end {

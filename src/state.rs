@@ -1,4 +1,5 @@
-//! Particle state, materials and particle types: the data every stage reads and writes.
+//! Particle state, materials and particle types: the data every stage reads and writes; and
+//! the observables a force evaluation leaves ([`StepStats`]).
 //!
 //! Particles are a structure of arrays indexed by a local index (DESIGN.md §3); each has a
 //! global id that never changes and names it in output and checkpoints. Positions, velocities,
@@ -157,10 +158,33 @@ impl Particles {
         self.inertia.truncate(n);
     }
 
+    /// Removes the particles at the (sorted) local indices `remove`, keeping the others' order.
+    pub fn remove(&mut self, remove: &[usize]) {
+        let mut keep = vec![true; self.len()];
+        for &i in remove {
+            keep[i] = false;
+        }
+        let kept: Vec<usize> = (0..self.len()).filter(|&i| keep[i]).collect();
+        *self = self.select(&kept);
+    }
+
     /// Translational plus rotational kinetic energy of particle `i`.
     pub fn kinetic_energy(&self, i: usize) -> f64 {
         let w_body = self.orientation[i].inverse_transform_vector(&self.angular_velocity[i]);
         0.5 * self.mass[i] * self.velocity[i].norm_squared()
             + 0.5 * w_body.component_mul(&self.inertia[i]).dot(&w_body)
     }
+}
+
+/// Per-step observables.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StepStats {
+    /// Particle pairs with a positive overlap.
+    pub contacts: u64,
+    /// Particle–wall contacts with a positive overlap.
+    pub wall_contacts: u64,
+    /// Elastic energy stored in all contacts.
+    pub elastic_energy: f64,
+    /// Particles removed because they left a non-periodic domain, cumulative.
+    pub removed: u64,
 }

@@ -8,7 +8,7 @@ mod common;
 
 use common::*;
 use polydem::backend::cuda::{CudaSimulation, Precision};
-use polydem::pipeline::Simulation;
+use polydem::pipeline::{RestoredState, Simulation};
 use polydem::scene::parse_scene;
 use std::collections::HashMap;
 
@@ -83,22 +83,23 @@ fn sphere_scene() -> polydem::scene::Scene {
 }
 
 fn simulation() -> Simulation {
-    Simulation::new(scene()).unwrap()
+    Simulation::builder(scene()).build().unwrap()
 }
 
 /// A simulation of `scene` restored from the state of `s` (particles, contact history,
 /// inserter, time), as a checkpoint restores it.
 fn restored(scene: polydem::scene::Scene, s: &Simulation) -> Simulation {
-    Simulation::restore(
-        scene,
-        s.particles.clone(),
-        s.history.clone(),
-        s.inserter.clone(),
-        s.time,
-        s.step,
-        s.next_id,
-    )
-    .unwrap()
+    Simulation::builder(scene)
+        .restore(RestoredState {
+            particles: s.particles.clone(),
+            history: s.history.clone(),
+            inserter: s.inserter.clone(),
+            time: s.time,
+            step: s.step,
+            next_id: s.next_id,
+        })
+        .build()
+        .unwrap()
 }
 
 /// Largest differences, by global id, of position (relative to the particle size), velocity
@@ -261,7 +262,7 @@ fn a_thousand_steps_of_a_dense_pour_match_the_cpu() {
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn six_thousand_steps_of_a_sphere_pour_match_the_cpu() {
-    let mut cpu = Simulation::new(sphere_scene()).unwrap();
+    let mut cpu = Simulation::builder(sphere_scene()).build().unwrap();
     let mut double = CudaSimulation::from_scene(sphere_scene(), 0, Precision::Double).unwrap();
     let mut mixed = CudaSimulation::from_scene(sphere_scene(), 0, Precision::Mixed).unwrap();
     let mut worst = (0.0f64, 0.0f64, 0.0f64);
@@ -430,9 +431,13 @@ fn the_examples_on_the_gpu_stay_bitwise_equal_to_the_cpu() {
         let name = path.file_name().unwrap().to_string_lossy().to_string();
         let text = std::fs::read_to_string(path).unwrap();
         let scene = || parse_scene(&text, &dir, &name).unwrap();
-        let mut cpu = Simulation::new(scene()).unwrap();
-        let mut gpu =
-            CudaSimulation::new(Simulation::new(scene()).unwrap(), 0, Precision::Double).unwrap();
+        let mut cpu = Simulation::builder(scene()).build().unwrap();
+        let mut gpu = CudaSimulation::new(
+            Simulation::builder(scene()).build().unwrap(),
+            0,
+            Precision::Double,
+        )
+        .unwrap();
         for _ in 0..5000 {
             cpu.step().unwrap();
             gpu.step().unwrap();
@@ -479,7 +484,7 @@ fn moving_walls_on_the_gpu_match_the_cpu() {
     );
     for (what, text) in [("shaken", &shaker), ("turning", &turning)] {
         let scene = || parse_scene(text, &dir, "shaker.toml").unwrap();
-        let mut start = Simulation::new(scene()).unwrap();
+        let mut start = Simulation::builder(scene()).build().unwrap();
         for _ in 0..6000 {
             start.step().unwrap();
         }

@@ -51,7 +51,7 @@ generator = { kind = "cube", size = 0.017320508075688773 }
 /// steps and the steps A spent wrapped.
 fn run(xa: f64, steps: u64, device: Device) -> (Vector3<f64>, Vector3<f64>, u64) {
     let s = parse_scene(&scene(), &repo_root(), "seam.toml").unwrap();
-    let mut sim = Simulation::new(s).unwrap();
+    let mut sim = Simulation::builder(s).build().unwrap();
     let t = sim.scene.templates[0].clone();
     let q = UnitQuaternion::identity();
     for (id, x, v) in [(0u64, xa, 1.0), (1, (xa + 0.0105) % L, 0.0)] {

@@ -178,7 +178,8 @@ fn launch_scenes_start() {
                     _ => 0,
                 })
                 .sum();
-            let sim = polydem::pipeline::Simulation::new(scene)
+            let sim = polydem::pipeline::Simulation::builder(scene)
+                .build()
                 .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
             assert_eq!(sim.particles.len() as u64, to_place, "{}", f.display());
             started += 1;

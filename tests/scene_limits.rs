@@ -154,7 +154,9 @@ fn thrown_down(on_leaving: Option<&str>) -> String {
 #[test]
 fn leaving_the_domain_is_an_error_unless_the_scene_allows_it() {
     use polydem::pipeline::{Simulation, SimulationError};
-    let mut sim = Simulation::new(parse(&thrown_down(None)).unwrap()).unwrap();
+    let mut sim = Simulation::builder(parse(&thrown_down(None)).unwrap())
+        .build()
+        .unwrap();
     let err = loop {
         if let Err(e) = sim.step() {
             break e;
@@ -186,7 +188,9 @@ fn leaving_the_domain_is_an_error_unless_the_scene_allows_it() {
     assert_eq!(sim.stats.removed, 0);
 
     // Allowed: the same steps remove them and count them.
-    let mut sim = Simulation::new(parse(&thrown_down(Some("remove"))).unwrap()).unwrap();
+    let mut sim = Simulation::builder(parse(&thrown_down(Some("remove"))).unwrap())
+        .build()
+        .unwrap();
     while sim.step < 1000 {
         sim.step().unwrap();
     }

@@ -67,7 +67,7 @@ fn deep_overlap(device: Device) {
     let (r, v, dt) = (0.01, 1.0, 1e-4);
     let text = sphere_scene(1.0, 0.0, dt, "max_overlap = 0.1");
     let scene = parse_scene(&text, &repo_root(), "guard.toml").unwrap();
-    let mut sim = Simulation::new(scene).unwrap();
+    let mut sim = Simulation::builder(scene).build().unwrap();
     // Centres 2R + gap apart, closing at 2v: after n steps the lens is δ = 2 v Δt n − gap thick
     // (forces of 1 Pa change the velocities by 1e-9 of v over the run, far from a tie), with
     // the volume π (4R + d)(2R − d)²/12, d = 2R − δ.
@@ -103,7 +103,7 @@ fn speed_bound(device: Device) {
     let (g, dt, vmax) = (9.81, 1e-3, 1.0);
     let text = sphere_scene(1e7, -g, dt, "max_speed = 1.0");
     let scene = parse_scene(&text, &repo_root(), "guard.toml").unwrap();
-    let mut sim = Simulation::new(scene).unwrap();
+    let mut sim = Simulation::builder(scene).build().unwrap();
     place(&mut sim, &[(Vector3::new(0.0, 0.0, 5.0), Vector3::zeros())]);
     // |v| after step n's first half kick: g Δt (n − 1/2).
     let expected = (vmax / (g * dt) + 0.5).ceil() as u64;
@@ -142,7 +142,7 @@ fn the_default_speed_bound_is_ten_times_the_scene_speed_scale() {
     // Domain ±10 m: free fall across its diagonal √(2 g √1200); a turning wall adds ω r_max.
     let text = sphere_scene(1e7, -9.81, 1e-4, "enabled = true");
     let scene = parse_scene(&text, &repo_root(), "guard.toml").unwrap();
-    let mut sim = Simulation::new(scene).unwrap();
+    let mut sim = Simulation::builder(scene).build().unwrap();
     let fall = (2.0 * 9.81 * 1200f64.sqrt()).sqrt();
     assert!((sim.guard.speed_scale - fall).abs() <= 1e-12 * fall);
     assert!((sim.guard.max_speed - 10.0 * fall).abs() <= 1e-12 * fall);
@@ -158,7 +158,9 @@ fn the_default_speed_bound_is_ten_times_the_scene_speed_scale() {
     );
     // With the guard off nothing is bounded.
     let text = sphere_scene(1e7, -9.81, 1e-4, "enabled = false");
-    let sim = Simulation::new(parse_scene(&text, &repo_root(), "guard.toml").unwrap()).unwrap();
+    let sim = Simulation::builder(parse_scene(&text, &repo_root(), "guard.toml").unwrap())
+        .build()
+        .unwrap();
     assert!(sim.guard.max_speed.is_infinite() && sim.guard.max_overlap.is_infinite());
     // Bad values are refused with the key.
     let text = sphere_scene(1e7, -9.81, 1e-4, "max_overlap = -1.0");
@@ -340,7 +342,7 @@ fn elastic_packing(device: Device, shape: &str, steps: u64) -> f64 {
         _ => 0.009,
     };
     let scene = packing_scene(shape, spacing);
-    let mut sim = Simulation::new(scene).unwrap();
+    let mut sim = Simulation::builder(scene).build().unwrap();
     let mut rng = polydem::rng::Rng::new(11);
     for v in sim.particles.velocity.iter_mut() {
         *v = Vector3::new(

@@ -34,7 +34,7 @@ fn simulation(e: f64, mu: f64, g: f64, dt: f64, floor: bool, generator: &str) ->
         types: &types,
     });
     let scene = parse_scene(&text, &repo_root(), "validation.toml").unwrap();
-    Simulation::new(scene).unwrap()
+    Simulation::builder(scene).build().unwrap()
 }
 
 fn add(
@@ -356,8 +356,9 @@ fn rest(device: Device) {
             wall_motion: None,
             types: &types,
         });
-        let mut s =
-            Simulation::new(parse_scene(&text, &repo_root(), "rest.toml").unwrap()).unwrap();
+        let mut s = Simulation::builder(parse_scene(&text, &repo_root(), "rest.toml").unwrap())
+            .build()
+            .unwrap();
         let t = s.scene.templates[0].clone();
         // Face 0 down: rotate its normal onto −z.
         let q = UnitQuaternion::rotation_between(&t.faces[0].normal, &-Vector3::z())
@@ -465,7 +466,7 @@ dir = "{}"
             "aligned.toml",
         )
         .unwrap();
-        let mut sim = Simulation::new(scene).unwrap();
+        let mut sim = Simulation::builder(scene).build().unwrap();
         let mut rng = polydem::rng::Rng::new(7);
         let mut id = 0;
         for i in 0..3 {

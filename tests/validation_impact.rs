@@ -42,7 +42,7 @@ fn impact(theta_deg: f64, device: Device) -> Impact {
         types: &types,
     });
     let scene = parse_scene(&text, &root, "impact.toml").unwrap();
-    let mut sim = Simulation::new(scene).unwrap();
+    let mut sim = Simulation::builder(scene).build().unwrap();
     let t = sim.scene.templates[0].clone();
     // File frame: axis along z, a rim vertex towards +x. Tilt the axis to θ from the wall plane
     // by turning about y by 90° − θ: the rim vertex at +x of the lower cap becomes the lowest.

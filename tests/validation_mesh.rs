@@ -97,7 +97,9 @@ dir = "{}"
         wall.display(),
         dir.join("out").display()
     );
-    let mut sim = Simulation::new(parse_scene(&text, dir, "mesh.toml").unwrap()).unwrap();
+    let mut sim = Simulation::builder(parse_scene(&text, dir, "mesh.toml").unwrap())
+        .build()
+        .unwrap();
     let t = sim.scene.templates[0].clone();
     // Pressed in by 1 % of its edge, moving along x at 0.1 m/s (kinematically: position and
     // velocity are prescribed every step, the forces are what the wall answers).

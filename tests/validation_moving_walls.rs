@@ -47,8 +47,9 @@ fn cube_on_moving_floor(
         wall_motion: Some(motion),
         types: &types,
     });
-    let mut sim =
-        Simulation::new(parse_scene(&text, &repo_root(), "moving.toml").unwrap()).unwrap();
+    let mut sim = Simulation::builder(parse_scene(&text, &repo_root(), "moving.toml").unwrap())
+        .build()
+        .unwrap();
     let t = sim.scene.templates[0].clone();
     // Equilibrium overlap of a resting face: c A^{4/3} δ^{1/3} = m g with V = A δ.
     let (m, area) = (RHO * t.volume, EDGE * EDGE);

@@ -34,7 +34,7 @@ fn box_planes(lo: &Vector3<f64>, hi: &Vector3<f64>) -> Vec<(Vector3<f64>, f64)> 
 fn poured_dodecahedra_settle_to_the_experimental_packing_fraction() {
     let scene = load_scene(&repo_root().join("launch/validation/pour.toml")).unwrap();
     let end = scene.simulation.end_time;
-    let mut sim = Simulation::new(scene).unwrap();
+    let mut sim = Simulation::builder(scene).build().unwrap();
     // `step` fails on a non-finite position or velocity, so reaching the end means no NaN.
     while sim.time < end {
         sim.step().unwrap();

@@ -59,7 +59,7 @@ fn simulation(
     });
     let scene = parse_scene(&text, &repo_root(), "spheres.toml").unwrap();
     assert!(scene.spheres_only());
-    Simulation::new(scene).unwrap()
+    Simulation::builder(scene).build().unwrap()
 }
 
 /// Equal spheres of radius r with centres d apart: lens volume `π(4r + d)(2r − d)²/12` and

@@ -41,13 +41,16 @@ impl Engine {
         let backend: Box<dyn Backend> = match (start.into(), device) {
             (Start::State(sim), Device::Cpu) => sim,
             (Start::Scene { scene, comm }, Device::Cpu) => {
-                Box::new(Simulation::new_parallel(*scene, comm)?)
+                Box::new(Simulation::builder(*scene).comm(comm).build()?)
             }
             (Start::State(sim), Device::Cuda { ordinal, precision }) => {
                 Box::new(CudaSimulation::new(*sim, ordinal, precision)?)
             }
             (Start::Scene { scene, comm }, Device::Cuda { ordinal, precision }) => {
-                let host = Simulation::new_parallel_unevaluated(*scene, comm)?;
+                let host = Simulation::builder(*scene)
+                    .comm(comm)
+                    .evaluate_forces(false)
+                    .build()?;
                 let mut c = CudaSimulation::new(host, ordinal, precision)?;
                 c.evaluate_first_forces()?;
                 Box::new(c)

@@ -5,9 +5,24 @@
 use super::comm::Comm;
 use super::migration::{pack_particles, unpack_particles};
 use crate::contact::ContactHistory;
-use crate::pipeline::{Simulation, StepStats};
-use crate::state::Particles;
+use crate::state::{Particles, StepStats};
 use nalgebra::Vector3;
+
+/// One rank's part of a run as the whole-run views read it: implemented by the simulation, so
+/// that the decomposition needs none of its stages.
+pub trait RankState {
+    /// This rank's owned particles.
+    fn owned_particles(&self) -> &Particles;
+    /// Their contacts' history.
+    fn contact_history(&self) -> &ContactHistory;
+    /// Observables of the last force evaluation.
+    fn step_stats(&self) -> &StepStats;
+    /// This rank's particles' share of the force on each wall.
+    fn wall_force_shares(&self) -> &[Vector3<f64>];
+    /// Kinetic (translational, rotational) and gravitational potential energy of this rank's
+    /// particles.
+    fn energy_terms(&self) -> (f64, f64, f64);
+}
 
 /// Observables of the whole run.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -20,16 +35,16 @@ pub struct GlobalStats {
 }
 
 /// Sums this rank's observables with every other rank's (a collective call).
-pub fn global_stats(comm: &dyn Comm, sim: &Simulation) -> GlobalStats {
-    let (kt, kr, pg) = sim.energies();
-    let s = &sim.stats;
+pub fn global_stats(comm: &dyn Comm, sim: &impl RankState) -> GlobalStats {
+    let (kt, kr, pg) = sim.energy_terms();
+    let s = sim.step_stats();
     let mut f = vec![kt, kr, pg, s.elastic_energy];
-    for w in &sim.wall_forces {
+    for w in sim.wall_force_shares() {
         f.extend_from_slice(w.as_slice());
     }
     let f = comm.sum_f64(&f);
     let u = comm.sum_u64(&[
-        sim.particles.len() as u64,
+        sim.owned_particles().len() as u64,
         s.contacts,
         s.wall_contacts,
         s.removed,
@@ -54,12 +69,13 @@ pub fn global_stats(comm: &dyn Comm, sim: &Simulation) -> GlobalStats {
 /// call; `None` on the other ranks).
 pub fn gather_state(
     comm: &dyn Comm,
-    sim: &Simulation,
+    sim: &impl RankState,
     root: usize,
 ) -> Option<(Particles, ContactHistory)> {
-    let all: Vec<usize> = (0..sim.particles.len()).collect();
+    let (particles, history) = (sim.owned_particles(), sim.contact_history());
+    let all: Vec<usize> = (0..particles.len()).collect();
     let mut sends = vec![Vec::new(); comm.size()];
-    sends[root] = pack_particles(&sim.particles, &all, &sim.history);
+    sends[root] = pack_particles(particles, &all, history);
     let received = comm.all_to_all(&sends);
     if comm.rank() != root {
         return None;

@@ -131,7 +131,7 @@ pub fn migrate(
     gone.sort_unstable();
     let moved = gone.len();
     let received = comm.all_to_all(&sends);
-    crate::pipeline::remove_particles(p, &gone);
+    p.remove(&gone);
     let mut entries = history.entries().to_vec();
     for buf in &received {
         entries.extend(unpack_particles(buf, p));

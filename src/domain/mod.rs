@@ -14,12 +14,14 @@
 pub mod collect;
 pub mod comm;
 pub mod decomposition;
+pub mod exchange;
 pub mod halo;
 pub mod migration;
 pub mod pack;
 
 pub use comm::{Comm, SerialComm};
 pub use decomposition::{Aabb, DecompositionError, Subdomains};
+pub use exchange::{ExchangeError, Exchanged};
 
 use crate::neighbor::Bounds;
 use crate::scene::{BalanceWeight, Decomposition, ParallelSettings, Scene, SceneError};

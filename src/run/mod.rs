@@ -21,7 +21,7 @@ use crate::backend::cuda::Precision;
 use crate::backend::{BackendChoice, Device, Engine, Start, select_device};
 use crate::domain::{Comm, SerialComm};
 use crate::io::{remove_temporary_files, write_atomic};
-use crate::pipeline::Simulation;
+use crate::pipeline::{RestoredState, Simulation};
 use crate::scene::{Inserter, InserterState, load_scene};
 use anyhow::{Context, Result, anyhow};
 use checkpoints::{KeptCheckpoints, SceneId, read_restart, save_checkpoint, stopped_unstable};
@@ -115,16 +115,17 @@ fn start_or_restore(
     let inserter =
         Inserter::try_restore(&scene, &state).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let (particles, history) = local.map(|c| (c.particles, c.history)).unwrap_or_default();
-    let mut sim = Simulation::restore_parallel(
-        scene,
-        comm.clone(),
-        particles,
-        history,
-        inserter,
-        header.time,
-        header.step,
-        header.next_id,
-    )?;
+    let mut sim = Simulation::builder(scene)
+        .comm(comm.clone())
+        .restore(RestoredState {
+            particles,
+            history,
+            inserter,
+            time: header.time,
+            step: header.step,
+            next_id: header.next_id,
+        })
+        .build()?;
     // The removal count is the whole run's; rank 0 carries it.
     sim.stats.removed = if comm.rank() == 0 { header.removed } else { 0 };
     tracing::info!(

@@ -481,7 +481,7 @@ impl CudaSimulation {
         ordinal: usize,
         precision: Precision,
     ) -> Result<Self, CudaError> {
-        let host = Simulation::new_unevaluated(scene)?;
+        let host = Simulation::builder(scene).evaluate_forces(false).build()?;
         let mut sim = CudaSimulation::new(host, ordinal, precision)?;
         sim.evaluate_first_forces()?;
         Ok(sim)

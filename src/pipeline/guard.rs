@@ -1,0 +1,134 @@
+//! The stability guard's checks (`crate::stability`): speeds and finiteness after the drift,
+//! overlaps after the force evaluation, finiteness after the step; and the error that names a
+//! particle's contacts.
+
+use super::{Simulation, SimulationError};
+use crate::stability::{Instability, StabilityGuard};
+use rayon::prelude::*;
+
+impl Simulation {
+    /// Resolves the stability guard's bounds for the particles now placed (their speeds and
+    /// the elastic energy of the last force evaluation count in the scene's speed scale).
+    pub fn reset_guard(&mut self) {
+        if self.radius.len() != self.particles.len() {
+            self.refresh_radii();
+        }
+        self.guard = StabilityGuard::new(
+            &self.scene.simulation.guard,
+            &self.scene,
+            &self.particles,
+            &self.radius,
+            self.stats.elastic_energy,
+        );
+    }
+
+    /// [`Self::check_finite`] for a restored state, whose cause is the checkpoint.
+    pub(super) fn check_restored(&self) -> Result<(), SimulationError> {
+        self.check_finite().map_err(|e| match e {
+            SimulationError::NonFinite { step, id, .. } => SimulationError::Domain {
+                step,
+                message: format!(
+                    "the checkpoint holds particle {id} with a non-finite position or velocity"
+                ),
+            },
+            other => other,
+        })
+    }
+
+    /// The stability guard's finiteness and speed checks after the drift: the first particle
+    /// (by index) past a bound stops the step.
+    pub fn check_motion(&self) -> Result<(), SimulationError> {
+        let p = &self.particles;
+        let n = p.len().min(self.radius.len());
+        let found = (0..n)
+            .into_par_iter()
+            .find_first(|&i| self.guard.check_motion(p, &self.radius, i).is_some());
+        match found {
+            Some(i) => Err(self.unstable(i, self.guard.check_motion(p, &self.radius, i))),
+            None => Ok(()),
+        }
+    }
+
+    /// What the stability guard finds wrong with particle `i` now (finiteness and speed).
+    pub fn instability_of(&self, i: usize) -> Option<Instability> {
+        if self.radius.len() != self.particles.len() {
+            return None;
+        }
+        self.guard.check_motion(&self.particles, &self.radius, i)
+    }
+
+    /// The stability guard's overlap check on the last force evaluation.
+    pub(super) fn check_overlaps(&self) -> Result<(), SimulationError> {
+        match &self.too_deep {
+            Some((i, partner, volume, particle)) => Err(self.unstable(
+                *i,
+                Some(Instability::Overlap {
+                    partner: partner.clone(),
+                    volume: *volume,
+                    particle_volume: *particle,
+                    fraction: self.guard.max_overlap,
+                }),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// The guard's error for particle `i` (an index of this rank's particles), naming its
+    /// contacts from the history.
+    pub fn unstable(&self, i: usize, problem: Option<Instability>) -> SimulationError {
+        let id = self.particles.id[i];
+        let mut contacts: Vec<String> = self
+            .history
+            .entries()
+            .iter()
+            .filter(|(k, _)| k.a == id || (k.wall_index().is_none() && k.b == id))
+            .map(|(k, st)| {
+                let what = match k.wall_index() {
+                    Some(w) => format!(
+                        "wall \"{}\"",
+                        self.scene.walls.get(w).map_or("?", |w| w.name.as_str())
+                    ),
+                    None => format!("particle {}", if k.a == id { k.b } else { k.a }),
+                };
+                if st.approach_speed > 1e-300 {
+                    format!("{what} (first touched at {:.3e} m/s)", st.approach_speed)
+                } else {
+                    format!("{what} (in contact from rest)")
+                }
+            })
+            .collect();
+        if contacts.is_empty() {
+            contacts.push("none".into());
+        }
+        let p = &self.particles;
+        SimulationError::Unstable {
+            step: self.step,
+            id,
+            problem: format!(
+                "{} (position {:?}, velocity {:?}, angular velocity {:?})",
+                problem.map_or_else(|| "no bound is past now".to_string(), |p| p.to_string()),
+                p.position[i].as_slice(),
+                p.velocity[i].as_slice(),
+                p.angular_velocity[i].as_slice()
+            ),
+            contacts: contacts.join(", "),
+        }
+    }
+
+    /// The finiteness check at the end of a step: the first particle (by index) with a
+    /// non-finite position or velocity stops the run.
+    pub(super) fn check_finite(&self) -> Result<(), SimulationError> {
+        let p = &self.particles;
+        if let Some(i) = (0..p.len()).find(|&i| {
+            !(p.position[i].iter().all(|x| x.is_finite())
+                && p.velocity[i].iter().all(|x| x.is_finite()))
+        }) {
+            return Err(SimulationError::NonFinite {
+                step: self.step,
+                id: p.id[i],
+                field: "position or velocity",
+            });
+        }
+        Ok(())
+    }
+}

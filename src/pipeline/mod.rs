@@ -1,0 +1,213 @@
+//! The simulation and its step: every stage of DESIGN.md §1, in order.
+//!
+//! The translational and rotational integration is velocity Verlet: forces at the start of a
+//! step are those of the previous force evaluation, so [`Simulation::step`] runs
+//!
+//! - 9a: half kick and drift (integrate, first half; [`integration`]);
+//! - 1: exchange (insertion of due particles, removal of those that left a closed domain,
+//!   periodic wrapping; in a decomposed run migration and the halo, [`crate::domain`];
+//!   [`exchange`]);
+//! - 2: neighbour list (rebuilt when some particle moved half the skin; [`neighbors`]);
+//! - 3–7: per pair, bounding-sphere broad phase, narrow phase (the interior-point LP's proof of an
+//!   intersection, GJK where it proves none), dual-space overlap, contact law ([`pairs`]); per
+//!   particle and wall, facet contacts and the contact law (stage 6, [`walls`]);
+//! - 8: deterministic per-particle reduction (pairs in partner-id order, then walls in order;
+//!   [`reduction`]);
+//! - 9b: second half kick (integrate, second half);
+//!
+//! with the stability guard's checks between them ([`guard`]), and output (stage 10) is driven
+//! by the caller between steps ([`crate::run`]). Stages a scene does not need are skipped: no
+//! walls, no wall stage; μ = 0, no tangential history. A simulation starts from a
+//! [`SimulationBuilder`].
+
+mod builder;
+mod error;
+mod exchange;
+mod guard;
+mod integration;
+mod neighbors;
+mod pairs;
+mod reduction;
+mod walls;
+
+pub use crate::state::StepStats;
+pub use builder::{RestoredState, SimulationBuilder};
+pub use error::{SimulationError, StageTimers};
+
+use crate::contact::{ContactHistory, WallMesh};
+use crate::domain::Parallel;
+use crate::domain::collect::RankState;
+use crate::neighbor::{Bounds, PairList};
+use crate::scene::{Inserter, Scene};
+use crate::stability::StabilityGuard;
+use crate::state::Particles;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// A running simulation on the CPU backend.
+pub struct Simulation {
+    /// The scene it runs.
+    pub scene: Scene,
+    /// Particle state.
+    pub particles: Particles,
+    /// Live contacts' history.
+    pub history: ContactHistory,
+    /// Wall meshes in their t = 0 frames.
+    pub walls: Vec<WallMesh>,
+    /// Simulated time (s).
+    pub time: f64,
+    /// Steps done.
+    pub step: u64,
+    /// Time step (s).
+    pub dt: f64,
+    /// Next global id to give.
+    pub next_id: u64,
+    /// Places particles.
+    pub inserter: Inserter,
+    /// Stage timers.
+    pub timers: StageTimers,
+    /// Observables of the last force evaluation.
+    pub stats: StepStats,
+    /// Force on each wall from the last force evaluation (this rank's particles' share in a
+    /// decomposed run).
+    pub wall_forces: Vec<Vector3<f64>>,
+    /// This rank's part of a decomposed run (`None`: one rank, the whole domain).
+    pub parallel: Option<Box<Parallel>>,
+    pairs: PairList,
+    /// Per pair of `pairs`, the axis that separated it at the last evaluation (zero: none
+    /// known), tried before GJK ([`crate::geometry::overlap::axis_separates`]); cleared when
+    /// the list is rebuilt.
+    separating_axes: Vec<Vector3<f64>>,
+    bounds: Bounds,
+    radius: Vec<f64>,
+    /// Hunt–Crossley `ᾱ(e)` per material pair (`a * materials + b`).
+    damping: Vec<f64>,
+    dirty: bool,
+    /// The stability guard's bounds (`crate::stability`), set when particles are placed.
+    pub guard: StabilityGuard,
+    /// The contact of the last force evaluation past the guard's overlap bound, if any:
+    /// (particle index, what it overlaps, overlap volume, the smaller particle volume).
+    too_deep: Option<(usize, String, f64, f64)>,
+}
+
+impl Simulation {
+    /// Advances one time step (the stage order of DESIGN.md §1; see the module docs).
+    pub fn step(&mut self) -> Result<(), SimulationError> {
+        self.half_kick_and_drift(); // 9a
+        self.check_motion()?;
+        self.exchange()?; // 1
+        self.forces(self.dt)?; // 2–8
+        self.check_overlaps()?;
+        self.second_half_kick(); // 9b
+        self.check_finite()
+    }
+
+    /// Stages 2–8 at the current state, advancing the contact history by `dt` (zero: the
+    /// forces of the state as it is, the history left to the caller).
+    fn forces(&mut self, dt: f64) -> Result<(), SimulationError> {
+        let t_forces = Instant::now();
+        let owned = self.join_ghosts();
+        self.neighbor_list(owned); // 2
+        let pair_outcomes = self.pair_stage(dt, owned)?; // 3–7 (ghosts dropped again)
+        let wall_outcomes = self.wall_stage(dt)?; // 6
+        self.reduce(owned, &pair_outcomes, &wall_outcomes); // 8
+        if let Some(par) = self.parallel.as_deref_mut() {
+            par.cost += t_forces.elapsed().as_secs_f64();
+        }
+        Ok(())
+    }
+
+    /// Re-evaluates forces after the particle state was edited directly (tests, set-up
+    /// tools): neighbour lists and radii are rebuilt, the contact history is kept as is.
+    pub fn refresh(&mut self) -> Result<(), SimulationError> {
+        self.dirty = true;
+        self.refresh_radii();
+        self.reset_guard();
+        if self.parallel.is_some() {
+            self.parallel_exchange()?;
+        }
+        let saved = self.history.clone();
+        self.forces(0.0)?;
+        self.history = saved;
+        self.reset_guard();
+        Ok(())
+    }
+
+    /// The candidate pair list of stage 2 as global-id pairs (lower id first), sorted: what the
+    /// GPU's list must equal after a build from the same positions.
+    pub fn candidate_pair_ids(&self) -> Vec<(u64, u64)> {
+        let id = &self.particles.id;
+        let mut v: Vec<(u64, u64)> = self
+            .pairs
+            .pairs
+            .iter()
+            .map(|&[a, b]| {
+                let (x, y) = (id[a as usize], id[b as usize]);
+                (x.min(y), x.max(y))
+            })
+            .collect();
+        v.sort_unstable();
+        v
+    }
+
+    /// Kinetic, gravitational and elastic energy together (J): what an elastic, frictionless
+    /// run conserves.
+    pub fn total_energy(&self) -> f64 {
+        let (kt, kr, pg) = self.energies();
+        kt + kr + pg + self.stats.elastic_energy
+    }
+
+    /// Kinetic energy (translational, rotational) and gravitational potential energy
+    /// (relative to the origin).
+    pub fn energies(&self) -> (f64, f64, f64) {
+        let p = &self.particles;
+        let g = self.scene.gravity;
+        let mut terms: Vec<(u64, [f64; 3])> = (0..p.len())
+            .into_par_iter()
+            .map(|i| {
+                let wb = p.orientation[i].inverse_transform_vector(&p.angular_velocity[i]);
+                (
+                    p.id[i],
+                    [
+                        0.5 * p.mass[i] * p.velocity[i].norm_squared(),
+                        0.5 * wb.component_mul(&p.inertia[i]).dot(&wb),
+                        -p.mass[i] * g.dot(&p.position[i]),
+                    ],
+                )
+            })
+            .collect();
+        // Summed one by one in id order: a parallel reduction's grouping varies with the
+        // threads' work stealing, and the local order with the backend and a restart, either of
+        // which would change the last bits of a value that the state alone determines.
+        if !terms.windows(2).all(|w| w[0].0 < w[1].0) {
+            terms.sort_unstable_by_key(|t| t.0);
+        }
+        terms.iter().fold((0.0, 0.0, 0.0), |a, (_, e)| {
+            (a.0 + e[0], a.1 + e[1], a.2 + e[2])
+        })
+    }
+}
+
+/// The whole-run views of a decomposed run read a rank's state through this.
+impl RankState for Simulation {
+    fn owned_particles(&self) -> &Particles {
+        &self.particles
+    }
+
+    fn contact_history(&self) -> &ContactHistory {
+        &self.history
+    }
+
+    fn step_stats(&self) -> &StepStats {
+        &self.stats
+    }
+
+    fn wall_force_shares(&self) -> &[Vector3<f64>] {
+        &self.wall_forces
+    }
+
+    fn energy_terms(&self) -> (f64, f64, f64) {
+        self.energies()
+    }
+}

@@ -1,0 +1,248 @@
+//! Stages 3–7 for particle pairs: bounding-sphere broad phase, narrow phase (the interior-point
+//! LP's proof of an intersection, GJK where it proves none), dual-space overlap and the contact
+//! law, one rayon job per candidate pair; and what the pair and wall stages share (contact
+//! parameters, the effective mass, the per-thread workspace).
+
+use super::{Simulation, SimulationError};
+use crate::contact::{
+    ContactForces, ContactKey, ContactKinematics, ContactParameters, ContactState, contact_forces,
+};
+use crate::geometry::Overlap;
+use crate::geometry::overlap::{PairWorkspace, axis_separates, overlap_pair};
+use crate::geometry::sphere::sphere_lens;
+use crate::state::Particles;
+use nalgebra::{Isometry3, Vector3};
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// The result of one pair's contact evaluation.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct PairOutcome {
+    /// GJK's separating axis for a disjoint pair (zero otherwise).
+    pub(super) separating_axis: Vector3<f64>,
+    pub(super) forces: ContactForces,
+    pub(super) state: Option<(ContactKey, ContactState)>,
+    /// The overlap's volume over the smaller particle's volume (the stability guard's measure).
+    pub(super) penetration: f64,
+}
+
+impl Simulation {
+    /// The volume of particle `i`, as `(4π/3) R³` of its volume-equivalent radius (the
+    /// stability guard's measure, computed alike on the GPU).
+    pub(super) fn equivalent_volume(&self, i: usize) -> f64 {
+        let s = &self.scene;
+        let p = &self.particles;
+        let r = s.templates[s.particle_types[p.kind[i] as usize].template].equivalent_radius
+            * p.scale[i];
+        crate::stability::ball_volume(r)
+    }
+
+    /// The contact law's parameters of particle `i` against particle `other`, or against a wall
+    /// of material `wall_material` when `other` is `None`.
+    pub(super) fn contact_parameters(
+        &self,
+        i: usize,
+        other: Option<usize>,
+        wall_material: usize,
+    ) -> ContactParameters {
+        let s = &self.scene;
+        let p = &self.particles;
+        let side = |k: usize| {
+            let ty = &s.particle_types[p.kind[k] as usize];
+            let m = &s.materials[ty.material];
+            let r = s.templates[ty.template].equivalent_radius * p.scale[k];
+            (
+                ty.material,
+                m.youngs_modulus / r,
+                m.youngs_modulus / (2.0 * (1.0 + m.poisson_ratio) * r),
+            )
+        };
+        let (ma, cn_a, ct_a) = side(i);
+        // A wall is flat: its radius is infinite and only the particle's term remains.
+        let (mb, cn_b, ct_b) = match other {
+            Some(j) => side(j),
+            None => (wall_material, 0.0, 0.0),
+        };
+        let pair = s.pairs.get(ma, mb);
+        ContactParameters {
+            normal_stiffness: cn_a + cn_b,
+            tangential_stiffness: ct_a + ct_b,
+            restitution: pair.restitution,
+            friction: pair.friction,
+            damping: self.damping[ma * s.materials.len() + mb],
+            rocking: !s.templates[s.particle_types[p.kind[i] as usize].template].sphere,
+        }
+    }
+
+    /// Stages 3–7 with their timer: the outcome per candidate pair, and each pair's separating
+    /// axis kept for the next step. The ghosts [`Simulation::join_ghosts`] appended are dropped
+    /// again, whatever the outcome.
+    pub(super) fn pair_stage(
+        &mut self,
+        dt: f64,
+        owned: usize,
+    ) -> Result<Vec<PairOutcome>, SimulationError> {
+        let t0 = Instant::now();
+        let outcomes = self.pair_contacts(dt);
+        self.particles.truncate(owned);
+        self.radius.truncate(owned);
+        let outcomes = outcomes?;
+        for (axis, o) in self.separating_axes.iter_mut().zip(&outcomes) {
+            *axis = o.separating_axis;
+        }
+        self.timers.pairs += t0.elapsed().as_secs_f64();
+        Ok(outcomes)
+    }
+
+    /// Stages 3–7 for every candidate pair of the list, in list order (ghosts joined after the
+    /// owned particles): the outcome per pair, or the first pair whose geometry failed.
+    pub(super) fn pair_contacts(&self, dt: f64) -> Result<Vec<PairOutcome>, SimulationError> {
+        let p = &self.particles;
+        let s = &self.scene;
+        let step = self.step;
+        let spheres = s.spheres_only();
+        let periodic = self.bounds.periodic.iter().any(|&k| k);
+        let bounds = self.bounds;
+        self.pairs
+            .pairs
+            .par_iter()
+            .zip(self.separating_axes.par_iter())
+            .map(|(pair, axis)| {
+                let (a, b) = (pair[0] as usize, pair[1] as usize);
+                // B's periodic image from the current centroids by the list build's minimum-image
+                // arithmetic (not the build's shift: a particle wrapped across a periodic face
+                // since the build keeps its contacts); no shift without periodic axes.
+                let xb = if periodic {
+                    let (xa, xb) = (p.position[a], p.position[b]);
+                    xb + (bounds.displacement(&xa, &xb) - (xb - xa))
+                } else {
+                    p.position[b]
+                };
+                let d = xb - p.position[a];
+                let reach = self.radius[a] + self.radius[b];
+                // Stage 3: bounding spheres.
+                if d.norm_squared() >= reach * reach {
+                    return Ok(PairOutcome::default());
+                }
+                let overlap = if spheres {
+                    // Stages 4–5 for spheres: the lens in closed form.
+                    let o =
+                        sphere_lens(self.radius[a], self.radius[b], &d).to_world(&p.position[a]);
+                    if o.volume <= 0.0 {
+                        return Ok(PairOutcome::default());
+                    }
+                    o
+                } else {
+                    let ta = &s.templates[s.particle_types[p.kind[a] as usize].template];
+                    let tb = &s.templates[s.particle_types[p.kind[b] as usize].template];
+                    let pose_a = Isometry3::from_parts(p.position[a].into(), p.orientation[a]);
+                    let pose_b = Isometry3::from_parts(xb.into(), p.orientation[b]);
+                    let (body_a, body_b) = ((ta, p.scale[a], &pose_a), (tb, p.scale[b], &pose_b));
+                    // Stage 4 shortcut: last step's separating axis, with a margin far above
+                    // GJK's touching tolerance (1e-12 of the size in f64), so the verdict is
+                    // GJK's.
+                    if *axis != Vector3::zeros()
+                        && axis_separates(body_a, body_b, axis, 1e-9 * reach)
+                    {
+                        return Ok(PairOutcome {
+                            separating_axis: *axis,
+                            ..PairOutcome::default()
+                        });
+                    }
+                    // Stages 4–5: the narrow phase (GJK where the Chebyshev centre proves no
+                    // intersection), then the overlap.
+                    let g = with_workspace(|ws| overlap_pair(ws, body_a, body_b)).map_err(|e| {
+                        SimulationError::Geometry {
+                            step,
+                            what: format!("particles {} and {}", p.id[a], p.id[b]),
+                            message: e.to_string(),
+                        }
+                    })?;
+                    if g.overlap.volume <= 0.0 {
+                        return Ok(PairOutcome {
+                            separating_axis: g.separating_axis.unwrap_or_default(),
+                            ..PairOutcome::default()
+                        });
+                    }
+                    g.overlap
+                };
+                // Stage 7: contact law.
+                let params = self.contact_parameters(a, Some(b), 0);
+                let key = ContactKey::particles(p.id[a], p.id[b]);
+                let mut state = self.history.get(&key).copied().unwrap_or_default();
+                let kin = ContactKinematics {
+                    x_a: p.position[a],
+                    x_b: xb,
+                    v_a: p.velocity[a],
+                    v_b: p.velocity[b],
+                    w_a: p.angular_velocity[a],
+                    w_b: p.angular_velocity[b],
+                    // A lens's centroid is on the line of centres: no rotational term.
+                    effective_mass: if spheres {
+                        1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b])
+                    } else {
+                        normal_effective_mass(p, &[(a, p.position[a]), (b, xb)], &overlap)
+                    },
+                    q_a: p.orientation[a],
+                    q_b: p.orientation[b],
+                    inverse_inertia_a: p.inertia[a].map(|x| 1.0 / x),
+                    inverse_inertia_b: p.inertia[b].map(|x| 1.0 / x),
+                    sphere_radius_a: if spheres { self.radius[a] } else { 0.0 },
+                    sphere_radius_b: if spheres { self.radius[b] } else { 0.0 },
+                };
+                let forces = contact_forces(&params, &overlap, &kin, &mut state, dt);
+                Ok(PairOutcome {
+                    separating_axis: Vector3::zeros(),
+                    forces,
+                    state: Some((key, state)),
+                    penetration: overlap.volume
+                        / self.equivalent_volume(a).min(self.equivalent_volume(b)),
+                })
+            })
+            .collect::<Vec<_>>()
+            // The first failing pair in list order, whatever the threads' timing.
+            .into_iter()
+            .collect()
+    }
+}
+
+thread_local! {
+    /// One pair workspace per worker thread, made on first use: the workspace holds the
+    /// fixed-capacity overlap buffers (tens of kilobytes), too big to build per rayon job.
+    static WORKSPACE: std::cell::RefCell<Option<Box<PairWorkspace<f64>>>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// Runs `f` with this thread's pair workspace (a fresh one if it is already in use, which only
+/// a nested call could cause).
+pub(super) fn with_workspace<R>(f: impl FnOnce(&mut PairWorkspace<f64>) -> R) -> R {
+    WORKSPACE.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut slot) => f(slot.get_or_insert_with(PairWorkspace::boxed)),
+        Err(_) => f(&mut PairWorkspace::boxed()),
+    })
+}
+
+/// The mass a contact's normal impulse sees: `1/m* = Σ 1/m + (r × n)·I⁻¹(r × n)` over the
+/// bodies touching (centres `x`, lever arms `r` from them to the overlap centroid). The damping
+/// is scaled with it, so that the prescribed restitution holds for eccentric impacts too, where
+/// the contact point also turns the body (seed Eq. 15 uses the translational mass only, which
+/// over-damps such impacts: 4 % too little spin after the cylinder–wall impact at 75°).
+pub(super) fn normal_effective_mass(
+    p: &Particles,
+    bodies: &[(usize, Vector3<f64>)],
+    o: &Overlap<f64>,
+) -> f64 {
+    let Some(n) = o.normal() else {
+        return bodies
+            .iter()
+            .map(|&(i, _)| p.mass[i])
+            .fold(f64::MAX, f64::min);
+    };
+    let mut inverse = 0.0;
+    for &(i, x) in bodies {
+        let arm = (o.centroid - x).cross(&n);
+        let body = p.orientation[i].inverse_transform_vector(&arm);
+        inverse += 1.0 / p.mass[i] + body.component_div(&p.inertia[i]).dot(&body);
+    }
+    1.0 / inverse
+}

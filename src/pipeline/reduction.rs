@@ -1,0 +1,165 @@
+//! Stage 8: the deterministic reduction. Each particle's force and torque are summed from its
+//! pairs in partner-id order, then its walls in order; the contact history, the contact counts,
+//! the elastic energy and the wall forces are collected in an order that neither the thread
+//! count nor the pair list's build step changes; the stability guard's overlap bound is checked
+//! on the outcomes in list order.
+
+use super::Simulation;
+use super::pairs::PairOutcome;
+use super::walls::WallOutcome;
+use crate::contact::{ContactHistory, ContactKey, ContactState};
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+impl Simulation {
+    /// Stage 8 for the `owned` particles (the ghosts already dropped), from the pair outcomes
+    /// of stages 3–7 (in pair-list order) and the wall outcomes of stage 6 (per particle).
+    pub(super) fn reduce(
+        &mut self,
+        owned: usize,
+        outcomes: &[PairOutcome],
+        wall_outcomes: &[WallOutcome],
+    ) {
+        let t0 = Instant::now();
+        self.reduce_forces(outcomes, wall_outcomes);
+        self.reduce_contacts(owned, outcomes, wall_outcomes);
+        self.find_too_deep(owned, outcomes, wall_outcomes);
+        self.timers.reduce += t0.elapsed().as_secs_f64();
+    }
+
+    /// Each particle's force and torque: its pairs in the list's per-particle order (by
+    /// partner id), then its walls.
+    fn reduce_forces(&mut self, outcomes: &[PairOutcome], wall_outcomes: &[WallOutcome]) {
+        let pairs = &self.pairs;
+        let p = &mut self.particles;
+        p.force
+            .par_iter_mut()
+            .zip(p.torque.par_iter_mut())
+            .enumerate()
+            .for_each(|(i, (f, t))| {
+                let mut force = Vector3::zeros();
+                let mut torque = Vector3::zeros();
+                for r in pairs.of(i) {
+                    let o = &outcomes[r.pair as usize].forces;
+                    if r.is_b {
+                        force += o.force_b;
+                        torque += o.torque_b;
+                    } else {
+                        force -= o.force_b;
+                        torque += o.torque_a;
+                    }
+                }
+                if let Some(w) = wall_outcomes.get(i) {
+                    force += w.force;
+                    torque += w.torque;
+                }
+                *f = force;
+                *t = torque;
+            });
+    }
+
+    /// The contact history, the contact counts, the elastic energy and the force on each wall.
+    fn reduce_contacts(
+        &mut self,
+        owned: usize,
+        outcomes: &[PairOutcome],
+        wall_outcomes: &[WallOutcome],
+    ) {
+        let pairs = &self.pairs;
+        let mut entries: Vec<(ContactKey, ContactState)> =
+            outcomes.iter().filter_map(|o| o.state).collect();
+        let mut wall_forces = vec![Vector3::zeros(); self.walls.len()];
+        // A pair across two ranks is evaluated on both; it counts where its lower-id member
+        // (the pair's first) is owned, so that sums over ranks count it once.
+        let counted = |k: usize| self.pairs.pairs[k][0] < owned as u32;
+        // Summed per particle in local order, each particle's pairs by partner id (the order
+        // of the force reduction above), not in pair-list order: the list's order depends on
+        // the step it was built at, which a restart changes, and the energy must not.
+        let listed = owned.min(pairs.offsets.len().saturating_sub(1));
+        let mut energy: f64 = 0.0;
+        for i in 0..listed {
+            for r in pairs.of(i) {
+                if !r.is_b && counted(r.pair as usize) {
+                    energy += outcomes[r.pair as usize].forces.elastic_energy;
+                }
+            }
+        }
+        let mut wall_contacts = 0;
+        for w in wall_outcomes {
+            energy += w.energy;
+            wall_contacts += w.states.len() as u64;
+            entries.extend_from_slice(&w.states);
+            for (k, f) in &w.per_wall {
+                wall_forces[*k] += f;
+            }
+        }
+        self.stats.contacts = outcomes
+            .iter()
+            .enumerate()
+            .filter(|(k, o)| o.state.is_some() && counted(*k))
+            .count() as u64;
+        self.stats.wall_contacts = wall_contacts;
+        self.stats.elastic_energy = energy;
+        self.wall_forces = wall_forces;
+        self.history = ContactHistory::from_entries(entries);
+    }
+
+    /// The contact past the stability guard's overlap bound, if any, for
+    /// [`Simulation::check_overlaps`].
+    fn find_too_deep(
+        &mut self,
+        owned: usize,
+        outcomes: &[PairOutcome],
+        wall_outcomes: &[WallOutcome],
+    ) {
+        // The guard's overlap bound: the first pair past it, else the first particle with a
+        // wall contact past it (deterministic, whatever the thread count).
+        let limit = self.guard.max_overlap;
+        self.too_deep = None;
+        if limit.is_finite() {
+            // Id and volume ((4π/3) R³ of the volume-equivalent radius) of an owned particle
+            // or a ghost.
+            let member = |x: usize| {
+                let s = &self.scene;
+                let p = if x < owned {
+                    (&self.particles, x)
+                } else {
+                    let par = self
+                        .parallel
+                        .as_deref()
+                        .expect("ghosts only in a decomposed run");
+                    (&par.ghosts.particles, x - owned)
+                };
+                let (p, x) = p;
+                let t = &s.templates[s.particle_types[p.kind[x] as usize].template];
+                (
+                    p.id[x],
+                    crate::stability::ball_volume(t.equivalent_radius * p.scale[x]),
+                )
+            };
+            let volume = |i: usize| member(i).1;
+            if let Some(k) = outcomes.iter().position(|o| o.penetration > limit) {
+                let [a, b] = self.pairs.pairs[k].map(|x| x as usize);
+                // The owned member is named (a ghost's id is still the partner's).
+                let (i, j) = if a < owned { (a, b) } else { (b, a) };
+                let size = volume(i).min(volume(j));
+                self.too_deep = Some((
+                    i,
+                    format!("particle {}", member(j).0),
+                    outcomes[k].penetration * size,
+                    size,
+                ));
+            } else if let Some(i) = wall_outcomes.iter().position(|w| w.penetration.0 > limit) {
+                let (depth, k) = wall_outcomes[i].penetration;
+                let size = volume(i);
+                self.too_deep = Some((
+                    i,
+                    format!("wall \"{}\"", self.scene.walls[k].name),
+                    depth * size,
+                    size,
+                ));
+            }
+        }
+    }
+}

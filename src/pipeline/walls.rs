@@ -1,0 +1,122 @@
+//! Stage 6: per particle, the facet contacts with every wall near it and the contact law, one
+//! rayon job per particle, in the wall's own frame.
+
+use super::pairs::{normal_effective_mass, with_workspace};
+use super::{Simulation, SimulationError};
+use crate::contact::{ContactKey, ContactKinematics, ContactState, contact_forces};
+use crate::geometry::{Overlap, PosedPolytope};
+use nalgebra::{Isometry3, Vector3};
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// A particle's total wall contribution.
+#[derive(Clone, Debug, Default)]
+pub(super) struct WallOutcome {
+    pub(super) force: Vector3<f64>,
+    pub(super) torque: Vector3<f64>,
+    pub(super) energy: f64,
+    pub(super) per_wall: Vec<(usize, Vector3<f64>)>,
+    pub(super) states: Vec<(ContactKey, ContactState)>,
+    /// The deepest wall contact: overlap volume over the particle's volume, and the wall.
+    pub(super) penetration: (f64, usize),
+}
+
+impl Simulation {
+    /// Stage 6 with its timer.
+    pub(super) fn wall_stage(&mut self, dt: f64) -> Result<Vec<WallOutcome>, SimulationError> {
+        let t0 = Instant::now();
+        let wall_outcomes = self.wall_contacts(dt)?;
+        self.timers.walls += t0.elapsed().as_secs_f64();
+        Ok(wall_outcomes)
+    }
+
+    /// Stage 6 for every owned particle, in index order: its contacts with the walls, or the
+    /// first particle whose wall geometry failed. No walls, no work.
+    pub(super) fn wall_contacts(&self, dt: f64) -> Result<Vec<WallOutcome>, SimulationError> {
+        if self.walls.is_empty() {
+            return Ok(Vec::new());
+        }
+        let p = &self.particles;
+        let s = &self.scene;
+        let (t, step) = (self.time, self.step);
+        let poses: Vec<Isometry3<f64>> = s.walls.iter().map(|w| w.motion.transform(t)).collect();
+        (0..p.len())
+            .into_par_iter()
+            .map_init(Vec::new, |facets, i| {
+                with_workspace(|ws| {
+                    let mut out = WallOutcome::default();
+                    let tmpl = &s.templates[s.particle_types[p.kind[i] as usize].template];
+                    let pose = Isometry3::from_parts(p.position[i].into(), p.orientation[i]);
+                    for (k, (mesh, wall_pose)) in self.walls.iter().zip(&poses).enumerate() {
+                        // Work in the wall's own frame, where its facets are binned.
+                        let local = wall_pose.inverse() * pose;
+                        mesh.facets_near(&local.translation.vector, self.radius[i], facets);
+                        if facets.is_empty() {
+                            continue;
+                        }
+                        let o = if tmpl.sphere {
+                            mesh.sphere_contact(&local.translation.vector, self.radius[i], facets)
+                        } else {
+                            let body: &mut PosedPolytope<f64> = &mut ws.a;
+                            body.place(tmpl, p.scale[i], &local, &Vector3::zeros());
+                            mesh.contact(&mut ws.overlap, body, (tmpl, p.scale[i], &local), facets)
+                                .map_err(|e| SimulationError::Geometry {
+                                    step,
+                                    what: format!(
+                                        "particle {} and wall {}",
+                                        p.id[i], s.walls[k].name
+                                    ),
+                                    message: e.to_string(),
+                                })?
+                        };
+                        if o.volume <= 0.0 {
+                            continue;
+                        }
+                        let rot = wall_pose.rotation;
+                        let world = Overlap {
+                            volume: o.volume,
+                            centroid: (wall_pose * nalgebra::Point3::from(o.centroid)).coords,
+                            dv_dxb: rot * o.dv_dxb,
+                            moment_b: rot * o.moment_b,
+                            depth: o.depth,
+                            thickness: o.thickness,
+                        };
+                        let params = self.contact_parameters(i, None, s.walls[k].material);
+                        let key = ContactKey::wall(p.id[i], k);
+                        let mut state = self.history.get(&key).copied().unwrap_or_default();
+                        let c = world.centroid;
+                        let kin = ContactKinematics {
+                            x_a: p.position[i],
+                            x_b: c,
+                            v_a: p.velocity[i],
+                            v_b: s.walls[k].motion.velocity_at(t, &c),
+                            w_a: p.angular_velocity[i],
+                            w_b: s.walls[k].motion.angular_velocity(),
+                            effective_mass: normal_effective_mass(p, &[(i, p.position[i])], &world),
+                            q_a: p.orientation[i],
+                            q_b: nalgebra::UnitQuaternion::identity(),
+                            inverse_inertia_a: p.inertia[i].map(|x| 1.0 / x),
+                            inverse_inertia_b: Vector3::zeros(),
+                            sphere_radius_a: if tmpl.sphere { self.radius[i] } else { 0.0 },
+                            sphere_radius_b: 0.0,
+                        };
+                        let f = contact_forces(&params, &world, &kin, &mut state, dt);
+                        let depth = world.volume / self.equivalent_volume(i);
+                        if depth > out.penetration.0 {
+                            out.penetration = (depth, k);
+                        }
+                        out.force -= f.force_b;
+                        out.torque += f.torque_a;
+                        out.energy += f.elastic_energy;
+                        out.per_wall.push((k, f.force_b));
+                        out.states.push((key, state));
+                    }
+                    Ok(out)
+                })
+            })
+            .collect::<Vec<_>>()
+            // The first failing particle in index order, whatever the threads' timing.
+            .into_iter()
+            .collect()
+    }
+}
