@@ -1,6 +1,7 @@
 //! Stage 1 on this rank: insertion of due particles, removal of those that left a closed domain,
-//! periodic wrapping; in a decomposed run the decomposition's part ([`crate::domain::Parallel::exchange`])
-//! follows, and what it changes here (radii, wall facets) is brought up to date.
+//! periodic wrapping; in a decomposed run the decomposition's part
+//! ([`crate::domain::Parallel::exchange`]) follows, and what it changes here (radii, wall
+//! facets) is brought up to date.
 
 use super::{Simulation, SimulationError};
 use crate::contact::WallMesh;
@@ -9,7 +10,7 @@ use crate::scene::LeavingDomain;
 use std::time::Instant;
 
 impl Simulation {
-    /// Whether insertions are due at the current time (see [`Inserter::pending`]).
+    /// Whether insertions are due at the current time (see [`crate::scene::Inserter::pending`]).
     pub fn inserter_pending(&self) -> bool {
         self.inserter.pending(self.time, &self.scene)
     }

@@ -3,22 +3,22 @@
 //! The translational and rotational integration is velocity Verlet: forces at the start of a
 //! step are those of the previous force evaluation, so [`Simulation::step`] runs
 //!
-//! - 9a: half kick and drift (integrate, first half; [`integration`]);
+//! - 9a: half kick and drift (integrate, first half; `integration.rs`);
 //! - 1: exchange (insertion of due particles, removal of those that left a closed domain,
-//!   periodic wrapping; in a decomposed run migration and the halo, [`crate::domain`];
-//!   [`exchange`]);
-//! - 2: neighbour list (rebuilt when some particle moved half the skin; [`neighbors`]);
+//!   periodic wrapping; in a decomposed run migration and the halo exchange of
+//!   [`crate::domain`]; `exchange.rs`);
+//! - 2: neighbour list (rebuilt when some particle moved half the skin; `neighbors.rs`);
 //! - 3–7: per pair, bounding-sphere broad phase, narrow phase (the interior-point LP's proof of an
-//!   intersection, GJK where it proves none), dual-space overlap, contact law ([`pairs`]); per
-//!   particle and wall, facet contacts and the contact law (stage 6, [`walls`]);
+//!   intersection, GJK where it proves none), dual-space overlap, contact law (`pairs.rs`); per
+//!   particle and wall, facet contacts and the contact law (stage 6, `walls.rs`);
 //! - 8: deterministic per-particle reduction (pairs in partner-id order, then walls in order;
-//!   [`reduction`]);
+//!   `reduction.rs`);
 //! - 9b: second half kick (integrate, second half);
 //!
-//! with the stability guard's checks between them ([`guard`]), and output (stage 10) is driven
-//! by the caller between steps ([`crate::run`]). Stages a scene does not need are skipped: no
+//! with the stability guard's checks between them (`guard.rs`); output (stage 10) is driven by
+//! the caller between steps ([`crate::run`]). Stages a scene does not need are skipped: no
 //! walls, no wall stage; μ = 0, no tangential history. A simulation starts from a
-//! [`SimulationBuilder`].
+//! [`SimulationBuilder`] ([`Simulation::builder`]).
 
 mod builder;
 mod error;

@@ -474,7 +474,7 @@ impl CudaSimulation {
     }
 
     /// A new simulation of `scene` on GPU `ordinal`: particles of count insertions placed on
-    /// the host, the first forces evaluated on the device (as [`Simulation::new`] does on the
+    /// the host, the first forces evaluated on the device (as [`Simulation::builder`] does on the
     /// CPU, advancing the springs by one step).
     pub fn from_scene(
         scene: crate::scene::Scene,
