@@ -49,28 +49,8 @@ PD_DEVICE TemplateView template_view(unsigned int t) {
     return v;
 }
 
-// The particle state the contact stages read (device pointers, xyz-interleaved).
-struct ParticleView {
-    const double* position;
-    const double* velocity;
-    const double* angular_velocity;
-    const double* orientation; // x, y, z, w
-    const double* mass;
-    const double* inertia;
-    const double* scale;
-    const double* radius;      // bounding (circumscribed) radius
-    const double* cn;          // E / R (volume-equivalent radius): normal stiffness term
-    const double* ct;          // E / (2 (1 + ν) R): tangential stiffness term
-    const unsigned int* tmpl;  // template index
-    const unsigned int* material;
-};
-
-// Per-pair outputs: force on B, torque on A, torque on B (nine doubles), elastic energy.
-struct PairOutputs {
-    double* forces;
-    double* energy;
-    unsigned int* contact; // 1 when the pair is in contact (its spring is live history)
-};
+// ParticleView, PairOutputs and PairArgs, the structs every pair evaluation reads and writes,
+// are in layout.cuh (shared with Rust).
 
 // Where a geometry error happened: a pair of the list, or a particle against the walls.
 #define PD_ERROR_PAIR 0ull
@@ -84,23 +64,6 @@ PD_DEVICE void report_error(unsigned int* error, unsigned long long source, int 
     unsigned long long key = (source << 40) | ((unsigned long long)where << 8) | (unsigned long long)(status & 0xff);
     atomicMax((unsigned long long*)error, ~key);
 }
-
-// The arguments every pair evaluation reads and writes.
-struct PairArgs {
-    const int2* pairs;
-    GridParams grid;
-    double* axes;
-    ParticleView p;
-    const PairMaterial* materials;
-    int n_materials;
-    const double* spring_in;
-    double* spring_out;
-    PairOutputs out;
-    double dt;
-    double max_overlap; // the stability guard's overlap-volume bound (src/stability.rs); inf: off
-    unsigned int* error;
-};
-static_assert(sizeof(PairArgs) == PD_SIZEOF_PAIR_ARGS, "PairArgs differs from Rust's simulation::PairArgs");
 
 // The slots of pair k with no contact: no force, no energy, no spring. Every pair's slots are
 // written once per step, by whichever kernel settles the pair: these zeros, or the contact
@@ -524,28 +487,8 @@ extern "C" __global__ void pair_contacts_deferred(PairArgs args, const unsigned 
 #define PD_WALL_MERGE_CELLS 27
 #endif
 
-// One wall mesh in its own frame (src/contact/wall.rs `WallMesh`): facets
-// [facet_offset, facet_offset + n_facets) of the concatenated arrays, its facet grid, material.
-struct WallInfo {
-    int facet_offset;
-    int n_facets;
-    int cell_offset; // into the concatenated cell starts (each grid has cells + 1 entries)
-    int material;
-    double grid_min[3];
-    double grid_size;
-    int dims[3];
-    int pad;
-};
-
-// A wall's pose and velocity field at the current time (WallMotion::transform, velocity_at,
-// angular_velocity): a point c of the wall moves with v0 + omega × (c − origin).
-struct WallState {
-    double rotation[4]; // x, y, z, w
-    double translation[3];
-    double v0[3];
-    double omega[3];
-    double origin[3];
-};
+// WallInfo (one wall mesh in its own frame) and WallState (a wall's pose and velocity field at
+// the current time) are in layout.cuh (shared with Rust).
 
 // Point–triangle distance (wall.rs point_triangle_distance, Ericson §5.1.5).
 PD_DEVICE double point_triangle_distance(V3<double> x, const double* t) {
@@ -645,11 +588,19 @@ PD_DEVICE void wall_local_pose(const WallState& s, V3<double> xp, Quat<double> q
 // in each wall's frame (`kick_drift`'s wall check and the host's bound on the walls' motion),
 // the list holds every facet within the bounding radius, which `wall_facet_overlaps` then picks
 // by the same distance test as the CPU's per-step query: the same facets in the same order.
-extern "C" __global__ void wall_candidates(int n, ParticleView p, int n_walls, const WallInfo* walls,
-                                           const WallState* states, const double* triangles,
-                                           const unsigned int* cell_start, const unsigned int* cell_items,
-                                           double skin, unsigned int* counts, const unsigned int* offset,
-                                           uint2* items) {
+extern "C" __global__ void wall_candidates(WallCandidatesParams args) {
+    const int n = args.n;
+    const ParticleView p = args.p;
+    const int n_walls = args.n_walls;
+    const WallInfo* walls = args.walls;
+    const WallState* states = args.states;
+    const double* triangles = args.triangles;
+    const unsigned int* cell_start = args.cell_start;
+    const unsigned int* cell_items = args.cell_items;
+    const double skin = args.skin;
+    unsigned int* counts = args.counts;
+    const unsigned int* offset = args.offset;
+    uint2* items = args.items;
     int ii = blockIdx.x * blockDim.x + threadIdx.x;
     if (ii >= n) {
         return;
@@ -726,9 +677,16 @@ extern "C" __global__ void wall_candidates(int n, ParticleView p, int n_walls, c
 // its bounding radius is out of reach (zero volume, which the sum skips, as the CPU never lists
 // it); otherwise the particle is clipped by the facet's prism. overlaps[12 m ...] = volume,
 // centroid (3), S (3), M (3), depth, thickness, in the wall's frame.
-extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, int n_walls, ParticleView p,
-                                               const WallState* states, const double* triangles,
-                                               const double* prisms, double* overlaps, unsigned int* error) {
+extern "C" __global__ void wall_facet_overlaps(WallOverlapsParams args) {
+    const int n_items = args.n_items;
+    const uint2* items = args.items;
+    const int n_walls = args.n_walls;
+    const ParticleView p = args.p;
+    const WallState* states = args.states;
+    const double* triangles = args.triangles;
+    const double* prisms = args.prisms;
+    double* overlaps = args.overlaps;
+    unsigned int* error = args.error;
     int mm = blockIdx.x * blockDim.x + threadIdx.x;
     if (mm >= n_items) {
         return;
@@ -782,13 +740,27 @@ extern "C" __global__ void wall_facet_overlaps(int n_items, const uint2* items, 
 // Stage 6, second part, per particle (Simulation::wall_contacts): for every wall, the facet
 // overlaps summed in facet-id order into the total penetrating volume (WallMesh::contact) and
 // the contact law applied once to the total; the wall's spring per particle and wall.
-extern "C" __global__ void wall_contacts(int n, ParticleView p, int n_walls, const WallState* states,
-                                         const WallInfo* walls, const unsigned int* item_offset, const uint2* items,
-                                         const double* overlaps, const PairMaterial* materials, int n_materials,
-                                         const double* spring_in, double* spring_out, double* wall_force,
-                                         double* wall_torque, double* wall_energy, double* per_wall_force,
-                                         unsigned int* wall_contact, double dt, double max_overlap,
-                                         unsigned int* error) {
+extern "C" __global__ void wall_contacts(WallContactsParams args) {
+    const int n = args.n;
+    const ParticleView p = args.p;
+    const int n_walls = args.n_walls;
+    const WallState* states = args.states;
+    const WallInfo* walls = args.walls;
+    const unsigned int* item_offset = args.item_offset;
+    const uint2* items = args.items;
+    const double* overlaps = args.overlaps;
+    const PairMaterial* materials = args.materials;
+    const int n_materials = args.n_materials;
+    const double* spring_in = args.spring_in;
+    double* spring_out = args.spring_out;
+    double* wall_force = args.wall_force;
+    double* wall_torque = args.wall_torque;
+    double* wall_energy = args.wall_energy;
+    double* per_wall_force = args.per_wall_force;
+    unsigned int* wall_contact = args.wall_contact;
+    const double dt = args.dt;
+    const double max_overlap = args.max_overlap;
+    unsigned int* error = args.error;
     int ii = blockIdx.x * blockDim.x + threadIdx.x;
     if (ii >= n) {
         return;

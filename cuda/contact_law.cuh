@@ -5,20 +5,9 @@
 #pragma once
 #include "common.cuh"
 #include "overlap.cuh"
+#include "layout.cuh"
 
 namespace pd {
-
-// Contact parameters of one pair of materials (shared with Rust: layout.rs `PairMaterial`).
-struct PairMaterial {
-    double restitution;
-    double friction;
-    double damping;         // Hunt–Crossley ᾱ(e), computed on the host
-    double log_restitution; // ln e, computed on the host
-    double log_norm;        // sqrt((ln e)² + π²), computed on the host
-};
-#ifdef PD_SIZEOF_PAIR_MATERIAL
-static_assert(sizeof(PairMaterial) == PD_SIZEOF_PAIR_MATERIAL, "PairMaterial differs from Rust's layout::PairMaterial");
-#endif
 
 // Parameters of one contact (law.rs `ContactParameters`).
 struct ContactParameters {

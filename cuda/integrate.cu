@@ -72,25 +72,43 @@ PD_DEVICE double wrap_coordinate(double x, double lo, double hi) {
 // Simulation::step): the half kick with last step's forces, the drift x += v dt with the free
 // rotation by the symmetric splitting 1(dt/2) 2(dt/2) 3(dt) 2(dt/2) 1(dt/2) (integrate::drift,
 // integrate::free_rotation), the periodic wrap (`wrap` nonzero) and the per-step checks
-// (`checks` nonzero), reduced into `flags` (zeroed by the host): flags[0] = 1 when some particle
-// moved more than half the skin since the last list build (PairList::needs_rebuild), flags[1] =
-// number of particles outside a closed domain box, flags[2] = 1 when a position or velocity is
-// not finite, or an owned particle's angular velocity or orientation is not, or it moves faster
-// than `max_speed` (|v| + |ω| radius; the stability guard, Simulation::check_motion), flags[3] =
-// the smallest local index of such a particle (for the error message), flags[4] = 1 when, with `wall_reference` not null, some particle is
+// (`checks` nonzero), reduced into `flags` (StepFlags of layout.cuh, zeroed by the host):
+// `rebuild` = 1 when some particle moved more than half the skin since the last list build
+// (PairList::needs_rebuild), `outside` = number of particles outside a closed domain box,
+// `unstable` = 1 when a position or velocity is not finite, or an owned particle's angular
+// velocity or orientation is not, or it moves faster than `max_speed` (|v| + |ω| radius; the
+// stability guard, Simulation::check_motion), `first_unstable` = the smallest local index of
+// such a particle (for the error message), `wall_rebuild` = 1 when, with `wall_reference` not
+// null, some particle is
 // farther than `wall_half_reach` from where the wall list was built (the plain difference: a
 // periodic wrap moves a particle against the walls; the host has already taken the walls' own
 // motion off the half skin). Ghosts of a decomposed run are neither kicked nor drifted (their
 // owners' motion arrives through the halo) but are wrapped and checked, as on the CPU. Each
 // value takes the same operations as the separate stages of the CPU backend, in the same
 // order, so that fusing them changes no bit.
-extern "C" __global__ void kick_drift(int n, const unsigned int* ghost, double* position, double* velocity,
-                                      double* orientation, double* angular_velocity, const double* force,
-                                      const double* torque, const double* mass, const double* inertia, double gx,
-                                      double gy, double gz, double dt, int wrap, GridParams grid, int checks,
-                                      const double* reference, double half_skin,
-                                      const double* wall_reference, double wall_half_reach,
-                                      const double* radius, double max_speed, unsigned int* flags) {
+extern "C" __global__ void kick_drift(KickDriftParams args) {
+    const int n = args.n;
+    const unsigned int* ghost = args.ghost;
+    double* position = args.position;
+    double* velocity = args.velocity;
+    double* orientation = args.orientation;
+    double* angular_velocity = args.angular_velocity;
+    const double* force = args.force;
+    const double* torque = args.torque;
+    const double* mass = args.mass;
+    const double* inertia = args.inertia;
+    const double gx = args.gravity[0], gy = args.gravity[1], gz = args.gravity[2];
+    const double dt = args.dt;
+    const int wrap = args.wrap;
+    const GridParams& grid = args.grid;
+    const int checks = args.checks;
+    const double* reference = args.reference;
+    const double half_skin = args.half_skin;
+    const double* wall_reference = args.wall_reference;
+    const double wall_half_reach = args.wall_half_reach;
+    const double* radius = args.radius;
+    const double max_speed = args.max_speed;
+    StepFlags* flags = args.flags;
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) {
         return;
@@ -161,10 +179,10 @@ extern "C" __global__ void kick_drift(int n, const unsigned int* ghost, double* 
     }
     V3<double> dx = displacement(grid, load3(reference, i), x);
     if (norm2(dx) > half_skin * half_skin) {
-        flags[0] = 1u;
+        flags->rebuild = 1u;
     }
     if (wall_reference != nullptr && norm2(x - load3(wall_reference, i)) > wall_half_reach * wall_half_reach) {
-        flags[4] = 1u;
+        flags->wall_rebuild = 1u;
     }
     double c[3] = {x.x, x.y, x.z};
     bool outside = false;
@@ -174,7 +192,7 @@ extern "C" __global__ void kick_drift(int n, const unsigned int* ghost, double* 
         }
     }
     if (outside) {
-        atomicAdd(&flags[1], 1u);
+        atomicAdd(&flags->outside, 1u);
     }
     // Finiteness, and for owned particles the stability guard's speed bound (src/stability.rs
     // StabilityGuard::check_motion; the host names the cause from the synced state).
@@ -185,8 +203,8 @@ extern "C" __global__ void kick_drift(int n, const unsigned int* ghost, double* 
         bad = bad || more - more != 0.0 || norm(v) + norm(w_new) * radius[i] > max_speed;
     }
     if (bad) {
-        flags[2] = 1u;
-        atomicMin(&flags[3], (unsigned int)i);
+        flags->unstable = 1u;
+        atomicMin(&flags->first_unstable, (unsigned int)i);
     }
 }
 
@@ -196,12 +214,24 @@ extern "C" __global__ void kick_drift(int n, const unsigned int* ghost, double* 
 // the particle's force and torque, then the half kick with them (half_kick_particle). Reference
 // r names pair r >> 1, whose slot holds the force on B and the torques on A and B; bit 0 says
 // whether the particle is B. Ghosts are summed but not kicked.
-extern "C" __global__ void reduce_and_kick(int n, const unsigned int* ref_offset, const unsigned int* refs,
-                                           const double* pair_forces, const double* wall_force,
-                                           const double* wall_torque, double* force, double* torque, int kick,
-                                           const unsigned int* ghost, double* velocity, double* angular_velocity,
-                                           const double* mass, const double* inertia, const double* orientation,
-                                           double gx, double gy, double gz, double dt) {
+extern "C" __global__ void reduce_and_kick(ReduceKickParams args) {
+    const int n = args.n;
+    const unsigned int* ref_offset = args.ref_offset;
+    const unsigned int* refs = args.refs;
+    const double* pair_forces = args.pair_forces;
+    const double* wall_force = args.wall_force;
+    const double* wall_torque = args.wall_torque;
+    double* force = args.force;
+    double* torque = args.torque;
+    const int kick = args.kick;
+    const unsigned int* ghost = args.ghost;
+    double* velocity = args.velocity;
+    double* angular_velocity = args.angular_velocity;
+    const double* mass = args.mass;
+    const double* inertia = args.inertia;
+    const double* orientation = args.orientation;
+    const double gx = args.gravity[0], gy = args.gravity[1], gz = args.gravity[2];
+    const double dt = args.dt;
     int ii = blockIdx.x * blockDim.x + threadIdx.x;
     if (ii >= n) {
         return;

@@ -146,9 +146,16 @@ struct CountVisit {
     PD_DEVICE void operator()(int, V3<double>) { ++count; }
 };
 
-extern "C" __global__ void count_pairs(int n, const double* position, const double* radius, const pd_u64* id,
-                                       const unsigned int* ghost, int part, const unsigned int* cell_start,
-                                       GridParams grid, double skin, unsigned int* counts) {
+extern "C" __global__ void count_pairs(PairSearchParams args, unsigned int* counts) {
+    const int n = args.n;
+    const double* position = args.position;
+    const double* radius = args.radius;
+    const pd_u64* id = args.id;
+    const unsigned int* ghost = args.ghost;
+    const int part = args.part;
+    const unsigned int* cell_start = args.cell_start;
+    const GridParams& grid = args.grid;
+    const double skin = args.skin;
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) {
         return;
@@ -162,10 +169,16 @@ extern "C" __global__ void count_pairs(int n, const double* position, const doub
 
 // Pairs (i, j) at pair_offset[i] .. (no periodic shift is stored: the pair kernels take each
 // pair's image from the step's centroids).
-extern "C" __global__ void fill_pairs(int n, const double* position, const double* radius, const pd_u64* id,
-                                      const unsigned int* ghost, int part, const unsigned int* cell_start,
-                                      GridParams grid, double skin, const unsigned int* pair_offset,
-                                      int2* pairs) {
+extern "C" __global__ void fill_pairs(PairSearchParams args, const unsigned int* pair_offset, int2* pairs) {
+    const int n = args.n;
+    const double* position = args.position;
+    const double* radius = args.radius;
+    const pd_u64* id = args.id;
+    const unsigned int* ghost = args.ghost;
+    const int part = args.part;
+    const unsigned int* cell_start = args.cell_start;
+    const GridParams& grid = args.grid;
+    const double skin = args.skin;
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) {
         return;

@@ -10,24 +10,14 @@
 #include "common.cuh"
 #include "overlap.cuh"
 #include "prism.cuh"
+#include "layout.cuh"
 
 using namespace pd;
 
 // Template table: template t's vertices at vertices[3 (t mv + i)], its face normals at
 // normals[3 (t mf + i)] with offsets[t mf + i]; counts[2t], counts[2t + 1] the vertex and face
-// counts; radius[t] the circumscribed radius; face polygons as in TemplateView.
-struct ProbeTemplates {
-    const double* vertices;
-    const double* normals;
-    const double* offsets;
-    const int* counts;
-    const double* radius;
-    const unsigned short* face_start;    // max_faces + 1 per template
-    const double* face_points;           // 3 max_face_indices per template
-    int max_vertices;
-    int max_faces;
-    int max_face_indices;
-};
+// counts; radius[t] the circumscribed radius; face polygons as in TemplateView (the struct
+// `ProbeTemplates` is in layout.cuh).
 
 PD_DEVICE TemplateView probe_template(const ProbeTemplates& t, int i) {
     TemplateView v;

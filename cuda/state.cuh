@@ -1,9 +1,8 @@
 // Device-side views of the particle state and of the per-step parameters, shared by every
-// kernel file. The structs marked "shared with Rust" are mirrored by `#[repr(C)]` structs in
-// src/backend/cuda/layout.rs; their sizes are passed in as PD_SIZEOF_* defines and checked
-// below, so a layout drift fails the kernel compile (DESIGN.md §3).
+// kernel file. The structs shared with Rust (GridParams among them) are in layout.cuh.
 #pragma once
 #include "common.cuh"
+#include "layout.cuh"
 
 namespace pd {
 
@@ -30,18 +29,6 @@ PD_HD void store_quat(double* q, size_t i, Quat<double> r) {
     q[4 * i + 3] = r.w;
 }
 
-// The domain box and the neighbour grid (shared with Rust: `GridParams`). Mirrors
-// src/neighbor/mod.rs `Bounds` and `Grid`.
-struct GridParams {
-    double min[3];     // domain box
-    double max[3];
-    double size[3];    // cell widths
-    int dims[3];       // cells per axis
-    int periodic[3];   // 1 on periodic axes
-};
-#ifdef PD_SIZEOF_GRID_PARAMS
-static_assert(sizeof(GridParams) == PD_SIZEOF_GRID_PARAMS, "GridParams differs from Rust's layout::GridParams");
-#endif
 
 // Minimum-image displacement from a to b (Bounds::displacement); C's `round`, like Rust's,
 // rounds half away from zero.

@@ -14,15 +14,29 @@
 //!
 //! [`Simulation`]: crate::pipeline::Simulation
 
-use super::simulation::{CudaError, CudaSimulation, cfg, zeros};
-use cudarc::driver::{CudaEvent, CudaSlice, PinnedHostSlice, PushKernelArg};
+use super::error::{CudaError, HaloError};
+use super::gpu::Gpu;
+use super::launch::{cfg, zeros};
+use super::particles::DeviceParticles;
+use crate::domain::Parallel;
+use cudarc::driver::{CudaEvent, CudaSlice, PinnedHostSlice};
 use std::time::Instant;
 
 /// Doubles of one motion record (`cuda/halo.cu: PD_MOTION_DOUBLES`).
 const MOTION: usize = 13;
 
+/// A decomposed run's halo on the device: the buffers of the current plan (from one rebuild
+/// to the next), and whether this step's refresh is still due.
+#[derive(Default)]
+pub(super) struct HaloStage {
+    /// `None` outside a decomposed run, and from an upload to the next list build.
+    buffers: Option<HaloBuffers>,
+    /// The ghosts await this step's halo refresh (set by the exchange, done by the forces).
+    pub(super) due: bool,
+}
+
 /// The halo's device-side index lists and staging buffers, valid from one rebuild to the next.
-pub(super) struct DeviceHalo {
+struct HaloBuffers {
     /// Device slots of the owned particles sent: neighbour by neighbour in the plan's order,
     /// then this rank's own periodic images.
     send_slots: CudaSlice<u32>,
@@ -42,21 +56,29 @@ pub(super) struct DeviceHalo {
     received: Option<CudaEvent>,
 }
 
-impl CudaSimulation {
+impl HaloStage {
+    /// Drops the buffers of the last plan (an upload: the next list build sets up new ones).
+    pub(super) fn reset(&mut self) {
+        self.buffers = None;
+    }
+
     /// After a list build of a decomposed run: the device slots of the plan's particles and of
     /// the ghosts, from the build's reordering (`order[k]` = upload index now at slot `k`),
     /// and staging buffers sized for them.
-    pub(super) fn setup_halo(&mut self, order: &CudaSlice<u32>) -> Result<(), CudaError> {
-        let Some(par) = self.host.parallel.as_deref() else {
-            return Ok(());
-        };
-        let st = self.stream.clone();
+    pub(super) fn setup(
+        &mut self,
+        gpu: &Gpu,
+        n: usize,
+        par: &Parallel,
+        order: &CudaSlice<u32>,
+    ) -> Result<(), CudaError> {
+        let st = gpu.stream.clone();
         let order = st.clone_dtoh(order)?;
-        let mut slot = vec![0u32; self.n];
-        for (k, &o) in order.iter().take(self.n).enumerate() {
+        let mut slot = vec![0u32; n];
+        for (k, &o) in order.iter().take(n).enumerate() {
             slot[o as usize] = k as u32;
         }
-        let owned = self.n - par.ghosts.particles.len();
+        let owned = n - par.ghosts.particles.len();
         let plan = &par.plan;
         let mut sends: Vec<u32> = Vec::with_capacity(plan.sent() + plan.self_images.len());
         let mut send_counts = Vec::with_capacity(plan.sends.len() + 1);
@@ -64,8 +86,8 @@ impl CudaSimulation {
             sends.extend(list.iter().map(|(i, _)| slot[*i as usize]));
             send_counts.push(list.len());
         }
-        let n_ghosts = self.n - owned;
-        let ghosts: Vec<u32> = (owned..self.n).map(|g| slot[g]).collect();
+        let n_ghosts = n - owned;
+        let ghosts: Vec<u32> = (owned..n).map(|g| slot[g]).collect();
         let pad = |mut v: Vec<u32>| {
             if v.is_empty() {
                 v.push(0);
@@ -81,7 +103,7 @@ impl CudaSimulation {
                 ctx.alloc_pinned::<f64>((MOTION * n_ghosts).max(1))?,
             )
         };
-        self.halo = Some(DeviceHalo {
+        self.buffers = Some(HaloBuffers {
             send_slots: st.clone_htod(&pad(sends))?,
             send_counts,
             ghost_slots: st.clone_htod(&pad(ghosts))?,
@@ -99,29 +121,29 @@ impl CudaSimulation {
     /// Stage 1 between rebuilds, first half: the motion of this rank's outer-region particles
     /// packed on the device and its copy to the pinned buffer queued (the stream goes on with
     /// the pairs of owned particles meanwhile).
-    pub(super) fn start_halo(&mut self) -> Result<(), CudaError> {
-        let Some(h) = self.halo.as_mut() else {
+    pub(super) fn start(&mut self, gpu: &Gpu, p: &DeviceParticles) -> Result<(), CudaError> {
+        let Some(h) = self.buffers.as_mut() else {
             return Ok(());
         };
         let n_send: usize = h.send_counts.iter().sum();
         if n_send == 0 {
             return Ok(());
         }
-        let st = &self.stream;
+        let st = &gpu.stream;
         let nsi = n_send as i32;
-        let p = &self.p;
-        // SAFETY: `pack_motion(count, slots, position, velocity, orientation, ω, out)`; the
-        // slots are below n and `out` holds 13 doubles per slot.
+        // SAFETY: the slots are below n and `send_device` holds 13 doubles per slot.
         unsafe {
-            st.launch_builder(self.k.get("pack_motion"))
-                .arg(&nsi)
-                .arg(&h.send_slots)
-                .arg(&p.position)
-                .arg(&p.velocity)
-                .arg(&p.orientation)
-                .arg(&p.angular_velocity)
-                .arg(&mut h.send_device)
-                .launch(cfg(n_send))?;
+            gpu.k.pack_motion(
+                st,
+                cfg(n_send),
+                &nsi,
+                &h.send_slots,
+                &p.position,
+                &p.velocity,
+                &p.orientation,
+                &p.angular_velocity,
+                &mut h.send_device,
+            )?;
         }
         // Asynchronous into pinned memory: the host waits for this copy alone.
         st.memcpy_dtoh(&h.send_device, &mut h.send_host)?;
@@ -132,15 +154,17 @@ impl CudaSimulation {
     /// Second half: waits for the packed motion, exchanges it with the neighbours by MPI, and
     /// queues the upload of what arrived and its unpacking into the ghost slots (after the
     /// work already queued on the stream).
-    pub(super) fn finish_halo(&mut self) -> Result<(), CudaError> {
-        let Some(h) = self.halo.as_mut() else {
-            return Ok(());
-        };
-        let Some(par) = self.host.parallel.as_deref_mut() else {
+    pub(super) fn finish(
+        &mut self,
+        gpu: &Gpu,
+        p: &mut DeviceParticles,
+        par: &mut Parallel,
+    ) -> Result<(), CudaError> {
+        let Some(h) = self.buffers.as_mut() else {
             return Ok(());
         };
         let t0 = Instant::now();
-        let st = &self.stream;
+        let st = &gpu.stream;
         let n_send: usize = h.send_counts.iter().sum();
         // Waits for the copy alone, not for the pair kernel queued after it.
         if let Some(e) = h.sent.take() {
@@ -170,30 +194,30 @@ impl CudaSimulation {
             k += m;
         }
         if k != MOTION * h.n_ghosts {
-            return Err(CudaError::Halo(format!(
-                "halo refresh on rank {}: {} motion values for {} ghosts (the neighbours' plans \
-                 changed between rebuilds)",
-                par.rank(),
-                k,
-                h.n_ghosts
-            )));
+            return Err(HaloError::MotionCount {
+                rank: par.rank(),
+                values: k,
+                ghosts: h.n_ghosts,
+            }
+            .into());
         }
         if h.n_ghosts > 0 {
             st.memcpy_htod(&h.recv_host, &mut h.recv_device)?;
             h.received = Some(st.record_event(None)?);
             let ngi = h.n_ghosts as i32;
-            let p = &mut self.p;
-            // SAFETY: `unpack_motion(count, slots, in, position, velocity, orientation, ω)`.
+            // SAFETY: the ghost slots are below n and `recv_device` holds 13 doubles per ghost.
             unsafe {
-                st.launch_builder(self.k.get("unpack_motion"))
-                    .arg(&ngi)
-                    .arg(&h.ghost_slots)
-                    .arg(&h.recv_device)
-                    .arg(&mut p.position)
-                    .arg(&mut p.velocity)
-                    .arg(&mut p.orientation)
-                    .arg(&mut p.angular_velocity)
-                    .launch(cfg(h.n_ghosts))?;
+                gpu.k.unpack_motion(
+                    st,
+                    cfg(h.n_ghosts),
+                    &ngi,
+                    &h.ghost_slots,
+                    &h.recv_device,
+                    &mut p.position,
+                    &mut p.velocity,
+                    &mut p.orientation,
+                    &mut p.angular_velocity,
+                )?;
             }
         }
         par.timers.halo += t0.elapsed().as_secs_f64();

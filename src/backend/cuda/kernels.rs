@@ -10,6 +10,7 @@ use cudarc::nvrtc::{CompileOptions, Ptx};
 /// (each header once), so the binary carries its kernels and runs from any directory.
 pub const SOURCES: &[(&str, &str)] = &[
     ("common.cuh", include_str!("../../../cuda/common.cuh")),
+    ("layout.cuh", include_str!("../../../cuda/layout.cuh")),
     ("state.cuh", include_str!("../../../cuda/state.cuh")),
     ("polytope.cuh", include_str!("../../../cuda/polytope.cuh")),
     ("gjk.cuh", include_str!("../../../cuda/gjk.cuh")),
@@ -144,13 +145,34 @@ impl KernelConfig {
         if phase_clocks() {
             d.push("-DPD_PHASE_CLOCKS=1".into());
         }
-        d.extend(layout::size_defines());
+        d.extend(layout::layout_defines());
         d.push(format!(
             "-DPD_SIZEOF_STAGED_PLANES={}",
             layout::staged_planes_bytes(self.precision)
         ));
         d
     }
+}
+
+/// Why a kernel file did not compile.
+#[derive(Debug, thiserror::Error)]
+pub enum CompileError {
+    /// An `#include` names a file that is not among [`SOURCES`].
+    #[error("cuda/{name} is not among the embedded kernel sources")]
+    MissingSource { name: String },
+    /// NVRTC rejected the source: its log.
+    #[error("NVRTC could not compile cuda/{kernel_file} (options {options:?}):\n{log}")]
+    Nvrtc {
+        kernel_file: String,
+        options: Vec<String>,
+        log: String,
+    },
+    /// NVRTC failed otherwise (the library, the program's creation).
+    #[error("NVRTC could not compile cuda/{kernel_file}: {source:?}")]
+    Failed {
+        kernel_file: String,
+        source: cudarc::nvrtc::CompileError,
+    },
 }
 
 /// Register cap of the lean polyhedral pair kernels (`pair_planes` and `pair_faces`; the
@@ -176,8 +198,8 @@ pub fn phase_clocks() -> bool {
 
 /// `file` with its `#include "…"` lines replaced by the named sources (each once, as
 /// `#pragma once` would), so NVRTC needs no file system.
-pub fn expand(file: &str) -> Result<String, String> {
-    fn visit(name: &str, seen: &mut Vec<String>, out: &mut String) -> Result<(), String> {
+pub fn expand(file: &str) -> Result<String, CompileError> {
+    fn visit(name: &str, seen: &mut Vec<String>, out: &mut String) -> Result<(), CompileError> {
         if seen.iter().any(|s| s == name) {
             return Ok(());
         }
@@ -186,7 +208,9 @@ pub fn expand(file: &str) -> Result<String, String> {
             .iter()
             .find(|(n, _)| *n == name)
             .map(|(_, t)| *t)
-            .ok_or_else(|| format!("cuda/{name} is not among the embedded kernel sources"))?;
+            .ok_or_else(|| CompileError::MissingSource {
+                name: name.to_string(),
+            })?;
         for line in text.lines() {
             let t = line.trim_start();
             if let Some(rest) = t.strip_prefix("#include \"") {
@@ -212,7 +236,7 @@ pub fn expand(file: &str) -> Result<String, String> {
 /// The PTX is cached ([`ptx_cache_dir`]) under a hash of the expanded source, the options and
 /// the NVRTC version, so a run (and every rank of a decomposed run) after the first skips the
 /// seconds NVRTC takes; a cache that cannot be read or written is only skipped.
-pub fn compile(file: &str, config: &KernelConfig, arch: u32) -> Result<Ptx, String> {
+pub fn compile(file: &str, config: &KernelConfig, arch: u32) -> Result<Ptx, CompileError> {
     compile_in(file, config, arch, ptx_cache_dir().as_deref())
 }
 
@@ -222,7 +246,7 @@ pub fn compile_in(
     config: &KernelConfig,
     arch: u32,
     cache: Option<&std::path::Path>,
-) -> Result<Ptx, String> {
+) -> Result<Ptx, CompileError> {
     let source = expand(file)?;
     let mut options = config.defines();
     options.push(format!("--gpu-architecture=sm_{arch}"));
@@ -287,7 +311,7 @@ fn nvrtc_version() -> String {
     format!("nvrtc {major}.{minor}")
 }
 
-fn nvrtc_compile(file: &str, source: String, options: Vec<String>) -> Result<Ptx, String> {
+fn nvrtc_compile(file: &str, source: String, options: Vec<String>) -> Result<Ptx, CompileError> {
     let opts = CompileOptions {
         fmad: Some(false),
         options,
@@ -295,10 +319,14 @@ fn nvrtc_compile(file: &str, source: String, options: Vec<String>) -> Result<Ptx
         ..Default::default()
     };
     cudarc::nvrtc::compile_ptx_with_opts(source, opts).map_err(|e| match e {
-        cudarc::nvrtc::CompileError::CompileError { log, options, .. } => format!(
-            "NVRTC could not compile cuda/{file} (options {options:?}):\n{}",
-            log.to_string_lossy()
-        ),
-        other => format!("NVRTC could not compile cuda/{file}: {other:?}"),
+        cudarc::nvrtc::CompileError::CompileError { log, options, .. } => CompileError::Nvrtc {
+            kernel_file: file.to_string(),
+            options,
+            log: log.to_string_lossy().into_owned(),
+        },
+        source => CompileError::Failed {
+            kernel_file: file.to_string(),
+            source,
+        },
     })
 }

@@ -1,11 +1,14 @@
-//! Structs shared with the kernels, `#[repr(C)]` on both sides. Their sizes go to NVRTC as
-//! `PD_SIZEOF_*` defines, and the `.cu`/`.cuh` side `static_assert`s them (DESIGN.md §3), so a
-//! layout drift fails the kernel compile check in CI.
+//! Every struct shared with the kernels, `#[repr(C)]` here and mirrored field for field in
+//! `cuda/layout.cuh`. Their sizes and field offsets go to NVRTC as `PD_SIZEOF_<STRUCT>` and
+//! `PD_OFFSETOF_<STRUCT>_<field>` defines ([`layout_defines`]), which `cuda/layout.cuh`
+//! `static_assert`s (DESIGN.md §3), so a layout drift fails the kernel compile check in CI.
+//! Device pointers are `u64` ([`DevPtr`]); structs passed by value to a kernel (the `*Params`)
+//! carry explicit `pad` fields where C would insert padding.
 
 use super::kernels::Precision;
 use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
 use crate::neighbor::Bounds;
-use cudarc::driver::DeviceRepr;
+use cudarc::driver::{DeviceRepr, ValidAsZeroBits};
 
 /// The domain box and the neighbour grid (`cuda/state.cuh: GridParams`).
 #[repr(C)]
@@ -95,6 +98,291 @@ impl PairMaterial {
 // SAFETY: plain old data of f64.
 unsafe impl DeviceRepr for PairMaterial {}
 
+/// A device pointer as the kernels' structs hold it (null: 0).
+pub type DevPtr = u64;
+
+/// The per-step status flags `kick_drift` reduces into (`cuda/layout.cuh: StepFlags`); the host
+/// zeroes them, but `first_unstable` (all ones), and reads them back after the drift.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StepFlags {
+    /// Some particle moved more than half the skin since the last list build.
+    pub rebuild: u32,
+    /// Particles outside a closed domain box.
+    pub outside: u32,
+    /// A position or velocity is not finite, or a particle broke the guard's speed bound.
+    pub unstable: u32,
+    /// The smallest local index of such a particle.
+    pub first_unstable: u32,
+    /// Some particle left the wall list's reach.
+    pub wall_rebuild: u32,
+}
+
+impl StepFlags {
+    /// The flags as the host sets them before the drift.
+    pub fn cleared() -> Self {
+        StepFlags {
+            first_unstable: u32::MAX,
+            ..StepFlags::default()
+        }
+    }
+}
+
+// SAFETY: five u32, laid out as the C struct; all-zero bits are valid.
+unsafe impl DeviceRepr for StepFlags {}
+unsafe impl ValidAsZeroBits for StepFlags {}
+
+/// The particle state the contact kernels read (`cuda/layout.cuh: ParticleView`): device
+/// pointers, valid while the buffers they point into are alive and not reallocated.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ParticleView {
+    pub position: DevPtr,
+    pub velocity: DevPtr,
+    pub angular_velocity: DevPtr,
+    pub orientation: DevPtr,
+    pub mass: DevPtr,
+    pub inertia: DevPtr,
+    pub scale: DevPtr,
+    pub radius: DevPtr,
+    pub cn: DevPtr,
+    pub ct: DevPtr,
+    pub tmpl: DevPtr,
+    pub material: DevPtr,
+}
+// SAFETY: twelve device pointers, laid out as the C struct.
+unsafe impl DeviceRepr for ParticleView {}
+
+/// Per-pair outputs (`cuda/layout.cuh: PairOutputs`): nine force and torque values, the
+/// elastic energy and the contact flag per pair.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct PairOutputs {
+    pub forces: DevPtr,
+    pub energy: DevPtr,
+    pub contact: DevPtr,
+}
+// SAFETY: three device pointers.
+unsafe impl DeviceRepr for PairOutputs {}
+
+/// Everything a pair evaluation reads and writes (`cuda/layout.cuh: PairArgs`): device pointers
+/// into the pair list's and the particles' buffers, valid while those are alive.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct PairArgs {
+    pub pairs: DevPtr,
+    pub grid: GridParams,
+    pub axes: DevPtr,
+    pub p: ParticleView,
+    pub materials: DevPtr,
+    pub n_materials: i32,
+    pub spring_in: DevPtr,
+    pub spring_out: DevPtr,
+    pub out: PairOutputs,
+    pub dt: f64,
+    pub max_overlap: f64,
+    pub error: DevPtr,
+}
+// SAFETY: device pointers, a GridParams, an int and doubles, laid out as the C struct.
+unsafe impl DeviceRepr for PairArgs {}
+
+/// One wall mesh as the kernels read it (`cuda/layout.cuh: WallInfo`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WallInfo {
+    pub facet_offset: i32,
+    pub n_facets: i32,
+    pub cell_offset: i32,
+    pub material: i32,
+    pub grid_min: [f64; 3],
+    pub grid_size: f64,
+    pub dims: [i32; 3],
+    pub pad: i32,
+}
+// SAFETY: plain old data laid out as the C struct.
+unsafe impl DeviceRepr for WallInfo {}
+
+/// A wall's pose and velocity field at the current time (`cuda/layout.cuh: WallState`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WallState {
+    pub rotation: [f64; 4],
+    pub translation: [f64; 3],
+    pub v0: [f64; 3],
+    pub omega: [f64; 3],
+    pub origin: [f64; 3],
+}
+// SAFETY: plain old data laid out as the C struct; all-zero bits are valid f64 values.
+unsafe impl DeviceRepr for WallState {}
+unsafe impl ValidAsZeroBits for WallState {}
+
+/// The arguments of `kick_drift` (cuda/integrate.cu; `cuda/layout.cuh: KickDriftParams`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct KickDriftParams {
+    pub n: i32,
+    /// Nonzero: the periodic wrap.
+    pub wrap: i32,
+    /// Nonzero: the per-step checks against `reference`.
+    pub checks: i32,
+    pub pad: i32,
+    pub ghost: DevPtr,
+    pub position: DevPtr,
+    pub velocity: DevPtr,
+    pub orientation: DevPtr,
+    pub angular_velocity: DevPtr,
+    pub force: DevPtr,
+    pub torque: DevPtr,
+    pub mass: DevPtr,
+    pub inertia: DevPtr,
+    pub radius: DevPtr,
+    pub gravity: [f64; 3],
+    pub dt: f64,
+    pub grid: GridParams,
+    pub reference: DevPtr,
+    pub half_skin: f64,
+    /// Null: no wall list to check.
+    pub wall_reference: DevPtr,
+    pub wall_half_reach: f64,
+    pub max_speed: f64,
+    pub flags: DevPtr,
+}
+// SAFETY: ints, doubles, device pointers and a GridParams, laid out as the C struct.
+unsafe impl DeviceRepr for KickDriftParams {}
+
+/// The arguments of `reduce_and_kick` (cuda/integrate.cu; `cuda/layout.cuh:
+/// ReduceKickParams`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct ReduceKickParams {
+    pub n: i32,
+    /// Nonzero: the second half kick after the reduction.
+    pub kick: i32,
+    pub ref_offset: DevPtr,
+    pub refs: DevPtr,
+    pub pair_forces: DevPtr,
+    /// Null without walls.
+    pub wall_force: DevPtr,
+    pub wall_torque: DevPtr,
+    pub force: DevPtr,
+    pub torque: DevPtr,
+    pub ghost: DevPtr,
+    pub velocity: DevPtr,
+    pub angular_velocity: DevPtr,
+    pub mass: DevPtr,
+    pub inertia: DevPtr,
+    pub orientation: DevPtr,
+    pub gravity: [f64; 3],
+    pub dt: f64,
+}
+// SAFETY: ints, device pointers and doubles, laid out as the C struct.
+unsafe impl DeviceRepr for ReduceKickParams {}
+
+/// The particles and the grid of `count_pairs` and `fill_pairs` (cuda/neighbor.cu;
+/// `cuda/layout.cuh: PairSearchParams`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct PairSearchParams {
+    pub n: i32,
+    /// 0 all pairs; in a decomposed run 1 those of two owned particles, 2 those with a ghost.
+    pub part: i32,
+    pub position: DevPtr,
+    pub radius: DevPtr,
+    pub id: DevPtr,
+    pub ghost: DevPtr,
+    pub cell_start: DevPtr,
+    pub grid: GridParams,
+    pub skin: f64,
+}
+// SAFETY: ints, device pointers, a GridParams and a double, laid out as the C struct.
+unsafe impl DeviceRepr for PairSearchParams {}
+
+/// The arguments of `wall_candidates` (cuda/contact.cu; `cuda/layout.cuh:
+/// WallCandidatesParams`): null `offset` and `items` count, else list.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct WallCandidatesParams {
+    pub n: i32,
+    pub n_walls: i32,
+    pub p: ParticleView,
+    pub walls: DevPtr,
+    pub states: DevPtr,
+    pub triangles: DevPtr,
+    pub cell_start: DevPtr,
+    pub cell_items: DevPtr,
+    pub skin: f64,
+    pub counts: DevPtr,
+    pub offset: DevPtr,
+    pub items: DevPtr,
+}
+// SAFETY: ints, a ParticleView, device pointers and a double, laid out as the C struct.
+unsafe impl DeviceRepr for WallCandidatesParams {}
+
+/// The arguments of `wall_facet_overlaps` (cuda/contact.cu; `cuda/layout.cuh:
+/// WallOverlapsParams`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct WallOverlapsParams {
+    pub n_items: i32,
+    pub n_walls: i32,
+    pub items: DevPtr,
+    pub p: ParticleView,
+    pub states: DevPtr,
+    pub triangles: DevPtr,
+    pub prisms: DevPtr,
+    pub overlaps: DevPtr,
+    pub error: DevPtr,
+}
+// SAFETY: ints, a ParticleView and device pointers, laid out as the C struct.
+unsafe impl DeviceRepr for WallOverlapsParams {}
+
+/// The arguments of `wall_contacts` (cuda/contact.cu; `cuda/layout.cuh: WallContactsParams`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct WallContactsParams {
+    pub n: i32,
+    pub n_walls: i32,
+    pub n_materials: i32,
+    pub pad: i32,
+    pub p: ParticleView,
+    pub states: DevPtr,
+    pub walls: DevPtr,
+    pub item_offset: DevPtr,
+    pub items: DevPtr,
+    pub overlaps: DevPtr,
+    pub materials: DevPtr,
+    pub spring_in: DevPtr,
+    pub spring_out: DevPtr,
+    pub wall_force: DevPtr,
+    pub wall_torque: DevPtr,
+    pub wall_energy: DevPtr,
+    pub per_wall_force: DevPtr,
+    pub wall_contact: DevPtr,
+    pub dt: f64,
+    pub max_overlap: f64,
+    pub error: DevPtr,
+}
+// SAFETY: ints, a ParticleView, device pointers and doubles, laid out as the C struct.
+unsafe impl DeviceRepr for WallContactsParams {}
+
+/// The template table of the probe kernels (cuda/probe.cu; `cuda/layout.cuh: ProbeTemplates`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct ProbeTemplates {
+    pub vertices: DevPtr,
+    pub normals: DevPtr,
+    pub offsets: DevPtr,
+    pub counts: DevPtr,
+    pub radius: DevPtr,
+    pub face_start: DevPtr,
+    pub face_points: DevPtr,
+    pub max_vertices: i32,
+    pub max_faces: i32,
+    pub max_face_indices: i32,
+}
+// SAFETY: seven device pointers and three ints, laid out as the C struct.
+unsafe impl DeviceRepr for ProbeTemplates {}
+
 /// Bytes of one `StagedPlanes` record of cuda/contact.cu: ENUM_MAX_PLANES planes (normal and
 /// offset in the geometry's arithmetic), the frame origin in f64, two plane counts.
 pub fn staged_planes_bytes(precision: Precision) -> usize {
@@ -105,22 +393,75 @@ pub fn staged_planes_bytes(precision: Precision) -> usize {
     ENUM_MAX_PLANES * 4 * real + 3 * 8 + 2 * 4
 }
 
-/// The `-DPD_SIZEOF_…` options for every shared struct.
-pub fn size_defines() -> Vec<String> {
-    vec![
-        format!(
-            "-DPD_SIZEOF_GRID_PARAMS={}",
-            std::mem::size_of::<GridParams>()
-        ),
-        format!(
-            "-DPD_SIZEOF_PAIR_MATERIAL={}",
-            std::mem::size_of::<PairMaterial>()
-        ),
-        format!(
-            "-DPD_SIZEOF_PAIR_ARGS={}",
-            std::mem::size_of::<super::simulation::PairArgs>()
-        ),
-    ]
+/// Declares the shared structs whose layout is checked: each as `Type => "C_NAME" { fields }`,
+/// every field listed (`cuda/layout.cuh` checks the same ones).
+macro_rules! checked_layouts {
+    ($($ty:ty => $name:literal { $($field:ident),* $(,)? })*) => {
+        /// The `-DPD_SIZEOF_<STRUCT>` and `-DPD_OFFSETOF_<STRUCT>_<field>` options for every
+        /// shared struct (`cuda/layout.cuh` `static_assert`s them).
+        pub fn layout_defines() -> Vec<String> {
+            let mut d = Vec::new();
+            $(
+                d.push(format!("-DPD_SIZEOF_{}={}", $name, std::mem::size_of::<$ty>()));
+                $(
+                    d.push(format!(
+                        "-DPD_OFFSETOF_{}_{}={}",
+                        $name,
+                        stringify!($field),
+                        std::mem::offset_of!($ty, $field)
+                    ));
+                )*
+            )*
+            d
+        }
+    };
+}
+
+checked_layouts! {
+    GridParams => "GRID_PARAMS" { min, max, size, dims, periodic }
+    PairMaterial => "PAIR_MATERIAL" { restitution, friction, damping, log_restitution, log_norm }
+    StepFlags => "STEP_FLAGS" { rebuild, outside, unstable, first_unstable, wall_rebuild }
+    ParticleView => "PARTICLE_VIEW" {
+        position, velocity, angular_velocity, orientation, mass, inertia, scale, radius, cn, ct,
+        tmpl, material,
+    }
+    PairOutputs => "PAIR_OUTPUTS" { forces, energy, contact }
+    PairArgs => "PAIR_ARGS" {
+        pairs, grid, axes, p, materials, n_materials, spring_in, spring_out, out, dt,
+        max_overlap, error,
+    }
+    WallInfo => "WALL_INFO" {
+        facet_offset, n_facets, cell_offset, material, grid_min, grid_size, dims, pad,
+    }
+    WallState => "WALL_STATE" { rotation, translation, v0, omega, origin }
+    KickDriftParams => "KICK_DRIFT_PARAMS" {
+        n, wrap, checks, pad, ghost, position, velocity, orientation, angular_velocity, force,
+        torque, mass, inertia, radius, gravity, dt, grid, reference, half_skin, wall_reference,
+        wall_half_reach, max_speed, flags,
+    }
+    ReduceKickParams => "REDUCE_KICK_PARAMS" {
+        n, kick, ref_offset, refs, pair_forces, wall_force, wall_torque, force, torque, ghost,
+        velocity, angular_velocity, mass, inertia, orientation, gravity, dt,
+    }
+    PairSearchParams => "PAIR_SEARCH_PARAMS" {
+        n, part, position, radius, id, ghost, cell_start, grid, skin,
+    }
+    WallCandidatesParams => "WALL_CANDIDATES_PARAMS" {
+        n, n_walls, p, walls, states, triangles, cell_start, cell_items, skin, counts, offset,
+        items,
+    }
+    WallOverlapsParams => "WALL_OVERLAPS_PARAMS" {
+        n_items, n_walls, items, p, states, triangles, prisms, overlaps, error,
+    }
+    WallContactsParams => "WALL_CONTACTS_PARAMS" {
+        n, n_walls, n_materials, pad, p, states, walls, item_offset, items, overlaps, materials,
+        spring_in, spring_out, wall_force, wall_torque, wall_energy, per_wall_force,
+        wall_contact, dt, max_overlap, error,
+    }
+    ProbeTemplates => "PROBE_TEMPLATES" {
+        vertices, normals, offsets, counts, radius, face_start, face_points, max_vertices,
+        max_faces, max_face_indices,
+    }
 }
 
 /// Templates packed as the kernels read them (`cuda/contact.cu` constants, `cuda/probe.cu`

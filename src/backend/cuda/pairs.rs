@@ -1,133 +1,154 @@
-//! Stage 2 on the GPU, host side: the exclusive scans, binning with the reordering of the
-//! particle arrays, the int2 pair list and the per-particle references, and the contact
-//! history carried over a rebuild (kernels in `cuda/scan.cu` and `cuda/neighbor.cu`).
+//! Stage 2 on the GPU, host side: the [`PairStage`] owns the pair list and everything indexed
+//! by pair, and builds it: binning with the reordering of the particle arrays, the int2 pair
+//! list and the per-particle references, and the contact history carried over a rebuild
+//! (kernels in `cuda/scan.cu` and `cuda/neighbor.cu`). The evaluation of the listed pairs is in
+//! [`super::pair_contacts`].
 
-use super::layout::{HISTORY_WIDTH, staged_planes_bytes};
-use super::simulation::{
-    CudaError, CudaSimulation, DevicePairs, HistorySource, PLANE_BUCKETS, ParticleView, cfg, ptr,
-    zeros,
-};
-use cudarc::driver::{CudaSlice, LaunchConfig, PushKernelArg};
+use super::error::{CudaError, HaloError};
+use super::gpu::Gpu;
+use super::launch::{cfg, ptr, zeros};
+use super::layout::{HISTORY_WIDTH, PairSearchParams, staged_planes_bytes};
+use super::particles::DeviceParticles;
+use super::walls::WallStage;
+use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
+use cudarc::driver::CudaSlice;
 
-/// Elements per block of `scan.cu` (its PD_SCAN_BLOCK).
-const SCAN_BLOCK: usize = 1024;
+/// Plane-count buckets of the lean pair passes: counts 0..=ENUM_MAX_PLANES (`PD_PLANE_BUCKETS`).
+pub(super) const PLANE_BUCKETS: usize = ENUM_MAX_PLANES + 1;
 
-impl CudaSimulation {
-    /// Exclusive prefix sum of `input[..len]` into `out[..len + 1]` (out[len] = total), with
-    /// `scan.cu`; returns the total.
-    pub(super) fn scan(
-        &self,
-        input: &CudaSlice<u32>,
-        len: usize,
-        out: &mut CudaSlice<u32>,
-    ) -> Result<u32, CudaError> {
-        // Scan len + 1 elements, the last read as 0 (scan_blocks zero-fills past n only for the
-        // padding of the last block, so a copy with a trailing zero is scanned).
-        let m = len + 1;
-        let mut padded = self.stream.alloc_zeros::<u32>(m)?;
-        if len > 0 {
-            self.stream
-                .memcpy_dtod(&input.slice(0..len), &mut padded.slice_mut(0..len))?;
+/// The pair list and everything indexed by pair.
+pub(super) struct PairList {
+    pub(super) n: usize,
+    /// In a decomposed run, the pairs `0..n_interior` have two owned members and need nothing
+    /// from the halo; the rest have a ghost. Otherwise `n`.
+    pub(super) n_interior: usize,
+    /// Per particle, its pairs as first member (`offset[i]..offset[i + 1]`): the history source
+    /// of the next build; `None` for a decomposed run's two-part list.
+    pub(super) offset: Option<CudaSlice<u32>>,
+    pub(super) pairs: CudaSlice<i32>,
+    pub(super) axes: CudaSlice<f64>,
+    pub(super) spring_in: CudaSlice<f64>,
+    pub(super) spring_out: CudaSlice<f64>,
+    pub(super) forces: CudaSlice<f64>,
+    pub(super) energy: CudaSlice<f64>,
+    pub(super) contact: CudaSlice<u32>,
+    pub(super) ref_offset: CudaSlice<u32>,
+    pub(super) refs: CudaSlice<u32>,
+    /// The pairs the lean passes leave to the full evaluation (GJK, the dual hull), and their
+    /// count.
+    pub(super) deferred: CudaSlice<u32>,
+    pub(super) deferred_count: CudaSlice<u32>,
+    /// Between the two lean passes of polyhedral pairs (`pair_planes`, `pair_faces`): each
+    /// staged pair's planes (`StagedPlanes` of cuda/contact.cu, [`staged_planes_bytes`] each),
+    /// its plane-count bucket, the staged pairs listed bucket by bucket, and per bucket the
+    /// count and the fill cursor ([`PLANE_BUCKETS`] values each).
+    pub(super) staged: CudaSlice<u8>,
+    pub(super) bucket: CudaSlice<u8>,
+    pub(super) order: CudaSlice<u32>,
+    pub(super) bucket_count: CudaSlice<u32>,
+    pub(super) bucket_fill: CudaSlice<u32>,
+}
+
+impl PairList {
+    /// Bytes of device memory held by the list and its per-pair buffers.
+    fn bytes(&self) -> usize {
+        fn b<T>(s: &CudaSlice<T>) -> usize {
+            s.len() * std::mem::size_of::<T>()
         }
-        self.scan_inplace(&padded, m, out)?;
-        let mut total = [0u32; 1];
-        self.stream
-            .memcpy_dtoh(&out.slice(len..len + 1), &mut total)?;
-        Ok(total[0])
+        self.offset.as_ref().map_or(0, b)
+            + b(&self.pairs)
+            + b(&self.deferred)
+            + b(&self.deferred_count)
+            + b(&self.staged)
+            + b(&self.bucket)
+            + b(&self.order)
+            + b(&self.bucket_count)
+            + b(&self.bucket_fill)
+            + b(&self.axes)
+            + b(&self.spring_in)
+            + b(&self.spring_out)
+            + b(&self.forces)
+            + b(&self.energy)
+            + b(&self.contact)
+            + b(&self.ref_offset)
+            + b(&self.refs)
+    }
+}
+
+/// The contact history handed to the next list build: for each particle in the numbering
+/// before the build's reordering, its pairs' partner ids and springs (CSR).
+pub(super) struct HistorySource {
+    pub(super) offset: CudaSlice<u32>,
+    pub(super) partner: CudaSlice<u64>,
+    pub(super) spring: CudaSlice<f64>,
+}
+
+/// Stage 2 and the pair list it keeps (the GPU twin of the CPU's `PairList`).
+pub(super) struct PairStage {
+    /// The current list; `None` until the first build after an upload.
+    pub(super) list: Option<PairList>,
+    /// The particles' positions at the last build (`kick_drift` checks the half skin against
+    /// them).
+    pub(super) reference: CudaSlice<f64>,
+    /// The history uploaded from the host, for the next build.
+    pub(super) pending_history: Option<HistorySource>,
+    /// A build is due before the next evaluation.
+    pub(super) rebuild: bool,
+    /// Pair lists built so far.
+    pub(super) builds: u64,
+}
+
+impl PairStage {
+    pub(super) fn new(gpu: &Gpu) -> Result<Self, CudaError> {
+        Ok(PairStage {
+            list: None,
+            reference: gpu.stream.alloc_zeros::<f64>(1)?,
+            pending_history: None,
+            rebuild: true,
+            builds: 0,
+        })
     }
 
-    /// Exclusive scan of `input[..m]` into `out[..m]`.
-    pub(super) fn scan_inplace(
-        &self,
-        input: &CudaSlice<u32>,
-        m: usize,
-        out: &mut CudaSlice<u32>,
-    ) -> Result<(), CudaError> {
-        let blocks = m.div_ceil(SCAN_BLOCK).max(1);
-        let mut sums = self.stream.alloc_zeros::<u32>(blocks)?;
-        let lc = LaunchConfig {
-            grid_dim: (blocks as u32, 1, 1),
-            block_dim: (SCAN_BLOCK as u32, 1, 1),
-            shared_mem_bytes: 0,
-        };
-        let mi = m as i32;
-        let f = self.k.get("scan_blocks");
-        // SAFETY: argument types and counts match the kernel; buffers hold m (out, input) and
-        // `blocks` (sums) elements.
-        unsafe {
-            self.stream
-                .launch_builder(f)
-                .arg(&mi)
-                .arg(input)
-                .arg(&mut *out)
-                .arg(&mut sums)
-                .launch(lc)?;
-        }
-        if blocks > 1 {
-            let mut scanned = self.stream.alloc_zeros::<u32>(blocks)?;
-            self.scan_inplace(&sums, blocks, &mut scanned)?;
-            let f = self.k.get("scan_add");
-            // SAFETY: as above.
-            unsafe {
-                self.stream
-                    .launch_builder(f)
-                    .arg(&mi)
-                    .arg(&mut *out)
-                    .arg(&scanned)
-                    .launch(lc)?;
-            }
-        }
-        Ok(())
+    /// Bytes of device memory held by the list and the reference positions.
+    pub(super) fn bytes(&self) -> usize {
+        self.reference.len() * 8 + self.list.as_ref().map_or(0, PairList::bytes)
     }
 
-    pub(super) fn particle_view(&self) -> ParticleView {
-        let st = &self.stream;
-        let p = &self.p;
-        ParticleView {
-            ptrs: [
-                ptr(&p.position, st),
-                ptr(&p.velocity, st),
-                ptr(&p.angular_velocity, st),
-                ptr(&p.orientation, st),
-                ptr(&p.mass, st),
-                ptr(&p.inertia, st),
-                ptr(&p.scale, st),
-                ptr(&p.radius, st),
-                ptr(&p.cn, st),
-                ptr(&p.ct, st),
-                ptr(&p.tmpl, st),
-                ptr(&p.material, st),
-            ],
-        }
+    /// Drops the list (and its history) for a fresh upload; the next evaluation builds one.
+    pub(super) fn reset(&mut self, history: HistorySource) {
+        self.list = None;
+        self.pending_history = Some(history);
+        self.rebuild = true;
     }
 
-    /// Stage 2: bins, reorders the particle arrays by cell, builds the pair list and the
-    /// per-particle references, and carries the contact history over.
-    pub(super) fn build_pairs(&mut self) -> Result<(), CudaError> {
-        let st = self.stream.clone();
-        let n = self.n;
+    /// Stage 2: bins, reorders the particle arrays (and the walls' springs) by cell, builds the
+    /// pair list and the per-particle references, and carries the contact history over.
+    /// `decomposed`: a rank of a decomposed run (pairs of two owned particles first). Returns
+    /// the reordering: `order[k]` = the slot before the build now at slot `k`.
+    pub(super) fn build(
+        &mut self,
+        gpu: &Gpu,
+        p: &mut DeviceParticles,
+        walls: Option<&mut WallStage>,
+        decomposed: bool,
+    ) -> Result<CudaSlice<u32>, CudaError> {
+        let st = gpu.stream.clone();
+        let k = &gpu.k;
+        let n = p.n;
         let ni = n as i32;
         // History of the current list (or the one uploaded from the host), in the numbering
         // before this build.
-        let history = match (self.pending_history.take(), self.pairs.take()) {
+        let history = match (self.pending_history.take(), self.list.take()) {
             (Some(h), _) => h,
             (None, Some(old)) => {
                 let Some(old_offset) = old.offset else {
-                    return Err(CudaError::Halo(
-                        "a decomposed run's pair list was rebuilt without the host's history"
-                            .into(),
-                    ));
+                    return Err(HaloError::MissingHistory.into());
                 };
                 let mut partner = zeros::<u64>(&st, old.n)?;
                 let npi = old.n as i32;
-                // SAFETY: argument types match `history_partners`.
+                // SAFETY: `partner` holds a value per pair of the old list.
                 unsafe {
-                    st.launch_builder(self.k.get("history_partners"))
-                        .arg(&npi)
-                        .arg(&old.pairs)
-                        .arg(&self.p.id)
-                        .arg(&mut partner)
-                        .launch(cfg(old.n))?;
+                    k.history_partners(&st, cfg(old.n), &npi, &old.pairs, &p.id, &mut partner)?;
                 }
                 HistorySource {
                     offset: old_offset,
@@ -143,53 +164,46 @@ impl CudaSimulation {
             },
         };
         // Bin and sort by cell (global id within a cell).
-        let cells = self.grid.cells();
+        let g = gpu.grid;
+        let cells = g.cells();
         let mut cell = zeros::<u32>(&st, n)?;
         let mut cell_count = zeros::<u32>(&st, cells)?;
-        let g = self.grid;
-        // SAFETY (all launches below): argument lists match the kernels' signatures in cuda/,
-        // and every buffer holds the element counts the kernels index.
+        // SAFETY (all launches below): every buffer holds the element counts the kernels index.
         unsafe {
-            st.launch_builder(self.k.get("bin_particles"))
-                .arg(&ni)
-                .arg(&self.p.position)
-                .arg(&g)
-                .arg(&mut cell)
-                .arg(&mut cell_count)
-                .launch(cfg(n))?;
-        }
+            k.bin_particles(
+                &st,
+                cfg(n),
+                &ni,
+                &p.position,
+                &g,
+                &mut cell,
+                &mut cell_count,
+            )?
+        };
         let mut cell_start = zeros::<u32>(&st, cells + 1)?;
-        self.scan(&cell_count, cells, &mut cell_start)?;
+        gpu.scan(&cell_count, cells, &mut cell_start)?;
         let mut fill = zeros::<u32>(&st, cells)?;
         let mut order = zeros::<u32>(&st, n)?;
         let ci = cells as i32;
         unsafe {
-            st.launch_builder(self.k.get("scatter_by_cell"))
-                .arg(&ni)
-                .arg(&cell)
-                .arg(&cell_start)
-                .arg(&mut fill)
-                .arg(&mut order)
-                .launch(cfg(n))?;
-            st.launch_builder(self.k.get("sort_cells"))
-                .arg(&ci)
-                .arg(&cell_start)
-                .arg(&mut order)
-                .arg(&self.p.id)
-                .launch(cfg(cells))?;
+            k.scatter_by_cell(&st, cfg(n), &ni, &cell, &cell_start, &mut fill, &mut order)?;
+            k.sort_cells(&st, cfg(cells), &ci, &cell_start, &mut order, &p.id)?;
         }
         // Reorder every particle array (and the wall springs) by `order`; the wall list names
         // particles by index, so it is built again too.
-        self.gather_all(&order)?;
-        if let Some(w) = &mut self.walls {
+        p.gather_f64s(k, &st, &order)?;
+        if let Some(w) = walls {
+            w.gather_springs(k, &st, n, &order)?;
             w.list = None;
         }
+        p.gather_u32s(k, &st, &order)?;
+        p.gather_u64s(k, &st, &order)?;
         // Pairs: count, exclusive prefix sum, fill. A decomposed run lists the pairs of two
         // owned particles first and those with a ghost after them, so the first part can be
         // evaluated while the halo is in flight.
-        let (np, n_interior, pairs, offset) = if self.host.parallel.is_some() {
-            let (n1, p1, _) = self.list_pairs(1, &cell_start)?;
-            let (n2, p2, _) = self.list_pairs(2, &cell_start)?;
+        let (np, n_interior, pairs, offset) = if decomposed {
+            let (n1, p1, _) = list_pairs(gpu, p, 1, &cell_start)?;
+            let (n2, p2, _) = list_pairs(gpu, p, 2, &cell_start)?;
             let np = n1 + n2;
             let mut pairs = zeros::<i32>(&st, 2 * np)?;
             if n1 > 0 {
@@ -202,56 +216,48 @@ impl CudaSimulation {
             // this run's history comes up from the host at every rebuild instead.
             (np, n1, pairs, None)
         } else {
-            let (np, pairs, offset) = self.list_pairs(0, &cell_start)?;
+            let (np, pairs, offset) = list_pairs(gpu, p, 0, &cell_start)?;
             (np, np, pairs, Some(offset))
         };
         // References per particle, sorted by partner id.
         let npi = np as i32;
         let mut ref_count = zeros::<u32>(&st, n)?;
-        unsafe {
-            st.launch_builder(self.k.get("count_refs"))
-                .arg(&npi)
-                .arg(&pairs)
-                .arg(&mut ref_count)
-                .launch(cfg(np))?;
-        }
+        unsafe { k.count_refs(&st, cfg(np), &npi, &pairs, &mut ref_count)? };
         let mut ref_offset = zeros::<u32>(&st, n + 1)?;
-        self.scan(&ref_count, n, &mut ref_offset)?;
+        gpu.scan(&ref_count, n, &mut ref_offset)?;
         let mut ref_fill = zeros::<u32>(&st, n)?;
         let mut refs = zeros::<u32>(&st, 2 * np)?;
         unsafe {
-            st.launch_builder(self.k.get("fill_refs"))
-                .arg(&npi)
-                .arg(&pairs)
-                .arg(&ref_offset)
-                .arg(&mut ref_fill)
-                .arg(&mut refs)
-                .launch(cfg(np))?;
-            st.launch_builder(self.k.get("sort_refs"))
-                .arg(&ni)
-                .arg(&ref_offset)
-                .arg(&mut refs)
-                .arg(&pairs)
-                .arg(&self.p.id)
-                .launch(cfg(n))?;
+            k.fill_refs(
+                &st,
+                cfg(np),
+                &npi,
+                &pairs,
+                &ref_offset,
+                &mut ref_fill,
+                &mut refs,
+            )?;
+            k.sort_refs(&st, cfg(n), &ni, &ref_offset, &mut refs, &pairs, &p.id)?;
         }
         // The springs of pairs that survive, found by (lower-id member, partner id).
         let mut spring_in = zeros::<f64>(&st, HISTORY_WIDTH * np)?;
         unsafe {
-            st.launch_builder(self.k.get("remap_history"))
-                .arg(&npi)
-                .arg(&pairs)
-                .arg(&self.p.id)
-                .arg(&order)
-                .arg(&history.offset)
-                .arg(&history.partner)
-                .arg(&history.spring)
-                .arg(&mut spring_in)
-                .launch(cfg(np))?;
+            k.remap_history(
+                &st,
+                cfg(np),
+                &npi,
+                &pairs,
+                &p.id,
+                &order,
+                &history.offset,
+                &history.partner,
+                &history.spring,
+                &mut spring_in,
+            )?;
         }
-        let spheres = self.config.spheres;
-        let staged_bytes = staged_planes_bytes(self.config.precision);
-        self.pairs = Some(DevicePairs {
+        let spheres = gpu.config.spheres;
+        let staged_bytes = staged_planes_bytes(gpu.config.precision);
+        self.list = Some(PairList {
             n: np,
             n_interior,
             offset,
@@ -273,133 +279,42 @@ impl CudaSimulation {
             bucket_count: zeros::<u32>(&st, PLANE_BUCKETS)?,
             bucket_fill: zeros::<u32>(&st, PLANE_BUCKETS)?,
         });
-        self.reference = st.clone_dtod(&self.p.position)?;
+        self.reference = st.clone_dtod(&p.position)?;
         self.rebuild = false;
-        self.list_builds += 1;
-        if self.host.parallel.is_some() {
-            self.setup_halo(&order)?;
-        }
-        Ok(())
+        self.builds += 1;
+        Ok(order)
     }
+}
 
-    /// Count, exclusive prefix sum and fill of the pairs of `part` (0 all; in a decomposed run
-    /// 1 those of two owned particles, 2 those with a ghost): their number, the int2 list and
-    /// the per-particle offsets.
-    fn list_pairs(
-        &self,
-        part: i32,
-        cell_start: &CudaSlice<u32>,
-    ) -> Result<(usize, CudaSlice<i32>, CudaSlice<u32>), CudaError> {
-        let st = self.stream.clone();
-        let n = self.n;
-        let ni = n as i32;
-        let g = self.grid;
-        let skin = self.skin;
-        let mut counts = zeros::<u32>(&st, n)?;
-        // SAFETY: argument lists match `count_pairs` and `fill_pairs` of cuda/neighbor.cu; the
-        // buffers hold n (particles), cells + 1 (cell_start) and the listed pairs' values.
-        unsafe {
-            st.launch_builder(self.k.get("count_pairs"))
-                .arg(&ni)
-                .arg(&self.p.position)
-                .arg(&self.p.radius)
-                .arg(&self.p.id)
-                .arg(&self.p.ghost)
-                .arg(&part)
-                .arg(cell_start)
-                .arg(&g)
-                .arg(&skin)
-                .arg(&mut counts)
-                .launch(cfg(n))?;
-        }
-        let mut offset = zeros::<u32>(&st, n + 1)?;
-        let np = self.scan(&counts, n, &mut offset)? as usize;
-        let mut pairs = zeros::<i32>(&st, 2 * np)?;
-        unsafe {
-            st.launch_builder(self.k.get("fill_pairs"))
-                .arg(&ni)
-                .arg(&self.p.position)
-                .arg(&self.p.radius)
-                .arg(&self.p.id)
-                .arg(&self.p.ghost)
-                .arg(&part)
-                .arg(cell_start)
-                .arg(&g)
-                .arg(&skin)
-                .arg(&offset)
-                .arg(&mut pairs)
-                .launch(cfg(n))?;
-        }
-        Ok((np, pairs, offset))
-    }
-
-    pub(super) fn gather_all(&mut self, order: &CudaSlice<u32>) -> Result<(), CudaError> {
-        let st = self.stream.clone();
-        let n = self.n;
-        let ni = n as i32;
-        let g64 = self.k.get("gather_f64").clone();
-        let gather = |src: &mut CudaSlice<f64>, width: usize| -> Result<(), CudaError> {
-            let mut dst = zeros::<f64>(&st, width * n)?;
-            let w = width as i32;
-            // SAFETY: `gather_f64(n, width, src, dst, order)`; both buffers hold width·n values.
-            unsafe {
-                st.launch_builder(&g64)
-                    .arg(&ni)
-                    .arg(&w)
-                    .arg(&*src)
-                    .arg(&mut dst)
-                    .arg(order)
-                    .launch(cfg(n))?;
-            }
-            *src = dst;
-            Ok(())
-        };
-        let p = &mut self.p;
-        for (buf, w) in [
-            (&mut p.scale, 1),
-            (&mut p.radius, 1),
-            (&mut p.cn, 1),
-            (&mut p.ct, 1),
-            (&mut p.mass, 1),
-            (&mut p.position, 3),
-            (&mut p.velocity, 3),
-            (&mut p.angular_velocity, 3),
-            (&mut p.orientation, 4),
-            (&mut p.force, 3),
-            (&mut p.torque, 3),
-            (&mut p.inertia, 3),
-        ] {
-            gather(buf, w)?;
-        }
-        if let Some(w) = &mut self.walls {
-            let width = HISTORY_WIDTH * w.n;
-            gather(&mut w.spring_in, width)?;
-        }
-        let g32 = self.k.get("gather_u32").clone();
-        for buf in [&mut p.tmpl, &mut p.material, &mut p.kind, &mut p.ghost] {
-            let mut dst = zeros::<u32>(&st, n)?;
-            // SAFETY: `gather_u32(n, src, dst, order)`.
-            unsafe {
-                st.launch_builder(&g32)
-                    .arg(&ni)
-                    .arg(&*buf)
-                    .arg(&mut dst)
-                    .arg(order)
-                    .launch(cfg(n))?;
-            }
-            *buf = dst;
-        }
-        let mut id = zeros::<u64>(&st, n)?;
-        // SAFETY: `gather_u64(n, src, dst, order)`.
-        unsafe {
-            st.launch_builder(self.k.get("gather_u64"))
-                .arg(&ni)
-                .arg(&p.id)
-                .arg(&mut id)
-                .arg(order)
-                .launch(cfg(n))?;
-        }
-        p.id = id;
-        Ok(())
-    }
+/// Count, exclusive prefix sum and fill of the pairs of `part` (0 all; in a decomposed run 1
+/// those of two owned particles, 2 those with a ghost): their number, the int2 list and the
+/// per-particle offsets.
+fn list_pairs(
+    gpu: &Gpu,
+    p: &DeviceParticles,
+    part: i32,
+    cell_start: &CudaSlice<u32>,
+) -> Result<(usize, CudaSlice<i32>, CudaSlice<u32>), CudaError> {
+    let st = gpu.stream.clone();
+    let n = p.n;
+    let args = PairSearchParams {
+        n: n as i32,
+        part,
+        position: ptr(&p.position, &st),
+        radius: ptr(&p.radius, &st),
+        id: ptr(&p.id, &st),
+        ghost: ptr(&p.ghost, &st),
+        cell_start: ptr(cell_start, &st),
+        grid: gpu.grid,
+        skin: gpu.skin,
+    };
+    let mut counts = zeros::<u32>(&st, n)?;
+    // SAFETY: the particle buffers hold n values, cell_start cells + 1, `counts` n.
+    unsafe { gpu.k.count_pairs(&st, cfg(n), &args, &mut counts)? };
+    let mut offset = zeros::<u32>(&st, n + 1)?;
+    let np = gpu.scan(&counts, n, &mut offset)? as usize;
+    let mut pairs = zeros::<i32>(&st, 2 * np)?;
+    // SAFETY: as above; `pairs` holds the 2 np values the offsets reach.
+    unsafe { gpu.k.fill_pairs(&st, cfg(n), &args, &offset, &mut pairs)? };
+    Ok((np, pairs, offset))
 }

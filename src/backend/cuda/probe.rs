@@ -4,12 +4,13 @@
 //! functions the step uses. It is how the tests hold the kernels, run on a GPU, to
 //! `geometry::overlap::overlap_pair` and `geometry::clip::prism_overlap_culled`.
 
+use super::error::CudaError;
 use super::kernels::{KernelConfig, Precision, compile};
-use super::layout::{TemplateTables, max_face_indices};
-use super::simulation::{CudaError, cfg, ptr};
+use super::launch::{cfg, ptr};
+use super::layout::{ProbeTemplates, TemplateTables, max_face_indices};
 use crate::geometry::Overlap;
 use crate::shape::ConvexTemplate;
-use cudarc::driver::{CudaContext, CudaFunction, CudaStream, DeviceRepr, PushKernelArg};
+use cudarc::driver::{CudaContext, CudaFunction, CudaStream, PushKernelArg};
 use nalgebra::{Isometry3, Vector3};
 use std::sync::Arc;
 
@@ -60,19 +61,6 @@ pub struct ProbeFacetResult {
     pub status: i32,
     pub overlap: Overlap<f64>,
 }
-
-/// The template table as `cuda/probe.cu: ProbeTemplates` reads it: seven device pointers and
-/// the three strides.
-#[repr(C)]
-#[derive(Clone, Copy, Debug)]
-struct ProbeTemplates {
-    ptrs: [u64; 7],
-    max_vertices: i32,
-    max_faces: i32,
-    max_face_indices: i32,
-}
-// SAFETY: seven device pointers and three ints, laid out as the C struct.
-unsafe impl DeviceRepr for ProbeTemplates {}
 
 /// The probe kernels, compiled once for templates of up to `max_vertices` vertices and
 /// `max_faces` faces.
@@ -151,8 +139,7 @@ impl GeometryProbe {
             materials: 1,
             ghosts: false,
         };
-        let ptx = compile(PROBE_FILE, &config, (major * 10 + minor) as u32)
-            .map_err(CudaError::Compile)?;
+        let ptx = compile(PROBE_FILE, &config, (major * 10 + minor) as u32)?;
         let module = ctx.load_module(ptx)?;
         Ok(GeometryProbe {
             device: ctx.name().unwrap_or_else(|_| format!("GPU {ordinal}")),
@@ -169,14 +156,13 @@ impl GeometryProbe {
     fn check_capacity(&self, templates: &[&ConvexTemplate]) -> Result<(), CudaError> {
         for t in templates {
             if t.vertices.len() > self.max_vertices || t.faces.len() > self.max_faces {
-                return Err(CudaError::Compile(format!(
-                    "template {} has {} vertices and {} faces; the probe was built for at most {} and {}",
-                    t.name,
-                    t.vertices.len(),
-                    t.faces.len(),
-                    self.max_vertices,
-                    self.max_faces
-                )));
+                return Err(CudaError::ProbeCapacity {
+                    template: t.name.clone(),
+                    vertices: t.vertices.len(),
+                    faces: t.faces.len(),
+                    max_vertices: self.max_vertices,
+                    max_faces: self.max_faces,
+                });
             }
         }
         Ok(())
@@ -203,15 +189,13 @@ impl GeometryProbe {
         let d_face_start = st.clone_htod(&t.face_start)?;
         let d_face_points = st.clone_htod(&t.face_points)?;
         let table = ProbeTemplates {
-            ptrs: [
-                ptr(&d_vertices, st),
-                ptr(&d_normals, st),
-                ptr(&d_offsets, st),
-                ptr(&d_counts, st),
-                ptr(&d_radius, st),
-                ptr(&d_face_start, st),
-                ptr(&d_face_points, st),
-            ],
+            vertices: ptr(&d_vertices, st),
+            normals: ptr(&d_normals, st),
+            offsets: ptr(&d_offsets, st),
+            counts: ptr(&d_counts, st),
+            radius: ptr(&d_radius, st),
+            face_start: ptr(&d_face_start, st),
+            face_points: ptr(&d_face_points, st),
             max_vertices: mv as i32,
             max_faces: mf as i32,
             max_face_indices: max_face_indices(mv) as i32,

@@ -2,8 +2,9 @@
 //! host-side insertion: particles in the device's order, the contact history rebuilt from the
 //! pair slots and per-particle wall slots, and the step statistics.
 
+use super::error::CudaError;
 use super::layout::{HISTORY_WIDTH, history_state};
-use super::simulation::{CudaError, CudaSimulation};
+use super::simulation::CudaSimulation;
 use super::upload::{flat_quats, flat3};
 use crate::contact::{ContactHistory, ContactKey};
 use crate::pipeline::Simulation;
@@ -17,8 +18,8 @@ impl CudaSimulation {
         if self.host_current {
             return Ok(&self.host);
         }
-        let st = &self.stream;
-        let n = self.n;
+        let st = &self.gpu.stream;
+        let n = self.particles.n;
         let get = |s: &CudaSlice<f64>| st.clone_dtoh(s);
         let vec3 = |v: Vec<f64>| -> Vec<Vector3<f64>> {
             v.chunks_exact(3)
@@ -27,25 +28,25 @@ impl CudaSimulation {
                 .collect()
         };
         let p = &mut self.host.particles;
-        let mut id = st.clone_dtoh(&self.p.id)?;
+        let mut id = st.clone_dtoh(&self.particles.id)?;
         id.truncate(n);
         p.id = id;
-        let mut kind = st.clone_dtoh(&self.p.kind)?;
+        let mut kind = st.clone_dtoh(&self.particles.kind)?;
         kind.truncate(n);
         p.kind = kind;
-        let mut scale = get(&self.p.scale)?;
+        let mut scale = get(&self.particles.scale)?;
         scale.truncate(n);
         p.scale = scale;
-        let mut mass = get(&self.p.mass)?;
+        let mut mass = get(&self.particles.mass)?;
         mass.truncate(n);
         p.mass = mass;
-        p.position = vec3(get(&self.p.position)?);
-        p.velocity = vec3(get(&self.p.velocity)?);
-        p.angular_velocity = vec3(get(&self.p.angular_velocity)?);
-        p.force = vec3(get(&self.p.force)?);
-        p.torque = vec3(get(&self.p.torque)?);
-        p.inertia = vec3(get(&self.p.inertia)?);
-        p.orientation = get(&self.p.orientation)?
+        p.position = vec3(get(&self.particles.position)?);
+        p.velocity = vec3(get(&self.particles.velocity)?);
+        p.angular_velocity = vec3(get(&self.particles.angular_velocity)?);
+        p.force = vec3(get(&self.particles.force)?);
+        p.torque = vec3(get(&self.particles.torque)?);
+        p.inertia = vec3(get(&self.particles.inertia)?);
+        p.orientation = get(&self.particles.orientation)?
             .chunks_exact(4)
             .take(n)
             .map(|c| {
@@ -57,7 +58,7 @@ impl CudaSimulation {
         // A rank of a decomposed run holds ghosts too: they are left out of the host copy, and
         // a pair counts in the statistics where its lower-id member (the first) is owned.
         let ghost: Vec<bool> = if self.host.parallel.is_some() {
-            st.clone_dtoh(&self.p.ghost)?
+            st.clone_dtoh(&self.particles.ghost)?
                 .iter()
                 .take(n)
                 .map(|&g| g != 0)
@@ -67,7 +68,7 @@ impl CudaSimulation {
         };
         let mut entries = Vec::new();
         let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
-        if let Some(pairs) = &self.pairs {
+        if let Some(pairs) = &self.pairs.list {
             let pr = st.clone_dtoh(&pairs.pairs)?;
             let contact = st.clone_dtoh(&pairs.contact)?;
             let spring = get(&pairs.spring_in)?;
@@ -117,7 +118,7 @@ impl CudaSimulation {
         }
         // Until the first evaluation after an upload (a restart, an insertion) the device has
         // no contact outputs: the history and statistics are still the uploaded host ones.
-        if self.pairs.is_some() {
+        if self.pairs.list.is_some() {
             self.host.history = ContactHistory::from_entries(entries);
             self.host.stats.contacts = contacts;
             self.host.stats.wall_contacts = wall_contacts;
@@ -154,29 +155,32 @@ impl CudaSimulation {
             && before.5 == self.host.history;
         // A decomposed run's device arrays interleave ghosts with the owned particles: it
         // always uploads whole (and rebuilds, with fresh ghosts, at the next step).
-        if !motion_only || self.n == 0 || self.host.parallel.is_some() {
+        if !motion_only || self.particles.n == 0 || self.host.parallel.is_some() {
             return self.upload_from_host();
         }
-        let st = &self.stream;
-        st.memcpy_htod(&flat3(&p.position), &mut self.p.position)?;
-        st.memcpy_htod(&flat3(&p.velocity), &mut self.p.velocity)?;
-        st.memcpy_htod(&flat3(&p.angular_velocity), &mut self.p.angular_velocity)?;
-        st.memcpy_htod(&flat3(&p.force), &mut self.p.force)?;
-        st.memcpy_htod(&flat3(&p.torque), &mut self.p.torque)?;
-        st.memcpy_htod(&flat_quats(&p.orientation), &mut self.p.orientation)?;
-        self.rebuild = true;
+        let st = &self.gpu.stream;
+        st.memcpy_htod(&flat3(&p.position), &mut self.particles.position)?;
+        st.memcpy_htod(&flat3(&p.velocity), &mut self.particles.velocity)?;
+        st.memcpy_htod(
+            &flat3(&p.angular_velocity),
+            &mut self.particles.angular_velocity,
+        )?;
+        st.memcpy_htod(&flat3(&p.force), &mut self.particles.force)?;
+        st.memcpy_htod(&flat3(&p.torque), &mut self.particles.torque)?;
+        st.memcpy_htod(&flat_quats(&p.orientation), &mut self.particles.orientation)?;
+        self.pairs.rebuild = true;
         Ok(())
     }
 
     /// The candidate pair list as global-id pairs (lower id first), sorted (see
     /// [`Simulation::candidate_pair_ids`]).
     pub fn candidate_pair_ids(&mut self) -> Result<Vec<(u64, u64)>, CudaError> {
-        let Some(pairs) = &self.pairs else {
+        let Some(pairs) = &self.pairs.list else {
             return Ok(Vec::new());
         };
-        let st = &self.stream;
+        let st = &self.gpu.stream;
         let pr = st.clone_dtoh(&pairs.pairs)?;
-        let id = st.clone_dtoh(&self.p.id)?;
+        let id = st.clone_dtoh(&self.particles.id)?;
         let mut v: Vec<(u64, u64)> = pr
             .chunks_exact(2)
             .take(pairs.n)
@@ -197,7 +201,7 @@ impl CudaSimulation {
             self.sync_host()?;
             return Ok((self.host.stats.contacts, self.host.stats.wall_contacts));
         }
-        let st = &self.stream;
+        let st = &self.gpu.stream;
         let count = |s: &CudaSlice<u32>, n: usize| -> Result<u64, CudaError> {
             Ok(st
                 .clone_dtoh(s)?
@@ -206,12 +210,12 @@ impl CudaSimulation {
                 .filter(|&&c| c != 0)
                 .count() as u64)
         };
-        let pairs = match &self.pairs {
+        let pairs = match &self.pairs.list {
             Some(p) => count(&p.contact, p.n)?,
             None => 0,
         };
         let walls = match &self.walls {
-            Some(w) => count(&w.contact, self.n * w.n)?,
+            Some(w) => count(&w.contact, self.particles.n * w.n)?,
             None => 0,
         };
         Ok((pairs, walls))

@@ -1,0 +1,52 @@
+//! The errors of the CUDA backend, each saying what failed.
+
+use super::kernels::CompileError;
+use crate::pipeline::SimulationError;
+
+/// Errors of the CUDA backend.
+#[derive(Debug, thiserror::Error)]
+pub enum CudaError {
+    #[error("CUDA driver: {0}")]
+    Driver(#[from] cudarc::driver::DriverError),
+    /// A kernel file did not compile (or its source could not be assembled).
+    #[error(transparent)]
+    Compile(#[from] CompileError),
+    /// A constant or global table of a kernel module is missing or smaller than the host's data.
+    #[error("the kernels' table {name} holds fewer than the {expected} values the host has")]
+    Symbol { name: &'static str, expected: usize },
+    /// A template exceeds the capacities the geometry probe was compiled for.
+    #[error(
+        "template {template} has {vertices} vertices and {faces} faces; the probe was built for \
+         at most {max_vertices} and {max_faces}"
+    )]
+    ProbeCapacity {
+        template: String,
+        vertices: usize,
+        faces: usize,
+        max_vertices: usize,
+        max_faces: usize,
+    },
+    #[error(transparent)]
+    Simulation(#[from] SimulationError),
+    #[error(transparent)]
+    Halo(#[from] HaloError),
+}
+
+/// What went wrong in a decomposed run's device halo (`super::halo`).
+#[derive(Debug, thiserror::Error)]
+pub enum HaloError {
+    /// A pair-list rebuild found no contact history from the host: a decomposed run's list is in
+    /// two parts, no CSR by particle, so its history always comes up from the host.
+    #[error("a decomposed run's pair list was rebuilt without the host's history")]
+    MissingHistory,
+    /// The neighbours sent motion for another number of ghosts than this rank expects.
+    #[error(
+        "halo refresh on rank {rank}: {values} motion values for {ghosts} ghosts (the \
+         neighbours' plans changed between rebuilds)"
+    )]
+    MotionCount {
+        rank: usize,
+        values: usize,
+        ghosts: usize,
+    },
+}

@@ -1,0 +1,204 @@
+//! Stages 2–8 of a step on the GPU, in order: the pair list (rebuilt when due), the pair
+//! contacts ([`super::pair_contacts`]) and the wall contacts ([`super::walls`]), overlapped
+//! with a decomposed run's halo refresh ([`super::halo`]), and the deterministic reduction
+//! fused with the second half kick ([`super::integrator`]); then the step's geometry errors.
+
+use super::error::CudaError;
+use super::simulation::CudaSimulation;
+use crate::pipeline::SimulationError;
+use std::time::Instant;
+
+impl CudaSimulation {
+    /// Stage 2: the pair list built (the particle arrays reordered), and a decomposed run's
+    /// halo set up for the new order.
+    pub(super) fn build_pairs(&mut self) -> Result<(), CudaError> {
+        let decomposed = self.host.parallel.is_some();
+        let order = self.pairs.build(
+            &self.gpu,
+            &mut self.particles,
+            self.walls.as_mut(),
+            decomposed,
+        )?;
+        if let Some(par) = self.host.parallel.as_deref() {
+            self.halo.setup(&self.gpu, self.particles.n, par, &order)?;
+        }
+        Ok(())
+    }
+
+    /// Stages 2–8: the list (rebuilt when due), the pair and wall contacts and the reduction
+    /// into the particles' forces and torques, followed by the second half kick of the step
+    /// when `kick` (fused into the reduction's pass over the particles).
+    pub(super) fn forces(&mut self, dt: f64, kick: bool) -> Result<(), CudaError> {
+        let t0 = Instant::now();
+        if self.pairs.rebuild || self.pairs.list.is_none() {
+            self.build_pairs()?;
+        }
+        self.gpu.stream.synchronize()?;
+        self.host.timers.neighbor += t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        let st = self.gpu.stream.clone();
+        let view = self.particles.view(&st);
+        let n_mat = self.host.scene.materials.len() as i32;
+        let max_overlap = self.host.guard.max_overlap;
+        // A decomposed run between rebuilds: the ghosts' motion is in flight while the pairs of
+        // two owned particles are evaluated; the pairs with a ghost follow its arrival.
+        let overlap = std::mem::take(&mut self.halo.due);
+        let (np, n_interior) = {
+            let q = self.pairs.list.as_ref().expect("built above");
+            (q.n, if overlap { q.n_interior } else { q.n })
+        };
+        let args = self.pairs.args(&self.gpu, &view, n_mat, dt, max_overlap);
+        self.pairs.clear_deferred(&self.gpu)?;
+        // The walls' facet overlaps read only the particles' poses, final for this step once
+        // the ghosts' have arrived: they run on the wall stream alongside the pairs. In a
+        // decomposed run they are queued behind the interior pairs (the ghosts arrive while
+        // those run), so they overlap only the ghosts' and the deferred pairs.
+        let mut wall_host = 0.0;
+        if !overlap {
+            wall_host += self.start_wall_overlaps(&view)?;
+        }
+        if overlap {
+            self.halo.start(&self.gpu, &self.particles)?;
+        }
+        self.pairs.launch(&self.gpu, 0, n_interior, &args)?;
+        if overlap {
+            if let Some(par) = self.host.parallel.as_deref_mut() {
+                self.halo.finish(&self.gpu, &mut self.particles, par)?;
+            }
+            wall_host += self.start_wall_overlaps(&view)?;
+            self.pairs.launch(&self.gpu, n_interior, np, &args)?;
+        }
+        let spheres_only = self.host.scene.spheres_only();
+        self.pairs.launch_deferred(&self.gpu, &args, spheres_only)?;
+        // Kernels run asynchronously: wait for the stage so that its timer measures it (a few
+        // microseconds per stage, negligible against the step).
+        st.synchronize()?;
+        self.host.timers.pairs += t0.elapsed().as_secs_f64() - wall_host;
+        self.host.timers.walls += wall_host;
+        if super::kernels::phase_clocks() {
+            self.gpu.report_phase_clocks()?;
+        }
+        let t0 = Instant::now();
+        if let Some(w) = self.walls.as_mut() {
+            w.finish(&self.gpu, self.particles.n, &view, n_mat, dt, max_overlap)?;
+        }
+        st.synchronize()?;
+        self.host.timers.walls += t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        let g = self.host.scene.gravity;
+        let pairs = self.pairs.list.as_mut().expect("built above");
+        self.integrator.reduce_and_kick(
+            &self.gpu,
+            &mut self.particles,
+            pairs,
+            self.walls.as_ref(),
+            g,
+            dt,
+            kick,
+        )?;
+        // The springs just computed are the history of the next evaluation.
+        std::mem::swap(&mut pairs.spring_in, &mut pairs.spring_out);
+        if let Some(w) = &mut self.walls {
+            std::mem::swap(&mut w.spring_in, &mut w.spring_out);
+        }
+        let mut error = [0u32; 3];
+        st.memcpy_dtoh(&self.gpu.error, &mut error)?;
+        self.host.timers.reduce += t0.elapsed().as_secs_f64();
+        // A geometry error fails the step; the fused kick has already applied this step's
+        // forces to the velocities on the device (the run stops with the error: `engine.step()?`).
+        if error[0] != 0 || error[1] != 0 {
+            return Err(self.geometry_error(error).into());
+        }
+        self.host_current = false;
+        if error[2] != 0 {
+            // The stability guard's overlap bound (cuda/contact.cu `guard_overlap`).
+            let i = (u32::MAX - error[2]) as usize;
+            self.sync_host()?;
+            if i >= self.host.particles.len() {
+                return Err(SimulationError::Domain {
+                    step: self.host.step,
+                    message: format!(
+                        "a contact of ghost slot {i} overlaps more than {} of the smaller \
+                         particle's volume (simulation.guard.max_overlap); its owner's rank \
+                         names it",
+                        self.host.guard.max_overlap
+                    ),
+                }
+                .into());
+            }
+            let problem = crate::stability::Instability::DeepContact {
+                fraction: self.host.guard.max_overlap,
+            };
+            return Err(self.host.unstable(i, Some(problem)).into());
+        }
+        Ok(())
+    }
+
+    /// Stage 6, first part ([`super::walls::WallStage::start_overlaps`]) at the current time;
+    /// returns the host seconds spent (a list build waits for its count).
+    fn start_wall_overlaps(
+        &mut self,
+        view: &super::layout::ParticleView,
+    ) -> Result<f64, CudaError> {
+        let t0 = Instant::now();
+        let Some(w) = self.walls.as_mut() else {
+            return Ok(0.0);
+        };
+        w.start_overlaps(
+            &self.gpu,
+            &self.particles,
+            view,
+            &self.host.scene,
+            self.host.time,
+        )?;
+        Ok(t0.elapsed().as_secs_f64())
+    }
+
+    /// The geometry error the kernels recorded (`report_error` of cuda/contact.cu): of all
+    /// that failed this step, the pair of the smallest list index, else the particle–wall
+    /// item of the smallest particle slot and wall, named by global ids as the CPU names them.
+    fn geometry_error(&self, error: [u32; 3]) -> SimulationError {
+        let key = !(u64::from(error[0]) | (u64::from(error[1]) << 32));
+        let (source, index, status) = (key >> 40, (key >> 8) & 0xffff_ffff, key & 0xff);
+        let step = self.host.step;
+        let message = format!("geometry status {status} (cuda/polytope.cuh status codes)");
+        let st = &self.gpu.stream;
+        let ids = st.clone_dtoh(&self.particles.id).unwrap_or_default();
+        let id = |slot: usize| {
+            ids.get(slot)
+                .map_or(format!("slot {slot}"), |g| g.to_string())
+        };
+        let what = if source == 0 {
+            let pair = self
+                .pairs
+                .list
+                .as_ref()
+                .and_then(|p| st.clone_dtoh(&p.pairs).ok())
+                .and_then(|pr| {
+                    Some((
+                        *pr.get(2 * index as usize)?,
+                        *pr.get(2 * index as usize + 1)?,
+                    ))
+                });
+            match pair {
+                Some((a, b)) => format!("particles {} and {}", id(a as usize), id(b as usize)),
+                None => format!("pair slot {index}"),
+            }
+        } else {
+            let walls = self.host.scene.walls.len().max(1);
+            let (i, k) = (index as usize / walls, index as usize % walls);
+            let name = self
+                .host
+                .scene
+                .walls
+                .get(k)
+                .map_or("?", |w| w.name.as_str());
+            format!("particle {} and wall {name}", id(i))
+        };
+        SimulationError::Geometry {
+            step,
+            what,
+            message,
+        }
+    }
+}
