@@ -590,7 +590,7 @@ PD_DEVICE void wall_local_pose(const WallState& s, V3<double> xp, Quat<double> q
 // by the same distance test as the CPU's per-step query: the same facets in the same order.
 extern "C" __global__ void wall_candidates(WallCandidatesParams args) {
     const int n = args.n;
-    const ParticleView p = args.p;
+    const ParticleView& p = args.p;
     const int n_walls = args.n_walls;
     const WallInfo* walls = args.walls;
     const WallState* states = args.states;
@@ -681,7 +681,7 @@ extern "C" __global__ void wall_facet_overlaps(WallOverlapsParams args) {
     const int n_items = args.n_items;
     const uint2* items = args.items;
     const int n_walls = args.n_walls;
-    const ParticleView p = args.p;
+    const ParticleView& p = args.p;
     const WallState* states = args.states;
     const double* triangles = args.triangles;
     const double* prisms = args.prisms;
@@ -742,7 +742,7 @@ extern "C" __global__ void wall_facet_overlaps(WallOverlapsParams args) {
 // the contact law applied once to the total; the wall's spring per particle and wall.
 extern "C" __global__ void wall_contacts(WallContactsParams args) {
     const int n = args.n;
-    const ParticleView p = args.p;
+    const ParticleView& p = args.p;
     const int n_walls = args.n_walls;
     const WallState* states = args.states;
     const WallInfo* walls = args.walls;
