@@ -6,8 +6,10 @@ use crate::pipeline::SimulationError;
 /// Errors of the CUDA backend.
 #[derive(Debug, thiserror::Error)]
 pub enum CudaError {
+    /// The driver reported an error. Its message is part of this one, so it is not also
+    /// chained as a source (an error report would print it twice).
     #[error("CUDA driver: {0}")]
-    Driver(#[from] cudarc::driver::DriverError),
+    Driver(cudarc::driver::DriverError),
     /// A kernel file did not compile (or its source could not be assembled).
     #[error(transparent)]
     Compile(#[from] CompileError),
@@ -30,6 +32,12 @@ pub enum CudaError {
     Simulation(#[from] SimulationError),
     #[error(transparent)]
     Halo(#[from] HaloError),
+}
+
+impl From<cudarc::driver::DriverError> for CudaError {
+    fn from(e: cudarc::driver::DriverError) -> Self {
+        CudaError::Driver(e)
+    }
 }
 
 /// What went wrong in a decomposed run's device halo (`super::halo`).

@@ -168,10 +168,11 @@ pub enum CompileError {
         log: String,
     },
     /// NVRTC failed otherwise (the library, the program's creation).
-    #[error("NVRTC could not compile cuda/{kernel_file}: {source:?}")]
+    #[error("NVRTC could not compile cuda/{kernel_file}: {error:?}")]
     Failed {
         kernel_file: String,
-        source: cudarc::nvrtc::CompileError,
+        /// Part of the message, not chained as a source (it would print twice).
+        error: cudarc::nvrtc::CompileError,
     },
 }
 
@@ -324,9 +325,9 @@ fn nvrtc_compile(file: &str, source: String, options: Vec<String>) -> Result<Ptx
             options,
             log: log.to_string_lossy().into_owned(),
         },
-        source => CompileError::Failed {
+        error => CompileError::Failed {
             kernel_file: file.to_string(),
-            source,
+            error,
         },
     })
 }
