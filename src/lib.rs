@@ -49,6 +49,10 @@
 //! - [`tuning`]: the `POLYDEM_*` environment knobs, read once and logged.
 //! - [`rng`]: the insertion's portable, checkpointed random numbers.
 
+// The library never writes to stdout: the CLI's JSON output goes there (clippy.toml lets
+// `#[cfg(test)]` code print what it measured).
+#![warn(clippy::print_stdout)]
+
 pub mod accuracy;
 pub mod backend;
 pub mod contact;
