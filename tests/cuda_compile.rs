@@ -1,5 +1,5 @@
 //! Every kernel of `cuda/` compiles under NVRTC 13.0 for sm_90 (the H100/H200 architecture),
-//! in each configuration a scene can ask for: this needs NVRTC but no GPU (`make test` puts
+//! in each configuration that changes their code (see `configs`): this needs NVRTC but no GPU (`make test` puts
 //! PyPI's `nvidia-cuda-nvrtc` on the library path). The kernels also `static_assert` the sizes
 //! of the structs they share with Rust, so a layout drift fails here.
 
@@ -7,6 +7,21 @@ use polydem::backend::cuda::kernels::{KERNEL_FILES, compile_in};
 use polydem::backend::cuda::probe::PROBE_FILE;
 use polydem::backend::cuda::{KernelConfig, Precision};
 
+/// The scene configurations whose kernels are checked. Only `cuda/contact.cu` (tens of seconds
+/// to minutes under NVRTC) and `cuda/probe.cu` are costly; the others take about a second.
+/// What the kernels switch on (`#if` in `cuda/`), and where each value is covered:
+///
+/// - `contact.cu`: `PD_DOUBLE_GEOMETRY`, `PD_SPHERES`, `PD_WALLS`, `PD_PERIODIC`, and the hull
+///   index type of `quickhull.cuh` (a byte for templates of fewer than 60 faces, else 16 bits).
+///   Polyhedra: double with walls (the CPU-bitwise path), mixed with walls (the default GPU
+///   path), and double, periodic, without walls, with the 16-bit hull index and 3 templates.
+///   Spheres: double with walls, mixed, periodic, without walls.
+/// - `integrate.cu`: `PD_GHOSTS`, `PD_WALLS`; `neighbor.cu`: `PD_GHOSTS`: both values of each.
+/// - `probe.cu`: only the template sizes, so the hull index type ([`probe_configs`]).
+/// - `scan.cu`, `halo.cu`: nothing of the scene.
+///
+/// `PD_MATERIALS` only sizes a table and no kernel reads `PD_FRICTION`; both vary anyway. The
+/// files are compiled on all cores (`jobs`), so on 2 cores the check takes about 4 minutes.
 fn configs() -> Vec<KernelConfig> {
     let base = KernelConfig {
         precision: Precision::Double,
@@ -22,28 +37,22 @@ fn configs() -> Vec<KernelConfig> {
     };
     vec![
         base.clone(),
-        // A rank of a decomposed run (ghost flags in the pair search).
+        // A rank of a decomposed run (ghost flags in the pair search), mixed precision.
         KernelConfig {
             precision: Precision::Mixed,
             ghosts: true,
             ..base.clone()
         },
+        // Periodic, no walls, several large templates: 128 faces need the 16-bit hull index.
         KernelConfig {
             walls: false,
             friction: false,
             periodic: true,
             templates: 3,
-            max_vertices: 42,
-            max_faces: 22,
-            materials: 1,
-            ghosts: true,
-            ..base.clone()
-        },
-        KernelConfig {
-            precision: Precision::Mixed,
-            templates: 2,
             max_vertices: 256,
             max_faces: 128,
+            materials: 1,
+            ghosts: true,
             ..base.clone()
         },
         // The sphere fast path, with and without walls.
@@ -65,6 +74,37 @@ fn configs() -> Vec<KernelConfig> {
     ]
 }
 
+/// `cuda/probe.cu` reads no scene flag, only the template sizes, and its code differs between
+/// sizes only in the hull index type. It is compiled once, with the 16-bit index: its kernels
+/// evaluate the geometry in both precisions, so this also covers mixed precision with the 16-bit
+/// index, which `contact.cu` is checked in only with double; the byte index is `contact.cu`'s
+/// in both precisions.
+fn probe_configs() -> Vec<KernelConfig> {
+    vec![configs().remove(2)]
+}
+
+/// Each kernel file with each configuration that can change its code: every configuration for
+/// the files that read scene flags, the probe's one, and one for the files that read none.
+/// Costly compiles first, so that the threads finish together.
+fn jobs() -> Vec<(&'static str, KernelConfig)> {
+    let all = configs();
+    let mut jobs = Vec::new();
+    for config in &all {
+        jobs.push(("contact.cu", config.clone()));
+    }
+    for config in probe_configs() {
+        jobs.push((PROBE_FILE, config));
+    }
+    for file in KERNEL_FILES {
+        match *file {
+            "contact.cu" => {}
+            "scan.cu" | "halo.cu" => jobs.push((*file, all[0].clone())),
+            _ => jobs.extend(all.iter().map(|c| (*file, c.clone()))),
+        }
+    }
+    jobs
+}
+
 #[test]
 fn every_kernel_compiles_with_nvrtc_for_sm_90() {
     // SAFETY: only tries to open the shared library.
@@ -75,21 +115,51 @@ fn every_kernel_compiles_with_nvrtc_for_sm_90() {
          puts .venv/lib/python3*/site-packages/nvidia/cu13/lib on LD_LIBRARY_PATH), or add a CUDA \
          13.0 lib64 folder to LD_LIBRARY_PATH"
     );
-    let mut failures = Vec::new();
-    for config in configs() {
-        for file in KERNEL_FILES.iter().chain([&PROBE_FILE]) {
-            let t = std::time::Instant::now();
-            // Without the PTX cache: this is the check that NVRTC accepts every kernel.
-            match compile_in(file, &config, 90, None) {
-                Ok(_) => println!(
-                    "{file} {:?}: {:.2} s",
-                    config.precision,
-                    t.elapsed().as_secs_f64()
-                ),
-                Err(e) => failures.push(format!("{config:?}\n{e}")),
-            }
-        }
+    // A new kernel file must be placed in `jobs` (with the configurations that change its code).
+    for file in KERNEL_FILES {
+        assert!(
+            matches!(
+                *file,
+                "contact.cu" | "scan.cu" | "halo.cu" | "integrate.cu" | "neighbor.cu"
+            ),
+            "{file}: say in jobs() which configurations change its code"
+        );
     }
+    // NVRTC compiles independent programs on several threads at once; a compile of contact.cu
+    // is single-threaded, so the threads divide the wall time by up to the core count.
+    let jobs = jobs();
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let failures = std::sync::Mutex::new(Vec::new());
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(jobs.len());
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| {
+                loop {
+                    let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some((file, config)) = jobs.get(k) else {
+                        break;
+                    };
+                    let t = std::time::Instant::now();
+                    // Without the PTX cache: this is the check that NVRTC accepts every kernel.
+                    match compile_in(file, config, 90, None) {
+                        Ok(_) => println!(
+                            "{file} {:?} spheres={} walls={} periodic={} faces={}: {:.2} s",
+                            config.precision,
+                            config.spheres,
+                            config.walls,
+                            config.periodic,
+                            config.max_faces,
+                            t.elapsed().as_secs_f64()
+                        ),
+                        Err(e) => failures.lock().unwrap().push(format!("{config:?}\n{e}")),
+                    }
+                }
+            });
+        }
+    });
+    let failures = failures.into_inner().unwrap();
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
 }
 
