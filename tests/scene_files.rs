@@ -756,14 +756,18 @@ fn committed_wall_meshes_face_the_particles() {
     };
     let normal = |t: &[Vector3<f64>; 3]| (t[1] - t[0]).cross(&(t[2] - t[0])).normalize();
     let centroid = |t: &[Vector3<f64>; 3]| (t[0] + t[1] + t[2]) / 3.0;
-    let box_tris = load("box_open_top.stl");
-    assert_eq!(box_tris.len(), 10);
-    let inside = Vector3::new(0.0, 0.0, 0.05);
-    assert!(
-        box_tris
-            .iter()
-            .all(|t| normal(t).dot(&(inside - centroid(t))) > 0.0)
-    );
+    for (file, height) in [("box_open_top.stl", 0.1), ("box_open_top_tall.stl", 0.2)] {
+        let box_tris = load(file);
+        assert_eq!(box_tris.len(), 10);
+        let inside = Vector3::new(0.0, 0.0, 0.5 * height);
+        assert!(
+            box_tris
+                .iter()
+                .all(|t| normal(t).dot(&(inside - centroid(t))) > 0.0)
+        );
+        let top = box_tris.iter().flatten().map(|x| x.z).fold(0.0, f64::max);
+        assert!((top - height).abs() < 1e-6, "{file}: top at {top}");
+    }
     let hopper = load("hopper.stl");
     assert_eq!(hopper.len(), 4 * HOPPER_SEGMENTS);
     for t in &hopper {
@@ -860,13 +864,19 @@ fn tri(m: &mut MeshFile, t: [Vector3<f64>; 3]) {
 
 /// Open-top box, 0.1 m cube: x, y ∈ [−0.05, 0.05], z ∈ [0, 0.1], normals inwards.
 fn box_open_top() -> MeshFile {
+    open_box(0.1)
+}
+
+/// Open-top box of base 0.1 m × 0.1 m and height `height`: x, y ∈ [−0.05, 0.05],
+/// z ∈ [0, height], normals inwards.
+fn open_box(height: f64) -> MeshFile {
     let (h, l) = (0.05, 0.1);
     let mut m = MeshFile::default();
     quad(&mut m, [-h, -h, 0.0], [l, 0.0, 0.0], [0.0, l, 0.0]); // floor, +z
-    quad(&mut m, [-h, -h, 0.0], [0.0, l, 0.0], [0.0, 0.0, l]); // x = −h, +x
-    quad(&mut m, [h, -h, 0.0], [0.0, 0.0, l], [0.0, l, 0.0]); // x = +h, −x
-    quad(&mut m, [-h, -h, 0.0], [0.0, 0.0, l], [l, 0.0, 0.0]); // y = −h, +y
-    quad(&mut m, [-h, h, 0.0], [l, 0.0, 0.0], [0.0, 0.0, l]); // y = +h, −y
+    quad(&mut m, [-h, -h, 0.0], [0.0, l, 0.0], [0.0, 0.0, height]); // x = −h, +x
+    quad(&mut m, [h, -h, 0.0], [0.0, 0.0, height], [0.0, l, 0.0]); // x = +h, −x
+    quad(&mut m, [-h, -h, 0.0], [0.0, 0.0, height], [l, 0.0, 0.0]); // y = −h, +y
+    quad(&mut m, [-h, h, 0.0], [l, 0.0, 0.0], [0.0, 0.0, height]); // y = +h, −y
     m
 }
 
@@ -908,6 +918,9 @@ fn regenerate_wall_meshes() {
     std::fs::create_dir_all(&dir).unwrap();
     box_open_top()
         .write_stl(&dir.join("box_open_top.stl"))
+        .unwrap();
+    open_box(0.2)
+        .write_stl(&dir.join("box_open_top_tall.stl"))
         .unwrap();
     hopper().write_stl(&dir.join("hopper.stl")).unwrap();
     plane().write_stl(&dir.join("plane.stl")).unwrap();
