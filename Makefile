@@ -14,13 +14,15 @@
 #   make setup     only the installation step
 #   make clean-venv   remove .venv (the next setup recreates it)
 #
-# What they cost on a 2-core machine (cold: a fresh clone, setup done; warm: built before):
+# What they cost on a 2-core machine (cold: a fresh clone after setup, the build included;
+# warm: built before):
 #
-#   make run       cold about 9 min (the build), warm about 1 min
-#   make test      cold about 18 min (8-10 min building the tests), warm about 10 min
-#   make validate  about 12 min warm (the full pour), plus the build when cold
-#   make lint      cold about 10 min (clippy checks every target, rustdoc builds the
+#   make run       cold 8-10 min (the build) + the scene; warm the scene alone
+#   make test      cold about 20 min, warm about 11 (NVRTC 3, the small pour 4, the rest 4)
+#   make validate  cold about 20 min, warm about 12 (the full pour)
+#   make lint      cold about 6 min (clippy checks every target, rustdoc builds the
 #                  dependencies in the dev profile), warm under 1 min
+#   make probe     cold 8-10 min (the build), warm seconds
 #
 # `make lint` is not part of `make test`: formatting or lint findings are review findings, not
 # failed tests, so they should not stop a user's `make test` from reporting what the tests
