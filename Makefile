@@ -18,7 +18,7 @@
 # warm: built before):
 #
 #   make run       cold 8-10 min (the build) + the scene; warm the scene alone
-#   make test      cold about 20 min, warm about 11 (NVRTC 3, the small pour 4, the rest 4)
+#   make test      cold about 20 min, warm about 11 (NVRTC 3, the small pour 3, the rest 5)
 #   make validate  cold about 20 min, warm about 12 (the full pour)
 #   make lint      cold about 6 min (clippy checks every target, rustdoc builds the
 #                  dependencies in the dev profile), warm under 1 min
