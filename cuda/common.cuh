@@ -194,7 +194,7 @@ template <class T> PD_HD V3<T> vmin(V3<T> a, V3<T> b) { return v3(min_(a.x, b.x)
 template <class T> PD_HD V3<T> vmax(V3<T> a, V3<T> b) { return v3(max_(a.x, b.x), max_(a.y, b.y), max_(a.z, b.z)); }
 template <class T> PD_HD T vmax_component(V3<T> a) { return max_(max_(a.x, a.y), a.z); }
 
-// Precision conversions: the pair frame is built in double and rounded to T once (DESIGN.md §3).
+// Precision conversions: the pair frame is built in double and rounded to T once (docs/design.md §3).
 template <class T, class S> PD_HD V3<T> cast3(V3<S> a) { return v3<T>(T(a.x), T(a.y), T(a.z)); }
 
 // A unit quaternion (w; x, y, z), body → world, as nalgebra's UnitQuaternion.

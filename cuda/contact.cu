@@ -21,7 +21,7 @@ typedef double GeomReal;
 typedef float GeomReal;
 #endif
 
-// Templates in constant memory (DESIGN.md §3), filled by the host after loading the module.
+// Templates in constant memory (docs/design.md §3), filled by the host after loading the module.
 __constant__ double pd_template_vertices[PD_TEMPLATES * PD_MAX_TEMPLATE_VERTICES * 3];
 __constant__ double pd_template_normals[PD_TEMPLATES * PD_MAX_TEMPLATE_FACES * 3];
 __constant__ double pd_template_offsets[PD_TEMPLATES * PD_MAX_TEMPLATE_FACES];

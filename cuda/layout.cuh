@@ -2,7 +2,7 @@
 // src/backend/cuda/layout.rs, field for field. The host passes the Rust side's sizes and field
 // offsets in as PD_SIZEOF_<STRUCT> and PD_OFFSETOF_<STRUCT>_<FIELD> defines (layout.rs
 // `layout_defines`), and each struct is checked against them below, so a layout drift fails the
-// kernel compile (tests/cuda_compile.rs) instead of reading garbage on the device (DESIGN.md §3).
+// kernel compile (tests/cuda_compile.rs) instead of reading garbage on the device (docs/design.md §3).
 //
 // The structs of the pair geometry and the contact law (GridParams, PairMaterial) compile on the
 // host as well (tests/cuda_geometry_host.rs); the kernels' argument structs only with NVRTC or

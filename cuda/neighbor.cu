@@ -5,7 +5,7 @@
 // higher global id within r_i + r_j + skin, and the 1D int2 pair list is built by count,
 // exclusive prefix sum (scan.cu) and fill (seed paper Sec. 2.2, Fig. 3c). Pairs of one particle
 // are contiguous, so the pair offsets also index the contact history by its lower-id member.
-// For the deterministic reduction (DESIGN.md §4), every particle gets its pair references
+// For the deterministic reduction (docs/design.md §4), every particle gets its pair references
 // sorted by partner global id.
 #include "common.cuh"
 #include "state.cuh"
@@ -212,7 +212,7 @@ extern "C" __global__ void fill_refs(int n_pairs, const int2* pairs, const unsig
     refs[ref_offset[b] + atomicAdd(&ref_fill[b], 1u)] = 2u * (unsigned int)k + 1u;
 }
 
-// Sorts each particle's references by partner global id: the reduction order (DESIGN.md §4).
+// Sorts each particle's references by partner global id: the reduction order (docs/design.md §4).
 extern "C" __global__ void sort_refs(int n, const unsigned int* ref_offset, unsigned int* refs, const int2* pairs,
                                      const pd_u64* id) {
     int i = blockIdx.x * blockDim.x + threadIdx.x;

@@ -373,7 +373,7 @@ PD_HD bool axis_separates(const BodyRef& A, const BodyRef& B, V3<double> axis, d
 }
 
 // overlap::overlap_pair: narrow phase and overlap of A against B computed in arithmetic T in a
-// frame centred near the contact (DESIGN.md §3): frame origin on the centre line where the
+// frame centred near the contact (docs/design.md §3): frame origin on the centre line where the
 // bounding spheres would touch, planes culled to those that reach the other's ball and the faces
 // that miss it set aside, Chebyshev centre started at the origin (the verdict when it proves an
 // interior; GJK, seed Alg. I, otherwise), frame moved onto it in double, overlap about it (seed

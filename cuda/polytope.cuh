@@ -158,7 +158,7 @@ PD_HD void place_vertices(PosedPolytope<T>& p, const TemplateView& t, double sca
 
 // PosedPolytope::place: places template `t`, scaled by `scale`, at (pos, rot) (body frame →
 // world), in a frame whose origin is the world point `origin`: x = R (s v) + (pos − origin),
-// the subtraction done in double before rounding to T (DESIGN.md §3, relative coordinates).
+// the subtraction done in double before rounding to T (docs/design.md §3, relative coordinates).
 // Input beyond the capacities is ignored, as in Rust.
 template <class T>
 PD_HD void place(PosedPolytope<T>& p, const TemplateView& t, double scale, V3<double> pos, Quat<double> rot_q,

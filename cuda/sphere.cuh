@@ -1,4 +1,4 @@
-// The sphere fast path (DESIGN.md §1): the lens of two spheres and a sphere's cap behind a wall
+// The sphere fast path (docs/design.md §1): the lens of two spheres and a sphere's cap behind a wall
 // facet in closed form, as the same Overlap record the polyhedral stages produce. Twins of
 // `sphere_lens`, `disk_polygon` and `sphere_facet` in src/geometry/sphere.rs, operation for
 // operation (the module docs there derive the formulas); always in double, since the lens is a

@@ -17,7 +17,7 @@
 #                    (default 60: time for the interrupt checkpoint)
 #
 # On a GPU machine each rank drives the GPU of its node-local rank modulo the visible GPUs
-# (DESIGN.md §6); POLYDEM_BACKEND=cpu|cuda|auto (default auto) picks the backend.
+# (docs/design.md §6); POLYDEM_BACKEND=cpu|cuda|auto (default auto) picks the backend.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

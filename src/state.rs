@@ -1,7 +1,7 @@
 //! Particle state, materials and particle types: the data every stage reads and writes; and
 //! the observables a force evaluation leaves ([`StepStats`]).
 //!
-//! Particles are a structure of arrays indexed by a local index (DESIGN.md §3); each has a
+//! Particles are a structure of arrays indexed by a local index (docs/design.md §3); each has a
 //! global id that never changes and names it in output and checkpoints. Positions, velocities,
 //! orientations and angular velocities are f64 on the CPU.
 

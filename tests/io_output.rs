@@ -1,4 +1,4 @@
-//! Output and checkpoints (src/io, DESIGN.md §8): frames read back by meshio (an independent
+//! Output and checkpoints (src/io, docs/design.md §8): frames read back by meshio (an independent
 //! reader, tests/oracles/read_vtu.py), collections, particle CSV, time series and checkpoints.
 //!
 //! The meshio tests need the Python of python/requirements.txt: `POLYDEM_PYTHON`, else

@@ -1,4 +1,4 @@
-//! Domain decomposition over real MPI ranks (DESIGN.md §6): the built `polydem` binary under
+//! Domain decomposition over real MPI ranks (docs/design.md §6): the built `polydem` binary under
 //! `mpirun --oversubscribe -n 2..4`, held to the single-rank run of the same scene.
 //!
 //! The reference is exact: a checkpoint holds every particle field (sorted by global id), the

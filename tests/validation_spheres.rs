@@ -1,4 +1,4 @@
-//! The sphere fast path (DESIGN.md §1) against closed-form and independently integrated
+//! The sphere fast path (docs/design.md §1) against closed-form and independently integrated
 //! references (validation.md §4 and §6), on the CPU; the `*_on_gpu_*` variants run the same
 //! cases with the same tolerances on the GPU.
 //!

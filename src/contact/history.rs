@@ -1,6 +1,6 @@
 //! Contact history: the per-contact state that outlives a step (the tangential spring, the
 //! approach speed at first touch, the twist angle), keyed by the pair of global ids so that it survives neighbour-list rebuilds,
-//! reordering and migration (DESIGN.md §3).
+//! reordering and migration (docs/design.md §3).
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -17,7 +17,7 @@ pub struct ContactKey {
 }
 
 impl ContactKey {
-    /// The key of a particle pair, lower id first (DESIGN.md §4).
+    /// The key of a particle pair, lower id first (docs/design.md §4).
     pub fn particles(i: u64, j: u64) -> Self {
         ContactKey {
             a: i.min(j),

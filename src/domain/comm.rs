@@ -1,4 +1,4 @@
-//! The communicator the domain decomposition talks through (DESIGN.md §6): [`SerialComm`] for
+//! The communicator the domain decomposition talks through (docs/design.md §6): [`SerialComm`] for
 //! one rank, [`MpiComm`] over rsmpi when built with the `mpi` feature.
 //!
 //! Every message is a byte buffer packed by [`super::pack`] (floats as their raw bits), so the
@@ -319,7 +319,7 @@ pub fn launched_under_mpi() -> bool {
 }
 
 /// The rank's index among the ranks on its node, as the launcher reports it (`None` when it
-/// does not): the GPU a rank drives is this modulo the visible GPUs (DESIGN.md §6).
+/// does not): the GPU a rank drives is this modulo the visible GPUs (docs/design.md §6).
 pub fn node_local_rank() -> Option<usize> {
     [
         "OMPI_COMM_WORLD_LOCAL_RANK",

@@ -1,4 +1,4 @@
-//! The decomposed part of stage 1 (DESIGN.md §1, §6): insertion over all ranks, and at a
+//! The decomposed part of stage 1 (docs/design.md §1, §6): insertion over all ranks, and at a
 //! neighbour-list rebuild rebalancing, migration and the ghosts chosen afresh.
 //!
 //! These take the parts of a rank's state they change (particles, contact history, inserter,

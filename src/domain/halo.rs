@@ -1,5 +1,5 @@
 //! The halo: ghost (virtual-region) copies of the neighbours' outer-region particles
-//! (seed paper Sec. 2.6, DESIGN.md §6).
+//! (seed paper Sec. 2.6, docs/design.md §6).
 //!
 //! At each neighbour-list rebuild a rank decides which of its particles each neighbour needs:
 //! those within the halo width (the pair-list cutoff `2 r_max + skin`) of the neighbour's box,

@@ -1,5 +1,5 @@
 //! Migration: particles whose centroid left their rank's box move to the owner with their full
-//! state and the contact-history entries they are a member of (DESIGN.md §6), at neighbour-list
+//! state and the contact-history entries they are a member of (docs/design.md §6), at neighbour-list
 //! rebuilds (between rebuilds a particle may stray up to half the skin outside its box, which
 //! the halo width allows for).
 //!

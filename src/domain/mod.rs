@@ -1,4 +1,4 @@
-//! Domain decomposition over MPI ranks (DESIGN.md §6, seed paper Sec. 2.6).
+//! Domain decomposition over MPI ranks (docs/design.md §6, seed paper Sec. 2.6).
 //!
 //! One rank owns the particles whose centroids lie in its box ([`decomposition`]). Particles
 //! within the halo width of a neighbour's box (the outer region) are sent there as ghosts each

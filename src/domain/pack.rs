@@ -1,5 +1,5 @@
 //! Byte packing of what ranks send each other: little-endian, floats as their raw bits, so a
-//! value arrives bitwise as it left (DESIGN.md §4 needs a ghost to be the owner's particle to
+//! value arrives bitwise as it left (docs/design.md §4 needs a ghost to be the owner's particle to
 //! the last bit).
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};

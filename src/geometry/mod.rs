@@ -2,7 +2,7 @@
 //!
 //! Every query here has an f64 reference instance and an f32 instance (the arithmetic type is a
 //! [`Real`]); the GPU kernels in `cuda/` are twins of these functions. Pair geometry is computed in
-//! a frame centred near the pair (DESIGN.md §3), which is what makes f32 viable.
+//! a frame centred near the pair (docs/design.md §3), which is what makes f32 viable.
 //!
 //! - [`gjk`]: GJK intersection test (seed paper Alg. I).
 //! - [`interior`]: the Chebyshev centre of the intersection, the robust interior point the dual

@@ -488,7 +488,7 @@ pub fn axis_separates(
 }
 
 /// Narrow phase and overlap of template `ta` scaled by `sa` at `pose_a` against `tb` at
-/// `pose_b`, computed in arithmetic `T` in a frame centred near the contact (DESIGN.md §3).
+/// `pose_b`, computed in arithmetic `T` in a frame centred near the contact (docs/design.md §3).
 ///
 /// The planes are culled to those that reach the other body's bounding ball, and the faces
 /// that miss the other body are set aside ([`set_aside_faces_apart`]). The Chebyshev centre of

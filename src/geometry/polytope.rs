@@ -62,7 +62,7 @@ impl<T: Real> PosedPolytope<T> {
     /// whose origin is the world point `origin`: `x = R (s v) + (t − origin)`.
     ///
     /// The subtraction `t − origin` is done in f64 before rounding to `T`: this is the
-    /// "relative coordinates" rule of DESIGN.md §3 that makes f32 pair geometry viable.
+    /// "relative coordinates" rule of docs/design.md §3 that makes f32 pair geometry viable.
     pub fn place(
         &mut self,
         template: &ConvexTemplate,

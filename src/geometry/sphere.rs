@@ -1,4 +1,4 @@
-//! The sphere fast path (DESIGN.md §1: "all spheres → stages 4–5 are the sphere formula"): the
+//! The sphere fast path (docs/design.md §1: "all spheres → stages 4–5 are the sphere formula"): the
 //! overlap of two spheres and of a sphere with a wall facet in closed form, as the same
 //! [`Overlap`] record the polyhedral stages produce, so the volume-based contact law applies
 //! unchanged. The GPU twins are in `cuda/sphere.cuh`.

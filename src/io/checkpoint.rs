@@ -1,4 +1,4 @@
-//! Checkpoints (DESIGN.md §8): everything a run needs to continue bitwise as if never stopped.
+//! Checkpoints (docs/design.md §8): everything a run needs to continue bitwise as if never stopped.
 //!
 //! Binary format, all integers and floats little-endian, floats as their raw bits:
 //!

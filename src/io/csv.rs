@@ -1,4 +1,4 @@
-//! CSV output (DESIGN.md §8): per-frame particle tables and the time series of energies,
+//! CSV output (docs/design.md §8): per-frame particle tables and the time series of energies,
 //! contact counts and wall forces.
 //!
 //! Numbers are written with the shortest digits that parse back to the same f64 bits

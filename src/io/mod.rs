@@ -1,4 +1,4 @@
-//! Output and checkpoints (DESIGN.md §8, stage 10 of §1).
+//! Output and checkpoints (docs/design.md §8, stage 10 of §1).
 //!
 //! - [`vtk`]: hand-written VTK XML: per-rank `.vtu` pieces with one `VTK_POLYHEDRON` cell per
 //!   particle, one `.pvtu` per frame, `frames.pvd` listing the frames with their times, and the

@@ -1,4 +1,4 @@
-//! VTK XML output of frames (DESIGN.md §8): `frames.pvd` → per-step `.pvtu` → per-rank `.vtu`,
+//! VTK XML output of frames (docs/design.md §8): `frames.pvd` → per-step `.pvtu` → per-rank `.vtu`,
 //! and `walls.pvd` → per-step walls `.vtu`. Written by hand (no VTK dependency).
 //!
 //! Layout under the output directory:
@@ -290,7 +290,7 @@ fn piece_xml(view: &FrameView, fields: &[&str]) -> Result<String, String> {
         let t = tmpl[i];
         let base = connectivity.len() as u64;
         for v in &t.vertices {
-            // World position R(q)·(s·v) + x (DESIGN.md §3: template + scale + pose).
+            // World position R(q)·(s·v) + x (docs/design.md §3: template + scale + pose).
             let w = p.orientation[i].transform_vector(&(v.coords * p.scale[i])) + p.position[i];
             points.extend_from_slice(&[w.x, w.y, w.z]);
         }

@@ -4,11 +4,11 @@
 //! scans the 27 surrounding cells for partners within `r_i + r_j + skin` (bounding spheres plus
 //! the Verlet skin). The result is the seed paper's 1D `int2` pair list (Sec. 2.2, Fig. 3c),
 //! built by count, exclusive prefix sum and fill, so that each pair is one independent work item.
-//! A pair is stored with the lower global id first (DESIGN.md §4). The list is reused until some
+//! A pair is stored with the lower global id first (docs/design.md §4). The list is reused until some
 //! particle has moved more than half the skin since the build (hybrid paper Eq. 1–2); bounding
 //! spheres are centred on the centroid, so rotation never invalidates it.
 //!
-//! For the deterministic reduction (DESIGN.md §4) the build also records, for every particle,
+//! For the deterministic reduction (docs/design.md §4) the build also records, for every particle,
 //! its pairs sorted by partner global id.
 
 use nalgebra::Vector3;

@@ -42,7 +42,7 @@ pub struct RestoredState {
 ///
 /// - Without [`comm`](Self::comm), or with one of one rank, the simulation is the whole
 ///   domain on this process; with more ranks it is this rank's part of a run decomposed over
-///   them (DESIGN.md §6): it owns the particles in its subdomain and holds ghosts of its
+///   them (docs/design.md §6): it owns the particles in its subdomain and holds ghosts of its
 ///   neighbours' outer regions. All ranks build together (the exchange is collective).
 /// - Without [`restore`](Self::restore), it starts at t = 0 with the particles of count
 ///   insertions placed and, unless [`evaluate_forces(false)`](Self::evaluate_forces), the

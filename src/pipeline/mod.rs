@@ -1,4 +1,4 @@
-//! The simulation and its step: every stage of DESIGN.md §1, in order.
+//! The simulation and its step: every stage of docs/design.md §1, in order.
 //!
 //! The translational and rotational integration is velocity Verlet: forces at the start of a
 //! step are those of the previous force evaluation, so [`Simulation::step`] runs
@@ -92,7 +92,7 @@ pub struct Simulation {
 }
 
 impl Simulation {
-    /// Advances one time step (the stage order of DESIGN.md §1; see the module docs).
+    /// Advances one time step (the stage order of docs/design.md §1; see the module docs).
     pub fn step(&mut self) -> Result<(), SimulationError> {
         self.half_kick_and_drift(); // 9a
         self.check_motion()?;

@@ -2,9 +2,9 @@
 //! [`Engine`]'s step — output frames, time series, checkpoints and restarts, progress,
 //! signals, and the closing `summary.json` (stage 10 of docs/design.md §1).
 //!
-//! [`run_on`] is four parts, each a function here: [`start_or_restore`] (the engine on its
-//! device, fresh or from a checkpoint), [`Outputs::open`] (the output folder's writers and
-//! schedules), [`step_loop`] (steps, scheduled output, progress, signals) and [`finish`] (the
+//! [`run_on`] is four parts, each a function here: `start_or_restore` (the engine on its
+//! device, fresh or from a checkpoint), `Outputs::open` (the output folder's writers and
+//! schedules), `step_loop` (steps, scheduled output, progress, signals) and `finish` (the
 //! closing output and the summary).
 
 mod bench;

@@ -235,7 +235,7 @@ pub enum TimeStep {
 pub struct NeighborSettings {
     /// Verlet skin, an absolute length (m); default 0.1 × the largest circumscribed diameter.
     pub skin: f64,
-    /// Who builds the neighbour list (DESIGN.md §7).
+    /// Who builds the neighbour list (docs/design.md §7).
     pub mode: NeighborMode,
 }
 
@@ -463,7 +463,7 @@ pub fn parse_scene(text: &str, base_dir: &Path, file_name: &str) -> Result<Scene
 }
 
 impl Scene {
-    /// Whether every particle is a sphere: the scene then takes the sphere fast path (DESIGN.md
+    /// Whether every particle is a sphere: the scene then takes the sphere fast path (docs/design.md
     /// §1), and validation guarantees it has no polyhedra.
     pub fn spheres_only(&self) -> bool {
         !self.templates.is_empty() && self.templates.iter().all(|t| t.sphere)

@@ -676,7 +676,7 @@ impl Validator<'_> {
             });
             scales.push(self.scale(&k("scale"), p.scale.as_ref()));
         }
-        // The sphere fast path replaces the polyhedral stages for the whole scene (DESIGN.md §1);
+        // The sphere fast path replaces the polyhedral stages for the whole scene (docs/design.md §1);
         // a sphere–polyhedron contact has no formula.
         let is_sphere = |t: &ParticleType| templates.get(t.template).is_some_and(|t| t.sphere);
         if let (Some(s), Some(q)) = (

@@ -78,7 +78,7 @@ pub struct ConvexTemplate {
     /// Radius of the sphere with the same volume, `(3V / 4π)^(1/3)`.
     pub equivalent_radius: f64,
     /// Whether the particle is an exact sphere of radius `circumscribed_radius` (the sphere fast
-    /// path, DESIGN.md §1): contacts use [`crate::geometry::sphere`], and `vertices`/`faces` are
+    /// path, docs/design.md §1): contacts use [`crate::geometry::sphere`], and `vertices`/`faces` are
     /// only its drawing.
     pub sphere: bool,
 }

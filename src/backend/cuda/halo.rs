@@ -1,4 +1,4 @@
-//! A decomposed run's rank on the GPU (DESIGN.md §6): the GPU twin of [`crate::domain::halo`].
+//! A decomposed run's rank on the GPU (docs/design.md §6): the GPU twin of [`crate::domain::halo`].
 //!
 //! The rank's owned particles and its ghosts share the device arrays (a `ghost` flag per slot,
 //! carried through the list build's reordering); pairs of two ghosts are not listed, ghosts are

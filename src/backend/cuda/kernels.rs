@@ -1,5 +1,5 @@
 //! The kernels of `cuda/`, embedded in the binary and compiled at run time by NVRTC with
-//! `#define`s derived from the scene (DESIGN.md §1, §5): a scene pays only for the stages it
+//! `#define`s derived from the scene (docs/design.md §1, §5): a scene pays only for the stages it
 //! uses, and the struct sizes shared with Rust are checked by `static_assert` in the kernels.
 
 use super::layout;
@@ -49,7 +49,7 @@ pub const KERNEL_FILES: &[&str] = &[
 pub enum Precision {
     /// Everything in f64.
     Double,
-    /// f64 state; f32 pair geometry in the pair's contact-centred frame (DESIGN.md §3).
+    /// f64 state; f32 pair geometry in the pair's contact-centred frame (docs/design.md §3).
     Mixed,
 }
 
@@ -177,10 +177,8 @@ pub enum CompileError {
 }
 
 /// Register cap of the lean polyhedral pair kernels (`pair_planes` and `pair_faces`; the
-/// deferred pass has none), 0 for none. Measured on an H200 for 1e6 dense dodecahedra
-/// (docs/performance.md): uncapped the two passes use 124–126 registers (two blocks of 256 per
-/// SM) and run 4 % faster than with a cap of 96 in mixed precision and 2 % in double; 128 is the
-/// same as none. With one lean pass the cap of 96 had been 6 % and 25 % faster. A cap changes
+/// deferred pass has none), 0 for none: uncapped, the two passes fit two blocks of 256 per SM
+/// and ran fastest in the sweep of docs/performance.md (§ dense dodecahedra). A cap changes
 /// only the register allocation, never the arithmetic (no FMA contraction, IEEE division and
 /// square root), so results are the same bits with any cap.
 pub const DEFAULT_PAIR_MAX_REGISTERS: u32 = 0;

@@ -20,11 +20,9 @@ use std::sync::Arc;
 pub(super) const BLOCK: u32 = 256;
 
 /// Threads per block of the sphere pair kernel. Its 94 registers per thread allow two blocks of
-/// 256 per multiprocessor (16 warps) but five of 128 (20 warps), and the kernel waits on memory:
-/// on an H200, 1e6 dense spheres took 0.50 ms per step in the pair stage with 128, 0.61 ms with
-/// 256 (docs/performance.md). The polyhedral passes keep [`BLOCK`]: their per-thread workspace
-/// lives in local memory, and with one pass for the whole pair, 128 was 40 % slower than 256
-/// (the two passes now are about equal either way).
+/// 256 per multiprocessor (16 warps) but five of 128 (20 warps), and the kernel waits on memory,
+/// so the smaller blocks are faster (measured in docs/performance.md, dense spheres). The
+/// polyhedral passes keep [`BLOCK`]: their per-thread workspace lives in local memory.
 pub(super) const SPHERE_PAIR_BLOCK: u32 = 128;
 
 /// Launch configuration for `n` threads in blocks of [`BLOCK`] (see [`cfg_with`]).
@@ -34,7 +32,7 @@ pub(super) fn cfg(n: usize) -> LaunchConfig {
 
 /// Launch configuration for `n` threads in blocks of `preferred`. Small launches get smaller
 /// blocks, so that they still spread over the GPU's multiprocessors (a 2000-particle scene in
-/// blocks of 128 would occupy 16 of an H100's 132); `POLYDEM_CUDA_BLOCK` fixes the block size
+/// blocks of 128 would occupy 16 of a GPU's 132 multiprocessors); `POLYDEM_CUDA_BLOCK` fixes the block size
 /// of every kernel instead (for tuning).
 pub(super) fn cfg_with(n: usize, preferred: u32) -> LaunchConfig {
     let fixed = crate::tuning::Tuning::get().cuda_block;

@@ -1,7 +1,7 @@
 //! Every struct shared with the kernels, `#[repr(C)]` here and mirrored field for field in
 //! `cuda/layout.cuh`. Their sizes and field offsets go to NVRTC as `PD_SIZEOF_<STRUCT>` and
 //! `PD_OFFSETOF_<STRUCT>_<field>` defines ([`layout_defines`]), which `cuda/layout.cuh`
-//! `static_assert`s (DESIGN.md §3), so a layout drift fails the kernel compile check in CI.
+//! `static_assert`s (docs/design.md §3), so a layout drift fails the kernel compile check in CI.
 //! Device pointers are `u64` ([`DevPtr`]); structs passed by value to a kernel (the `*Params`)
 //! carry explicit `pad` fields where C would insert padding.
 

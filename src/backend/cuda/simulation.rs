@@ -1,6 +1,6 @@
 //! The step on the GPU: [`CudaSimulation`] keeps the particle state, the pair list and the
 //! contact history resident on the device and launches the kernels of `cuda/` stage by stage in
-//! the order of DESIGN.md §1 (the GPU twin of [`Simulation`], as HOOMD-blue pairs a GPU class
+//! the order of docs/design.md §1 (the GPU twin of [`Simulation`], as HOOMD-blue pairs a GPU class
 //! with each expensive CPU class). The host copy in [`CudaSimulation::host`] is refreshed only
 //! when it is read (output, checkpoint) or changed (insertion, removal), so an ordinary step
 //! copies nothing back but its status flags and error word (28 bytes).
