@@ -10,7 +10,8 @@
 #                  (tests marked `#[ignore = "full validation: make validate"]`)
 #   make lint      cargo fmt --check, clippy -D warnings on every target, rustdoc -D warnings,
 #                  and no import cycle between top-level modules (scripts/module_graph.py)
-#   make graph     print the module import graph and the largest source files
+#   make graph     print the module import graph and the largest source files, and write them
+#                  into docs/design.md (Architecture at a glance)
 #   make setup     only the installation step
 #   make clean-venv   remove .venv (the next setup recreates it)
 #
@@ -102,7 +103,7 @@ lint: setup
 	cd $(ROOT) && python3 scripts/module_graph.py --check
 
 graph:
-	@cd $(ROOT) && python3 scripts/module_graph.py
+	@cd $(ROOT) && python3 scripts/module_graph.py && python3 scripts/module_graph.py --update docs/design.md
 
 clean-venv:
 	rm -rf $(ROOT)/.venv
