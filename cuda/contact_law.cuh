@@ -70,7 +70,7 @@ struct ContactForces {
 };
 
 // The mass a contact's normal impulse sees, 1/m* = Σ 1/m + (r × n)·I⁻¹(r × n), for one body
-// (pipeline.rs `normal_effective_mass`): returns its term of the sum. `inertia` holds the
+// (pipeline/pairs.rs `normal_effective_mass`): returns its term of the sum. `inertia` holds the
 // principal moments, `q` the orientation (body → world).
 PD_HD double inverse_mass_term(double mass, V3<double> inertia, Quat<double> q, V3<double> x,
                                V3<double> centroid, V3<double> n) {

@@ -208,7 +208,7 @@ extern "C" __global__ void kick_drift(KickDriftParams args) {
     }
 }
 
-// Stage 8, the deterministic reduction (src/pipeline.rs), fused with the second half kick when
+// Stage 8, the deterministic reduction (src/pipeline/reduction.rs), fused with the second half kick when
 // `kick` is nonzero: per particle, the pair forces and torques summed in the order of its
 // references (sorted by partner id at the list build), then the wall sums (PD_WALLS), stored as
 // the particle's force and torque, then the half kick with them (half_kick_particle). Reference

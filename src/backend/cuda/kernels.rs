@@ -30,6 +30,10 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("scan.cu", include_str!("../../../cuda/scan.cu")),
     ("integrate.cu", include_str!("../../../cuda/integrate.cu")),
     ("neighbor.cu", include_str!("../../../cuda/neighbor.cu")),
+    (
+        "wall_contacts.cuh",
+        include_str!("../../../cuda/wall_contacts.cuh"),
+    ),
     ("contact.cu", include_str!("../../../cuda/contact.cu")),
     ("halo.cu", include_str!("../../../cuda/halo.cu")),
     ("probe.cu", include_str!("../../../cuda/probe.cu")),
