@@ -1,0 +1,181 @@
+//! Scheduling of insertions: a fresh or restored [`Inserter`], its checkpoint state, and the
+//! `insert` call that works out which particles are due and hands each to the placement code.
+
+use super::super::walls::WallTriangles;
+use super::super::{Scene, SceneError};
+use super::placement::{Occupancy, type_name};
+use super::{InsertReport, Inserter, InserterState, InsertionMode, Region};
+use crate::rng::Rng;
+use crate::state::Particles;
+use nalgebra::Vector3;
+
+impl Inserter {
+    /// A fresh inserter, its generator seeded from `simulation.seed`.
+    pub fn new(scene: &Scene) -> Self {
+        let n = scene.insertions.len();
+        Inserter {
+            rng: Rng::new(scene.simulation.seed),
+            inserted: vec![0; n],
+            count_done: vec![false; n],
+            last_insertion_time: None,
+        }
+    }
+
+    /// The state to checkpoint.
+    pub fn state(&self) -> InserterState {
+        InserterState {
+            rng: self.rng.state(),
+            inserted: self.inserted.clone(),
+            count_done: self.count_done.clone(),
+            last_insertion_time: self.last_insertion_time,
+        }
+    }
+
+    /// Restores a checkpointed state. If the scene's insertion list changed length since, the
+    /// counters are cut or padded with zeros (new insertions start afresh);
+    /// [`Inserter::try_restore`] refuses that instead.
+    pub fn restore(scene: &Scene, state: &InserterState) -> Self {
+        let n = scene.insertions.len();
+        let mut inserted = state.inserted.clone();
+        inserted.resize(n, 0);
+        let mut count_done = state.count_done.clone();
+        count_done.resize(n, false);
+        Inserter {
+            rng: Rng::from_state(state.rng),
+            inserted,
+            count_done,
+            last_insertion_time: state.last_insertion_time,
+        }
+    }
+
+    /// As [`Inserter::restore`], but an error when the state does not match the scene.
+    pub fn try_restore(scene: &Scene, state: &InserterState) -> Result<Self, SceneError> {
+        let n = scene.insertions.len();
+        if state.inserted.len() != n || state.count_done.len() != n {
+            return Err(SceneError::Insertion {
+                file: scene.file.display().to_string(),
+                key: "insertions".into(),
+                message: format!(
+                    "the checkpoint's insertion state has {} entries, the scene {n}",
+                    state.inserted.len()
+                ),
+            });
+        }
+        Ok(Self::restore(scene, state))
+    }
+
+    /// Particles placed so far by each insertion.
+    pub fn inserted(&self) -> &[u64] {
+        &self.inserted
+    }
+
+    /// Time of the last call that placed a particle.
+    pub fn last_insertion_time(&self) -> Option<f64> {
+        self.last_insertion_time
+    }
+
+    /// Whether [`Inserter::insert`] at time `t` would place particles (some are due), without
+    /// placing them: the GPU backend syncs the state to the host only then.
+    pub fn pending(&self, t: f64, scene: &Scene) -> bool {
+        let n_ins = scene.insertions.len().min(self.inserted.len());
+        (0..n_ins).any(|k| {
+            let ins = &scene.insertions[k];
+            let done = matches!(ins.mode, InsertionMode::Count(_)) && self.count_done[k];
+            !done && ins.due_by(t) > self.inserted[k]
+        })
+    }
+
+    /// Inserts every particle due by time `t`: count insertions on the first call, rate
+    /// insertions as they fall due. New particles overlap no existing or new particle and no
+    /// wall (at its pose at `t`), judged by bounding spheres, and lie inside their region and
+    /// therefore inside the domain. Ids are taken from `next_id`, which is advanced.
+    ///
+    /// Rate particles that find no place in `max_attempts` tries are deferred to later calls.
+    /// A count insertion that cannot place all its particles is an error that says how many fit.
+    pub fn insert(
+        &mut self,
+        t: f64,
+        particles: &mut Particles,
+        scene: &Scene,
+        next_id: &mut u64,
+    ) -> Result<InsertReport, SceneError> {
+        let mut report = InsertReport::default();
+        let n_ins = scene.insertions.len().min(self.inserted.len());
+        let due: Vec<u64> = (0..n_ins)
+            .map(|k| {
+                let ins = &scene.insertions[k];
+                let done = matches!(ins.mode, InsertionMode::Count(_)) && self.count_done[k];
+                if done {
+                    0
+                } else {
+                    ins.due_by(t).saturating_sub(self.inserted[k])
+                }
+            })
+            .collect();
+        if due.iter().all(|&d| d == 0) {
+            return Ok(report);
+        }
+        let mut occupied = Occupancy::new(scene, particles);
+        let walls = WallTriangles::at(scene, t);
+        for (k, &n_due) in due.iter().enumerate() {
+            let ins = &scene.insertions[k];
+            let is_count = matches!(ins.mode, InsertionMode::Count(_));
+            if let (Some(spacing), Region::Box { min, max }) = (ins.lattice, &ins.region) {
+                // Validation checked that the lattice holds the count.
+                // The 1e-9 absorbs the rounding of a region sized as an exact multiple of the spacing.
+                let dims = [0, 1, 2]
+                    .map(|a| ((max[a] - min[a]) / spacing[a] + 1e-9).floor().max(1.0) as u64);
+                for _ in 0..n_due {
+                    let j = self.inserted[k];
+                    let cell = [
+                        j % dims[0],
+                        (j / dims[0]) % dims[1],
+                        j / (dims[0] * dims[1]),
+                    ];
+                    let c = Vector3::from_fn(|a, _| min[a] + spacing[a] * (cell[a] as f64 + 0.5));
+                    self.place_at(ins, particles, scene, c, next_id);
+                    self.inserted[k] += 1;
+                    report.inserted += 1;
+                }
+                self.last_insertion_time = Some(t);
+                self.count_done[k] = true;
+                continue;
+            }
+            for placed in 0..n_due {
+                if self.place_one(ins, particles, scene, &mut occupied, &walls, next_id) {
+                    self.inserted[k] += 1;
+                    report.inserted += 1;
+                    self.last_insertion_time = Some(t);
+                } else if is_count {
+                    let name = type_name(scene, ins.particle_type);
+                    return Err(SceneError::Insertion {
+                        file: scene.file.display().to_string(),
+                        key: format!("insertions[{k}].count"),
+                        message: format!(
+                            "only {placed} of {n_due} particles of type '{name}' fit in the region: \
+                             particle {} found no free position in {} random tries \
+                             (bounding-sphere test against particles and walls); enlarge the \
+                             region, lower `count`, or feed with `rate`",
+                            placed + 1,
+                            ins.max_attempts
+                        ),
+                    });
+                } else {
+                    report.deferred += n_due - placed;
+                    break;
+                }
+            }
+            if is_count {
+                self.count_done[k] = true;
+            }
+        }
+        if report.deferred > 0 {
+            tracing::debug!(
+                t,
+                deferred = report.deferred,
+                "insertion region full; retrying later"
+            );
+        }
+        Ok(report)
+    }
+}
