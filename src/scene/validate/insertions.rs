@@ -1,0 +1,156 @@
+//! `[[insertion]]` sections, and the memory the particles inserted at the start will need.
+
+use super::*;
+
+impl Validator<'_> {
+    pub(super) fn insertions(
+        &mut self,
+        list: &[schema::InsertionSection],
+        scene: &Scene,
+    ) -> Vec<Insertion> {
+        let mut out = Vec::new();
+        for (i, s) in list.iter().enumerate() {
+            let k = |f: &str| format!("insertions[{i}].{f}");
+            let particle_type = scene
+                .particle_type_index(&s.particle_type)
+                .unwrap_or_else(|| {
+                    let defined = names(scene.particle_types.iter().map(|p| &p.name));
+                    self.err(
+                        &k("type"),
+                        format!(
+                            "unknown particle type \"{}\"; defined: {defined}",
+                            s.particle_type
+                        ),
+                    );
+                    usize::MAX
+                });
+            let region = self.region(&k("region"), &s.region, scene, particle_type);
+            let rate_only = [
+                ("start", s.start.is_some()),
+                ("end", s.end.is_some()),
+                ("total", s.total.is_some()),
+            ];
+            let mode = match (s.count, s.rate) {
+                (Some(n), None) => {
+                    if n == 0 {
+                        self.err(&k("count"), "must be at least 1");
+                    }
+                    for (name, set) in rate_only {
+                        if set {
+                            self.err(&k(name), "only allowed with rate (a count insertion places all at the start)");
+                        }
+                    }
+                    InsertionMode::Count(n)
+                }
+                (None, Some(r)) => {
+                    let per_second = self.positive(&k("rate"), r);
+                    let start = self.non_negative(&k("start"), s.start.unwrap_or(0.0));
+                    if let Some(e) = s.end.filter(|e| !(*e > start && e.is_finite())) {
+                        self.err(
+                            &k("end"),
+                            format!("must be finite and after start ({start}), got {e}"),
+                        );
+                    }
+                    if s.total == Some(0) {
+                        self.err(&k("total"), "must be at least 1");
+                    }
+                    InsertionMode::Rate {
+                        per_second,
+                        start,
+                        end: s.end,
+                        total: s.total,
+                    }
+                }
+                _ => {
+                    self.err(
+                        &k("count"),
+                        "give exactly one of count (all at the start) or rate (per second)",
+                    );
+                    InsertionMode::Count(0)
+                }
+            };
+            let orientation = self.orientation(&k("orientation"), s.orientation.as_ref());
+            let velocity = self.vector(&k("velocity"), s.velocity.unwrap_or_default());
+            let angular_velocity = self.vector(
+                &k("angular_velocity"),
+                s.angular_velocity.unwrap_or_default(),
+            );
+            let max_attempts = s.max_attempts.unwrap_or(DEFAULT_MAX_ATTEMPTS);
+            if max_attempts == 0 {
+                self.err(&k("max_attempts"), "must be at least 1");
+            }
+            let lattice = s.lattice.map(|l| {
+                let v = self.vector(&k("lattice"), l);
+                if !(v.iter().all(|&x| x > 0.0 && x.is_finite())) {
+                    self.err(&k("lattice"), format!("spacings must be positive, got {v:?}"));
+                }
+                if !matches!(mode, InsertionMode::Count(_)) {
+                    self.err(&k("lattice"), "only allowed with count (a lattice is filled at the start)");
+                }
+                match (&region, &mode) {
+                    (Region::Box { min, max }, InsertionMode::Count(n)) => {
+                        let points: f64 = (0..3)
+                            .map(|a| ((max[a] - min[a]) / v[a] + 1e-9).floor().max(0.0))
+                            .product();
+                        if (*n as f64) > points {
+                            self.err(
+                                &k("count"),
+                                format!("{n} particles do not fit on the lattice: it has {points} points in the region"),
+                            );
+                        }
+                    }
+                    (Region::Box { .. }, _) => {}
+                    _ => self.err(&k("lattice"), "only allowed with a box region"),
+                }
+                v
+            });
+            out.push(Insertion {
+                particle_type,
+                region,
+                mode,
+                orientation,
+                velocity,
+                angular_velocity,
+                max_attempts,
+                lattice,
+            });
+        }
+        self.start_memory(&out);
+        out
+    }
+
+    /// Refuses count insertions whose particles, all placed at the start, cannot fit in this
+    /// machine's memory: they would otherwise be allocated one by one until the process is
+    /// killed, long after `polydem check` said the scene was fine.
+    pub(super) fn start_memory(&mut self, insertions: &[Insertion]) {
+        let counts: Vec<(usize, u64)> = insertions
+            .iter()
+            .enumerate()
+            .filter_map(|(k, ins)| match ins.mode {
+                InsertionMode::Count(n) => Some((k, n)),
+                _ => None,
+            })
+            .collect();
+        let total: u128 = counts.iter().map(|&(_, n)| n as u128).sum();
+        let Some(&(largest, _)) = counts.iter().max_by_key(|&&(_, n)| n) else {
+            return;
+        };
+        let need = total * HOST_BYTES_PER_PARTICLE as u128;
+        let Some(have) = physical_memory() else {
+            return;
+        };
+        if need > have as u128 {
+            let gib = |b: f64| b / (1u64 << 30) as f64;
+            self.err(
+                &format!("insertions[{largest}].count"),
+                format!(
+                    "{total} particles placed at the start need at least {:.1} GiB of memory \
+                     ({HOST_BYTES_PER_PARTICLE} bytes each for the particle state alone), more \
+                     than this machine's {:.1} GiB; lower count",
+                    gib(need as f64),
+                    gib(have as f64)
+                ),
+            );
+        }
+    }
+}
