@@ -78,7 +78,9 @@ PD_DEVICE double wrap_coordinate(double x, double lo, double hi) {
 // `unstable` = 1 when a position or velocity is not finite, or an owned particle's angular
 // velocity or orientation is not, or it moves faster than `max_speed` (|v| + |ω| radius; the
 // stability guard, Simulation::check_motion), `first_unstable` = the smallest local index of
-// such a particle (for the error message), `wall_rebuild` = 1 when, with `wall_reference` not
+// such a particle (for the error message), `snapshot` = 1 when some particle moved more than
+// `snapshot_distance` since the last list build (the hybrid list's snapshot is due,
+// docs/design.md §7; infinite when none is wanted), `wall_rebuild` = 1 when, with `wall_reference` not
 // null, some particle is
 // farther than `wall_half_reach` from where the wall list was built (the plain difference: a
 // periodic wrap moves a particle against the walls; the host has already taken the walls' own
@@ -104,6 +106,7 @@ extern "C" __global__ void kick_drift(KickDriftParams args) {
     const int checks = args.checks;
     const double* reference = args.reference;
     const double half_skin = args.half_skin;
+    const double snapshot_distance = args.snapshot_distance;
     const double* wall_reference = args.wall_reference;
     const double wall_half_reach = args.wall_half_reach;
     const double* radius = args.radius;
@@ -180,6 +183,9 @@ extern "C" __global__ void kick_drift(KickDriftParams args) {
     V3<double> dx = displacement(grid, load3(reference, i), x);
     if (norm2(dx) > half_skin * half_skin) {
         flags->rebuild = 1u;
+    }
+    if (norm2(dx) > snapshot_distance * snapshot_distance) {
+        flags->snapshot = 1u;
     }
     if (wall_reference != nullptr && norm2(x - load3(wall_reference, i)) > wall_half_reach * wall_half_reach) {
         flags->wall_rebuild = 1u;

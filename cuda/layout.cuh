@@ -70,6 +70,7 @@ struct StepFlags {
     unsigned int unstable;       // a position or velocity is not finite, or the guard's speed bound
     unsigned int first_unstable; // the smallest local index of such a particle
     unsigned int wall_rebuild;   // some particle left the wall list's reach
+    unsigned int snapshot;       // some particle moved more than the snapshot distance (a host build is due)
 };
 #ifdef PD_SIZEOF_STEP_FLAGS
 PD_CHECK_SIZE(StepFlags, STEP_FLAGS);
@@ -78,6 +79,7 @@ PD_CHECK_OFFSET(StepFlags, outside, STEP_FLAGS);
 PD_CHECK_OFFSET(StepFlags, unstable, STEP_FLAGS);
 PD_CHECK_OFFSET(StepFlags, first_unstable, STEP_FLAGS);
 PD_CHECK_OFFSET(StepFlags, wall_rebuild, STEP_FLAGS);
+PD_CHECK_OFFSET(StepFlags, snapshot, STEP_FLAGS);
 #endif
 
 // The particle state the contact stages read (layout.rs `ParticleView`; device pointers,
@@ -221,6 +223,7 @@ struct KickDriftParams {
     GridParams grid;
     const double* reference;
     double half_skin;
+    double snapshot_distance; // the hybrid list's trigger (docs/design.md §7); infinite: none
     const double* wall_reference; // null: no wall list to check
     double wall_half_reach;
     double max_speed;
@@ -247,6 +250,7 @@ PD_CHECK_OFFSET(KickDriftParams, dt, KICK_DRIFT_PARAMS);
 PD_CHECK_OFFSET(KickDriftParams, grid, KICK_DRIFT_PARAMS);
 PD_CHECK_OFFSET(KickDriftParams, reference, KICK_DRIFT_PARAMS);
 PD_CHECK_OFFSET(KickDriftParams, half_skin, KICK_DRIFT_PARAMS);
+PD_CHECK_OFFSET(KickDriftParams, snapshot_distance, KICK_DRIFT_PARAMS);
 PD_CHECK_OFFSET(KickDriftParams, wall_reference, KICK_DRIFT_PARAMS);
 PD_CHECK_OFFSET(KickDriftParams, wall_half_reach, KICK_DRIFT_PARAMS);
 PD_CHECK_OFFSET(KickDriftParams, max_speed, KICK_DRIFT_PARAMS);

@@ -272,3 +272,18 @@ extern "C" __global__ void remap_history(int n_pairs, const int2* pairs, const p
     }
     for (int c = 0; c < PD_HISTORY_WIDTH; ++c) spring[PD_HISTORY_WIDTH * (size_t)k + c] = s[c];
 }
+
+// The hybrid list's consistency check (hybrid paper Eq. 2, operation B10 of its Fig. 1): `flag`
+// (zeroed by the host) is set when some of the n particles moved more than `half_skin` from
+// `reference`, the positions a host-built list was built from (minimum image, as kick_drift).
+extern "C" __global__ void moved_beyond(int n, const double* position, const double* reference, GridParams grid,
+                                        double half_skin, unsigned int* flag) {
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) {
+        return;
+    }
+    V3<double> dx = displacement(grid, load3(reference, i), load3(position, i));
+    if (norm2(dx) > half_skin * half_skin) {
+        *flag = 1u;
+    }
+}

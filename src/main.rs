@@ -50,6 +50,10 @@ enum Command {
         /// folder holding one is refused otherwise; `--restart` continues in it).
         #[arg(long)]
         overwrite: bool,
+        /// Who builds the pair lists on the GPU, overriding the scene's
+        /// simulation.neighbor.mode (docs/scene.md).
+        #[arg(long, value_enum)]
+        neighbor_mode: Option<polydem::scene::NeighborMode>,
     },
     /// Validates a scene and prints the critical time step, the chosen dt and counts.
     Check { scene: PathBuf },
@@ -66,6 +70,10 @@ enum Command {
         /// both precisions unless one is given.
         #[arg(long, value_enum)]
         gpu_precision: Option<polydem::backend::cuda::Precision>,
+        /// Who builds the pair lists on the GPU, overriding the scene's
+        /// simulation.neighbor.mode.
+        #[arg(long, value_enum)]
+        neighbor_mode: Option<polydem::scene::NeighborMode>,
         /// Steps before timing.
         #[arg(long, default_value_t = 20)]
         warmup: u64,
@@ -213,6 +221,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
             max_steps,
             gpu_precision,
             overwrite,
+            neighbor_mode,
         } => {
             let rank = comm.rank();
             let summary = polydem::run::run_on(
@@ -224,6 +233,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                     max_steps,
                     precision: gpu_precision,
                     overwrite,
+                    neighbor_mode,
                 },
                 comm,
             )?;
@@ -237,6 +247,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
             scene,
             backend,
             gpu_precision,
+            neighbor_mode,
             warmup,
             steps,
             json: _,
@@ -296,6 +307,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                     precision: gpu_precision.unwrap_or(polydem::backend::cuda::Precision::Mixed),
                     warmup,
                     steps,
+                    neighbor_mode,
                 },
                 comm,
             )?;

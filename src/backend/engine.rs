@@ -121,6 +121,11 @@ impl Engine {
         self.backend.describe()
     }
 
+    /// See [`Backend::neighbor_report`].
+    pub fn neighbor_report(&self) -> crate::neighbor::NeighborReport {
+        self.backend.neighbor_report()
+    }
+
     /// "cpu" or "cuda".
     pub fn backend_name(&self) -> &'static str {
         self.backend.name()

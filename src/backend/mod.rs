@@ -15,6 +15,7 @@ pub use detect::{CudaInfo, GpuInfo, cuda_info};
 pub use engine::{Engine, Start};
 
 use crate::domain::Comm;
+use crate::neighbor::NeighborReport;
 use crate::pipeline::Simulation;
 use anyhow::{Result, bail};
 use cuda::Precision;
@@ -52,6 +53,9 @@ pub trait Backend {
     /// Candidate pairs of the current neighbour list, where the backend counts them apart
     /// from the host (`None`: see the host's list).
     fn candidate_pairs(&self) -> Option<usize>;
+
+    /// Who built the pair lists so far (`[simulation.neighbor] mode`, docs/design.md §7).
+    fn neighbor_report(&self) -> NeighborReport;
 
     /// What it runs on, for logs and reports ("CPU, 16 threads", the GPU's name).
     fn describe(&self) -> String;

@@ -11,6 +11,12 @@
 //! For the deterministic reduction (docs/design.md §4) the build also records, for every particle,
 //! its pairs sorted by partner global id.
 
+mod report;
+mod slot_list;
+
+pub use report::{Builder, NeighborReport, Switch};
+pub use slot_list::{SlotList, build_slot_list};
+
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
@@ -139,73 +145,7 @@ impl PairList {
             self.refs.clear();
             return;
         }
-        let r_max = radii.iter().cloned().fold(0.0, f64::max);
-        let cutoff = 2.0 * r_max + skin;
-        let grid = Grid::new(region, cutoff, 4 * n);
-        // Bin: cell of each particle, then particles sorted by cell (counting sort).
-        let cell: Vec<usize> = bins.par_iter().map(|x| grid.cell_of(x)).collect();
-        let mut start = vec![0u32; grid.cells() + 1];
-        for &c in &cell {
-            start[c + 1] += 1;
-        }
-        for c in 0..grid.cells() {
-            start[c + 1] += start[c];
-        }
-        let mut fill = start.clone();
-        let mut sorted = vec![0u32; n];
-        for (i, &c) in cell.iter().enumerate() {
-            sorted[fill[c] as usize] = i as u32;
-            fill[c] += 1;
-        }
-        // Candidates of particle i: partners j with a higher id (each pair once) in the 27
-        // neighbouring cells, within the bounding-sphere reach plus skin.
-        let partners = |i: usize, out: &mut dyn FnMut(usize)| {
-            let xi = positions[i];
-            for c in grid.neighbours(cell[i]) {
-                for &j in &sorted[start[c] as usize..start[c + 1] as usize] {
-                    let j = j as usize;
-                    if ids[j] <= ids[i] || (i >= owned && j >= owned) {
-                        continue;
-                    }
-                    let d = bounds.displacement(&xi, &positions[j]);
-                    let reach = radii[i] + radii[j] + skin;
-                    if d.norm_squared() < reach * reach {
-                        out(j);
-                    }
-                }
-            }
-        };
-        // Count, exclusive prefix sum, fill (seed Sec. 2.2).
-        let counts: Vec<u32> = (0..n)
-            .into_par_iter()
-            .map(|i| {
-                let mut k = 0;
-                partners(i, &mut |_| k += 1);
-                k
-            })
-            .collect();
-        let mut offset = vec![0usize; n + 1];
-        for i in 0..n {
-            offset[i + 1] = offset[i] + counts[i] as usize;
-        }
-        let total = offset[n];
-        let mut pairs = vec![[0u32; 2]; total];
-        let mut chunks: Vec<&mut [[u32; 2]]> = Vec::with_capacity(n);
-        {
-            let mut rest = &mut pairs[..];
-            for &c in &counts {
-                let (p, r) = rest.split_at_mut(c as usize);
-                chunks.push(p);
-                rest = r;
-            }
-        }
-        chunks.into_par_iter().enumerate().for_each(|(i, p)| {
-            let mut k = 0;
-            partners(i, &mut |j| {
-                p[k] = [i as u32, j as u32];
-                k += 1;
-            });
-        });
+        let (pairs, _) = search(positions, bins, radii, ids, owned, bounds, region, skin);
         self.pairs = pairs;
         self.index_by_particle(n, ids);
     }
@@ -258,6 +198,96 @@ impl PairList {
     pub fn of(&self, i: usize) -> &[PairRef] {
         &self.refs[self.offsets[i] as usize..self.offsets[i + 1] as usize]
     }
+}
+
+/// The candidate pairs of particles at `positions` (binned at `bins` on a grid over `region`,
+/// the first `owned` owned and the rest ghosts, see [`PairList::build_in`]): each pair `(i, j)`
+/// with `ids[i] < ids[j]` and a centre distance below `r_i + r_j + skin`, grouped by `i` in
+/// ascending order, and how many each `i` has. Count, exclusive prefix sum and fill on rayon
+/// threads (seed Sec. 2.2).
+#[allow(clippy::too_many_arguments)]
+fn search(
+    positions: &[Vector3<f64>],
+    bins: &[Vector3<f64>],
+    radii: &[f64],
+    ids: &[u64],
+    owned: usize,
+    bounds: &Bounds,
+    region: &Bounds,
+    skin: f64,
+) -> (Vec<[u32; 2]>, Vec<u32>) {
+    let n = positions.len();
+    if n == 0 {
+        return (Vec::new(), Vec::new());
+    }
+    let r_max = radii.iter().cloned().fold(0.0, f64::max);
+    let cutoff = 2.0 * r_max + skin;
+    let grid = Grid::new(region, cutoff, 4 * n);
+    // Bin: cell of each particle, then particles sorted by cell (counting sort).
+    let cell: Vec<usize> = bins.par_iter().map(|x| grid.cell_of(x)).collect();
+    let mut start = vec![0u32; grid.cells() + 1];
+    for &c in &cell {
+        start[c + 1] += 1;
+    }
+    for c in 0..grid.cells() {
+        start[c + 1] += start[c];
+    }
+    let mut fill = start.clone();
+    let mut sorted = vec![0u32; n];
+    for (i, &c) in cell.iter().enumerate() {
+        sorted[fill[c] as usize] = i as u32;
+        fill[c] += 1;
+    }
+    // Candidates of particle i: partners j with a higher id (each pair once) in the 27
+    // neighbouring cells, within the bounding-sphere reach plus skin.
+    let partners = |i: usize, out: &mut dyn FnMut(usize)| {
+        let xi = positions[i];
+        for c in grid.neighbours(cell[i]) {
+            for &j in &sorted[start[c] as usize..start[c + 1] as usize] {
+                let j = j as usize;
+                if ids[j] <= ids[i] || (i >= owned && j >= owned) {
+                    continue;
+                }
+                let d = bounds.displacement(&xi, &positions[j]);
+                let reach = radii[i] + radii[j] + skin;
+                if d.norm_squared() < reach * reach {
+                    out(j);
+                }
+            }
+        }
+    };
+    // Count, exclusive prefix sum, fill (seed Sec. 2.2).
+    let counts: Vec<u32> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let mut k = 0;
+            partners(i, &mut |_| k += 1);
+            k
+        })
+        .collect();
+    let mut offset = vec![0usize; n + 1];
+    for i in 0..n {
+        offset[i + 1] = offset[i] + counts[i] as usize;
+    }
+    let total = offset[n];
+    let mut pairs = vec![[0u32; 2]; total];
+    let mut chunks: Vec<&mut [[u32; 2]]> = Vec::with_capacity(n);
+    {
+        let mut rest = &mut pairs[..];
+        for &c in &counts {
+            let (p, r) = rest.split_at_mut(c as usize);
+            chunks.push(p);
+            rest = r;
+        }
+    }
+    chunks.into_par_iter().enumerate().for_each(|(i, p)| {
+        let mut k = 0;
+        partners(i, &mut |j| {
+            p[k] = [i as u32, j as u32];
+            k += 1;
+        });
+    });
+    (pairs, counts)
 }
 
 /// Cell widths and counts of the neighbour grid for `bounds` and cells at least `cutoff` wide

@@ -134,6 +134,11 @@ impl Simulation {
         Ok(())
     }
 
+    /// Pair lists built so far (the first one included).
+    pub fn pair_list_builds(&self) -> u64 {
+        self.pairs.builds
+    }
+
     /// The candidate pair list of stage 2 as global-id pairs (lower id first), sorted: what the
     /// GPU's list must equal after a build from the same positions.
     pub fn candidate_pair_ids(&self) -> Vec<(u64, u64)> {

@@ -20,6 +20,8 @@ pub struct BenchOptions {
     pub warmup: u64,
     /// Steps timed.
     pub steps: u64,
+    /// Overrides the scene's `simulation.neighbor.mode`.
+    pub neighbor_mode: Option<crate::scene::NeighborMode>,
 }
 
 /// `polydem bench`: steps a scene without output and reports particle-steps per second, the
@@ -33,7 +35,10 @@ pub fn bench(opts: &BenchOptions) -> Result<serde_json::Value> {
 /// per second of all ranks together, stage seconds of rank 0) plus each rank's particles,
 /// stage seconds and the decomposition's exchange and waiting times.
 pub fn bench_on(opts: &BenchOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Value> {
-    let scene = load_scene(&opts.scene)?;
+    let mut scene = load_scene(&opts.scene)?;
+    if let Some(mode) = opts.neighbor_mode {
+        scene.simulation.neighbor.mode = mode;
+    }
     let ranks = comm.size();
     let device = select_device(opts.backend, opts.precision, &*comm)?;
     let t_setup = Instant::now();
@@ -70,6 +75,7 @@ pub fn bench_on(opts: &BenchOptions, comm: Arc<dyn Comm>) -> Result<serde_json::
         "walls": t.walls - timers_before.walls,
         "reduce": t.reduce - timers_before.reduce,
     });
+    let neighbor = engine.neighbor_report();
     let (backend_name, described, bytes, pairs) = (
         engine.backend_name(),
         engine.describe(),
@@ -96,6 +102,7 @@ pub fn bench_on(opts: &BenchOptions, comm: Arc<dyn Comm>) -> Result<serde_json::
         "contacts_per_particle": 2.0 * g.stats.contacts as f64 / n.max(1) as f64,
         "wall_contacts": g.stats.wall_contacts,
         "candidate_pairs_per_particle": pairs.map(per_particle),
+        "neighbor": neighbor,
         "device_bytes_per_particle": bytes.map(per_particle),
     }))
 }

@@ -46,6 +46,9 @@ pub struct RunOptions {
     pub precision: Precision,
     /// Clear a previous run's output from the output folder ([`prepare_output_dir`]).
     pub overwrite: bool,
+    /// Overrides the scene's `simulation.neighbor.mode` (the trajectory is the same in
+    /// every mode; only who builds the pair lists changes).
+    pub neighbor_mode: Option<crate::scene::NeighborMode>,
 }
 
 /// `polydem run` on one rank: returns the summary it also writes to `summary.json`.
@@ -60,12 +63,18 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
     if let Some(out) = &opts.out {
         scene.output.dir = out.clone();
     }
+    if let Some(mode) = opts.neighbor_mode {
+        scene.simulation.neighbor.mode = mode;
+    }
     let device = select_device(opts.backend, opts.precision, &*comm)?;
     let warnings = time_step_warnings(&scene);
     if comm.rank() == 0 {
         for msg in &warnings {
             tracing::warn!("{msg}");
         }
+    }
+    if comm.rank() == 0 {
+        log_neighbor_mode(&scene, device, comm.size());
     }
     let id = SceneId::of(&scene, &opts.scene)?;
     let dir = scene.output.dir.clone();
@@ -296,6 +305,10 @@ fn finish(
     let (rank, ranks) = (comm.rank(), comm.size());
     let dir = out.dir.clone();
     let (backend_name, device) = (engine.backend_name(), engine.device());
+    let neighbor = engine.neighbor_report();
+    if rank == 0 {
+        log_neighbor_report(&neighbor);
+    }
     let sim = engine.synced()?;
     if ended.stopped_by.is_none() {
         out.frame(sim)?;
@@ -338,6 +351,7 @@ fn finish(
         "wall_contacts": g.stats.wall_contacts,
         "energy": {"kinetic_translational": kt, "kinetic_rotational": kr, "potential_gravity": pg, "elastic": g.stats.elastic_energy},
         "stage_seconds": sim.timers,
+        "neighbor": neighbor,
         "interrupted": stopped_by.is_some(),
         "signal": stopped_by.map(|s| s.1),
         "exit_status": stopped_by.map_or(0, |s| crate::interrupt::exit_status(s.0)),
@@ -351,4 +365,54 @@ fn finish(
         .with_context(|| format!("{}: cannot write summary.json", dir.display()))?;
     }
     Ok(summary)
+}
+
+/// The log's account of who built the pair lists (`summary.json`'s `neighbor`).
+fn log_neighbor_report(r: &crate::neighbor::NeighborReport) {
+    let secs = |x: Option<f64>| x.map_or("-".into(), |x| format!("{x:.3e} s"));
+    tracing::info!(
+        "neighbor lists (mode {}, last builder {}): {} device builds, {} host builds, {} stale \
+         and {} late host lists, GPU waited {:.3} s for the host; τ_CPU {}, τ_GPU {}, q {}",
+        r.mode,
+        r.builder,
+        r.device_builds,
+        r.host_builds,
+        r.stale_host_lists,
+        r.late_host_lists,
+        r.host_wait_s,
+        secs(r.tau_cpu_s),
+        secs(r.tau_gpu_s),
+        r.q.map_or("-".into(), |q| format!("{q:.3}"))
+    );
+}
+
+/// Says at the start who builds the pair lists: the mode, or why it does not apply here.
+fn log_neighbor_mode(scene: &crate::scene::Scene, device: Device, ranks: usize) {
+    use crate::scene::NeighborMode;
+    let mode = scene.simulation.neighbor.mode;
+    let what = match (device, mode) {
+        (Device::Cpu, _) => format!(
+            "the CPU backend builds its pair lists itself (simulation.neighbor.mode = \"{}\" \
+             chooses the builder of a GPU run)",
+            mode.name()
+        ),
+        (Device::Cuda { .. }, NeighborMode::Gpu) => "the GPU builds the pair lists".into(),
+        (Device::Cuda { .. }, _) if ranks > 1 => format!(
+            "a decomposed run builds every pair list on the GPU after the host's exchange \
+             (simulation.neighbor.mode = \"{}\" applies to one rank; docs/design.md §7)",
+            mode.name()
+        ),
+        (Device::Cuda { .. }, NeighborMode::Cpu) => {
+            "the host builds the pair lists and uploads them (neighbor mode cpu)".into()
+        }
+        (Device::Cuda { .. }, NeighborMode::Hybrid) => format!(
+            "the host pre-builds the next pair list while the GPU steps (neighbor mode hybrid, \
+             hybrid skin {:.3e} m)",
+            scene.simulation.neighbor.hybrid_skin
+        ),
+        (Device::Cuda { .. }, NeighborMode::Auto) => {
+            "neighbor mode auto: measures gpu and hybrid list building and runs the faster".into()
+        }
+    };
+    tracing::info!("{what}");
 }

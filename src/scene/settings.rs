@@ -111,19 +111,37 @@ pub struct NeighborSettings {
     pub skin: f64,
     /// Who builds the neighbour list (docs/design.md §7).
     pub mode: NeighborMode,
+    /// The skin of the lists `hybrid` (and `auto` when it runs hybrid) builds, on the host
+    /// from a snapshot and on the device when the host's list is stale (m); at least `skin`,
+    /// default 2 × `skin` (docs/design.md §7).
+    pub hybrid_skin: f64,
 }
 
-/// `simulation.neighbor.mode`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// `simulation.neighbor.mode` (and `--neighbor-mode`, which overrides it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum NeighborMode {
-    /// Measure and choose.
+    /// Measure the others while running and use the fastest (GPU backend).
     Auto,
     /// Lists built on the GPU.
     Gpu,
-    /// Lists built on the CPU.
+    /// Lists built on the host from the device's positions and uploaded (the hybrid seed's
+    /// sequential mode).
     Cpu,
-    /// CPU pre-builds the next list while the GPU steps.
+    /// The host pre-builds the next list from a snapshot while the GPU steps (the hybrid
+    /// seed's parallel mode).
     Hybrid,
+}
+
+impl NeighborMode {
+    /// The mode's name in scene files, logs and summaries.
+    pub fn name(self) -> &'static str {
+        match self {
+            NeighborMode::Auto => "auto",
+            NeighborMode::Gpu => "gpu",
+            NeighborMode::Cpu => "cpu",
+            NeighborMode::Hybrid => "hybrid",
+        }
+    }
 }
 
 /// `[domain]`, resolved.

@@ -2,6 +2,7 @@
 //! so its host copy is always current.
 
 use super::Backend;
+use crate::neighbor::{Builder, NeighborReport};
 use crate::pipeline::Simulation;
 use anyhow::Result;
 
@@ -38,6 +39,16 @@ impl Backend for Simulation {
 
     fn candidate_pairs(&self) -> Option<usize> {
         None
+    }
+
+    fn neighbor_report(&self) -> NeighborReport {
+        // The CPU backend builds every list itself, whatever the mode asks of a GPU run.
+        NeighborReport {
+            mode: self.scene.simulation.neighbor.mode.name().into(),
+            builder: Builder::Cpu.name().into(),
+            host_builds: self.pair_list_builds(),
+            ..NeighborReport::default()
+        }
     }
 
     fn describe(&self) -> String {

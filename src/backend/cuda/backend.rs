@@ -2,6 +2,7 @@
 
 use super::{CudaError, CudaSimulation};
 use crate::backend::Backend;
+use crate::neighbor::NeighborReport;
 use crate::pipeline::Simulation;
 use anyhow::Result;
 
@@ -45,6 +46,10 @@ impl Backend for CudaSimulation {
 
     fn candidate_pairs(&self) -> Option<usize> {
         Some(CudaSimulation::candidate_pairs(self))
+    }
+
+    fn neighbor_report(&self) -> NeighborReport {
+        CudaSimulation::neighbor_report(self)
     }
 
     fn describe(&self) -> String {

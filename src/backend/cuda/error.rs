@@ -32,6 +32,19 @@ pub enum CudaError {
     Simulation(#[from] SimulationError),
     #[error(transparent)]
     Halo(#[from] HaloError),
+    /// The host build of a pair list could not run.
+    #[error("the host's pair-list build: {0}")]
+    Prebuild(String),
+    /// A host-built pair list does not fit the device's particles (another count, or a
+    /// decomposed run, whose lists the device builds).
+    #[error(
+        "a host-built pair list for {list} particles was offered to {device} (decomposed: {decomposed})"
+    )]
+    HostListMismatch {
+        list: usize,
+        device: usize,
+        decomposed: bool,
+    },
 }
 
 impl From<cudarc::driver::DriverError> for CudaError {

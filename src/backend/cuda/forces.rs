@@ -4,6 +4,7 @@
 //! fused with the second half kick ([`super::integrator`]); then the step's geometry errors.
 
 use super::error::CudaError;
+use super::pairs::ListSource;
 use super::simulation::CudaSimulation;
 use crate::pipeline::SimulationError;
 use std::time::Instant;
@@ -13,12 +14,26 @@ impl CudaSimulation {
     /// halo set up for the new order.
     pub(super) fn build_pairs(&mut self) -> Result<(), CudaError> {
         let decomposed = self.host.parallel.is_some();
+        self.list_builder.begin_build(self.host.step);
+        let t0 = Instant::now();
+        let host_list =
+            self.list_builder
+                .source(&self.gpu, &self.particles, self.pairs.generation)?;
+        let source = match &host_list {
+            Some((list, snapshot)) => ListSource::Host { list, snapshot },
+            None => self.list_builder.device_source(),
+        };
         let order = self.pairs.build(
             &self.gpu,
             &mut self.particles,
             self.walls.as_mut(),
             decomposed,
+            source,
         )?;
+        self.gpu.stream.synchronize()?;
+        self.list_builder
+            .count_build(host_list.is_some(), t0.elapsed().as_secs_f64());
+        self.list_builder.end_build();
         if let Some(par) = self.host.parallel.as_deref() {
             self.halo.setup(&self.gpu, self.particles.n, par, &order)?;
         }

@@ -20,6 +20,9 @@ pub(super) struct DriftChecks<'a> {
     pub(super) reference: &'a CudaSlice<f64>,
     /// Half the skin: how far a particle may move before the pair list is due.
     pub(super) half_skin: f64,
+    /// How far a particle may move before the next host-built list's snapshot is due
+    /// (infinite: none is wanted).
+    pub(super) snapshot_distance: f64,
     /// The wall list's reference positions (null: none to check) and how far a particle may
     /// move from them ([`WallStage::check`]).
     pub(super) wall_reference: u64,
@@ -79,6 +82,7 @@ impl Integrator {
             grid: gpu.grid,
             reference: ptr(limits.reference, st),
             half_skin: limits.half_skin,
+            snapshot_distance: limits.snapshot_distance,
             wall_reference: limits.wall_reference,
             wall_half_reach: limits.wall_half_reach,
             max_speed: limits.max_speed,

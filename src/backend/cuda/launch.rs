@@ -217,6 +217,14 @@ kernel_table! {
             old_spring: &CudaSlice<f64>,
             spring: &mut CudaSlice<f64>,
         );
+        MovedBeyond moved_beyond(
+            n: &i32,
+            position: &CudaSlice<f64>,
+            reference: &CudaSlice<f64>,
+            grid: &GridParams,
+            half_skin: &f64,
+            flag: &mut CudaSlice<u32>,
+        );
     }
     "contact.cu" {
         PairContacts pair_contacts(first: &i32, last: &i32, args: &PairArgs);

@@ -116,6 +116,9 @@ pub struct StepFlags {
     pub first_unstable: u32,
     /// Some particle left the wall list's reach.
     pub wall_rebuild: u32,
+    /// Some particle moved more than the snapshot distance since the list build: the next
+    /// host-built list is due (docs/design.md §7).
+    pub snapshot: u32,
 }
 
 impl StepFlags {
@@ -128,7 +131,7 @@ impl StepFlags {
     }
 }
 
-// SAFETY: five u32, laid out as the C struct; all-zero bits are valid.
+// SAFETY: six u32, laid out as the C struct; all-zero bits are valid.
 unsafe impl DeviceRepr for StepFlags {}
 unsafe impl ValidAsZeroBits for StepFlags {}
 
@@ -241,6 +244,8 @@ pub struct KickDriftParams {
     pub grid: GridParams,
     pub reference: DevPtr,
     pub half_skin: f64,
+    /// `snapshot` is set when some particle moved farther than this (infinite: never).
+    pub snapshot_distance: f64,
     /// Null: no wall list to check.
     pub wall_reference: DevPtr,
     pub wall_half_reach: f64,
@@ -420,7 +425,9 @@ macro_rules! checked_layouts {
 checked_layouts! {
     GridParams => "GRID_PARAMS" { min, max, size, dims, periodic }
     PairMaterial => "PAIR_MATERIAL" { restitution, friction, damping, log_restitution, log_norm }
-    StepFlags => "STEP_FLAGS" { rebuild, outside, unstable, first_unstable, wall_rebuild }
+    StepFlags => "STEP_FLAGS" {
+        rebuild, outside, unstable, first_unstable, wall_rebuild, snapshot,
+    }
     ParticleView => "PARTICLE_VIEW" {
         position, velocity, angular_velocity, orientation, mass, inertia, scale, radius, cn, ct,
         tmpl, material,
@@ -436,8 +443,8 @@ checked_layouts! {
     WallState => "WALL_STATE" { rotation, translation, v0, omega, origin }
     KickDriftParams => "KICK_DRIFT_PARAMS" {
         n, wrap, checks, pad, ghost, position, velocity, orientation, angular_velocity, force,
-        torque, mass, inertia, radius, gravity, dt, grid, reference, half_skin, wall_reference,
-        wall_half_reach, max_speed, flags,
+        torque, mass, inertia, radius, gravity, dt, grid, reference, half_skin,
+        snapshot_distance, wall_reference, wall_half_reach, max_speed, flags,
     }
     ReduceKickParams => "REDUCE_KICK_PARAMS" {
         n, kick, ref_offset, refs, pair_forces, wall_force, wall_torque, force, torque, ghost,

@@ -18,6 +18,7 @@ mod integrator;
 pub mod kernels;
 mod launch;
 pub mod layout;
+mod list_builder;
 mod pair_contacts;
 mod pairs;
 mod particles;

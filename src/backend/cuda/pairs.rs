@@ -7,10 +7,11 @@
 use super::error::{CudaError, HaloError};
 use super::gpu::Gpu;
 use super::launch::{cfg, ptr, zeros};
-use super::layout::{HISTORY_WIDTH, PairSearchParams, staged_planes_bytes};
+use super::layout::{GridParams, HISTORY_WIDTH, PairSearchParams, staged_planes_bytes};
 use super::particles::DeviceParticles;
 use super::walls::WallStage;
 use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
+use crate::neighbor::SlotList;
 use cudarc::driver::CudaSlice;
 
 /// Plane-count buckets of the lean pair passes: counts 0..=ENUM_MAX_PLANES (`PD_PLANE_BUCKETS`).
@@ -96,6 +97,26 @@ pub(super) struct PairStage {
     pub(super) rebuild: bool,
     /// Pair lists built so far.
     pub(super) builds: u64,
+    /// Half the skin of the current list: how far a particle may move from `reference` before
+    /// the list is due (`kick_drift`'s check).
+    pub(super) half_skin: f64,
+    /// Counts the renumberings of the particle slots (every build, every upload): a host
+    /// build from positions of an older numbering names slots that no longer hold its
+    /// particles.
+    pub(super) generation: u64,
+}
+
+/// Where a list build takes its order and its pairs from.
+pub(super) enum ListSource<'a> {
+    /// The device bins, sorts and searches, with this skin and on this grid (cells at least
+    /// `2 r_max + skin` wide).
+    Device { skin: f64, grid: GridParams },
+    /// A list the host built ([`crate::neighbor::build_slot_list`]) from `snapshot`, the
+    /// device's positions in the current slot order when the host took them.
+    Host {
+        list: &'a SlotList,
+        snapshot: &'a CudaSlice<f64>,
+    },
 }
 
 impl PairStage {
@@ -106,6 +127,8 @@ impl PairStage {
             pending_history: None,
             rebuild: true,
             builds: 0,
+            half_skin: 0.0,
+            generation: 0,
         })
     }
 
@@ -119,18 +142,21 @@ impl PairStage {
         self.list = None;
         self.pending_history = Some(history);
         self.rebuild = true;
+        self.generation += 1;
     }
 
     /// Stage 2: bins, reorders the particle arrays (and the walls' springs) by cell, builds the
-    /// pair list and the per-particle references, and carries the contact history over.
-    /// `decomposed`: a rank of a decomposed run (pairs of two owned particles first). Returns
-    /// the reordering: `order[k]` = the slot before the build now at slot `k`.
+    /// pair list and the per-particle references, and carries the contact history over; the
+    /// order and the pairs come from `source`. `decomposed`: a rank of a decomposed run (pairs
+    /// of two owned particles first; device builds only). Returns the reordering: `order[k]`
+    /// = the slot before the build now at slot `k`.
     pub(super) fn build(
         &mut self,
         gpu: &Gpu,
         p: &mut DeviceParticles,
         walls: Option<&mut WallStage>,
         decomposed: bool,
+        source: ListSource,
     ) -> Result<CudaSlice<u32>, CudaError> {
         let st = gpu.stream.clone();
         let k = &gpu.k;
@@ -163,32 +189,34 @@ impl PairStage {
                 spring: zeros::<f64>(&st, HISTORY_WIDTH)?,
             },
         };
-        // Bin and sort by cell (global id within a cell).
-        let g = gpu.grid;
-        let cells = g.cells();
-        let mut cell = zeros::<u32>(&st, n)?;
-        let mut cell_count = zeros::<u32>(&st, cells)?;
-        // SAFETY (all launches below): every buffer holds the element counts the kernels index.
-        unsafe {
-            k.bin_particles(
-                &st,
-                cfg(n),
-                &ni,
-                &p.position,
-                &g,
-                &mut cell,
-                &mut cell_count,
-            )?
+        // The order: by cell (global id within a cell), binned here or taken from the host.
+        let (order, cell_start, skin) = match &source {
+            ListSource::Device { skin, grid } => {
+                let (order, cell_start) = sort_by_cell(gpu, p, grid)?;
+                (order, Some(cell_start), *skin)
+            }
+            ListSource::Host { list, .. } => {
+                if decomposed || list.order.len() != n {
+                    return Err(CudaError::HostListMismatch {
+                        list: list.order.len(),
+                        device: n,
+                        decomposed,
+                    });
+                }
+                (st.clone_htod(&list.order)?, None, list.skin)
+            }
         };
-        let mut cell_start = zeros::<u32>(&st, cells + 1)?;
-        gpu.scan(&cell_count, cells, &mut cell_start)?;
-        let mut fill = zeros::<u32>(&st, cells)?;
-        let mut order = zeros::<u32>(&st, n)?;
-        let ci = cells as i32;
-        unsafe {
-            k.scatter_by_cell(&st, cfg(n), &ni, &cell, &cell_start, &mut fill, &mut order)?;
-            k.sort_cells(&st, cfg(cells), &ci, &cell_start, &mut order, &p.id)?;
-        }
+        // The host list was built from the snapshot: its positions, in the new order, are the
+        // reference the list's validity is measured from (hybrid paper Eq. 2).
+        let reference = match &source {
+            ListSource::Host { snapshot, .. } => {
+                let mut r = zeros::<f64>(&st, 3 * n)?;
+                // SAFETY: both buffers hold 3n values, `order` n indices below n.
+                unsafe { k.gather_f64(&st, cfg(n), &ni, &3, snapshot, &mut r, &order)? };
+                Some(r)
+            }
+            ListSource::Device { .. } => None,
+        };
         // Reorder every particle array (and the wall springs) by `order`; the wall list names
         // particles by index, so it is built again too.
         p.gather_f64s(k, &st, &order)?;
@@ -201,9 +229,19 @@ impl PairStage {
         // Pairs: count, exclusive prefix sum, fill. A decomposed run lists the pairs of two
         // owned particles first and those with a ghost after them, so the first part can be
         // evaluated while the halo is in flight.
-        let (np, n_interior, pairs, offset) = if decomposed {
-            let (n1, p1, _) = list_pairs(gpu, p, 1, &cell_start)?;
-            let (n2, p2, _) = list_pairs(gpu, p, 2, &cell_start)?;
+        let (np, n_interior, pairs, offset) = if let ListSource::Host { list, .. } = &source {
+            let np = list.pairs.len();
+            let flat: &[i32] = list.pairs.as_flattened();
+            let pairs = if np > 0 {
+                st.clone_htod(flat)?
+            } else {
+                zeros::<i32>(&st, 2)?
+            };
+            (np, np, pairs, Some(st.clone_htod(&list.offset)?))
+        } else if decomposed {
+            let (grid, cell_start) = (device_grid(&source), cell_start.as_ref().expect("binned"));
+            let (n1, p1, _) = list_pairs(gpu, p, 1, cell_start, grid, skin)?;
+            let (n2, p2, _) = list_pairs(gpu, p, 2, cell_start, grid, skin)?;
             let np = n1 + n2;
             let mut pairs = zeros::<i32>(&st, 2 * np)?;
             if n1 > 0 {
@@ -216,7 +254,8 @@ impl PairStage {
             // this run's history comes up from the host at every rebuild instead.
             (np, n1, pairs, None)
         } else {
-            let (np, pairs, offset) = list_pairs(gpu, p, 0, &cell_start)?;
+            let (grid, cell_start) = (device_grid(&source), cell_start.as_ref().expect("binned"));
+            let (np, pairs, offset) = list_pairs(gpu, p, 0, cell_start, grid, skin)?;
             (np, np, pairs, Some(offset))
         };
         // References per particle, sorted by partner id.
@@ -279,14 +318,66 @@ impl PairStage {
             bucket_count: zeros::<u32>(&st, PLANE_BUCKETS)?,
             bucket_fill: zeros::<u32>(&st, PLANE_BUCKETS)?,
         });
-        self.reference = st.clone_dtod(&p.position)?;
+        self.reference = match reference {
+            Some(r) => r,
+            None => st.clone_dtod(&p.position)?,
+        };
+        self.half_skin = 0.5 * skin;
         self.rebuild = false;
         self.builds += 1;
+        self.generation += 1;
         Ok(order)
     }
 }
 
-/// Count, exclusive prefix sum and fill of the pairs of `part` (0 all; in a decomposed run 1
+/// The grid of a device build.
+fn device_grid(source: &ListSource) -> GridParams {
+    match source {
+        ListSource::Device { grid, .. } => *grid,
+        ListSource::Host { .. } => unreachable!("host lists are not searched on the device"),
+    }
+}
+
+/// Bins the particles on `grid` and sorts them by cell (global id within a cell, so the
+/// order does not depend on the atomics' arrival): the order (`order[k]` = the slot now at
+/// slot `k`) and each cell's first slot in it.
+fn sort_by_cell(
+    gpu: &Gpu,
+    p: &DeviceParticles,
+    grid: &GridParams,
+) -> Result<(CudaSlice<u32>, CudaSlice<u32>), CudaError> {
+    let st = gpu.stream.clone();
+    let k = &gpu.k;
+    let n = p.n;
+    let ni = n as i32;
+    let cells = grid.cells();
+    let mut cell = zeros::<u32>(&st, n)?;
+    let mut cell_count = zeros::<u32>(&st, cells)?;
+    // SAFETY (all launches below): every buffer holds the element counts the kernels index.
+    unsafe {
+        k.bin_particles(
+            &st,
+            cfg(n),
+            &ni,
+            &p.position,
+            grid,
+            &mut cell,
+            &mut cell_count,
+        )?
+    };
+    let mut cell_start = zeros::<u32>(&st, cells + 1)?;
+    gpu.scan(&cell_count, cells, &mut cell_start)?;
+    let mut fill = zeros::<u32>(&st, cells)?;
+    let mut order = zeros::<u32>(&st, n)?;
+    let ci = cells as i32;
+    unsafe {
+        k.scatter_by_cell(&st, cfg(n), &ni, &cell, &cell_start, &mut fill, &mut order)?;
+        k.sort_cells(&st, cfg(cells), &ci, &cell_start, &mut order, &p.id)?;
+    }
+    Ok((order, cell_start))
+}
+
+/// Count, exclusive prefix sum and fill of the pairs of `part` within `skin`, on `grid` (0 all; in a decomposed run 1
 /// those of two owned particles, 2 those with a ghost): their number, the int2 list and the
 /// per-particle offsets.
 fn list_pairs(
@@ -294,6 +385,8 @@ fn list_pairs(
     p: &DeviceParticles,
     part: i32,
     cell_start: &CudaSlice<u32>,
+    grid: GridParams,
+    skin: f64,
 ) -> Result<(usize, CudaSlice<i32>, CudaSlice<u32>), CudaError> {
     let st = gpu.stream.clone();
     let n = p.n;
@@ -305,8 +398,8 @@ fn list_pairs(
         id: ptr(&p.id, &st),
         ghost: ptr(&p.ghost, &st),
         cell_start: ptr(cell_start, &st),
-        grid: gpu.grid,
-        skin: gpu.skin,
+        grid,
+        skin,
     };
     let mut counts = zeros::<u32>(&st, n)?;
     // SAFETY: the particle buffers hold n values, cell_start cells + 1, `counts` n.

@@ -12,6 +12,7 @@ use super::integrator::{DriftChecks, Integrator};
 use super::kernels::{KernelConfig, Precision};
 use super::launch::Kernels;
 use super::layout::{GridParams, PairMaterial};
+use super::list_builder::ListBuilder;
 use super::pairs::PairStage;
 use super::particles::DeviceParticles;
 use super::walls::WallStage;
@@ -48,6 +49,8 @@ pub struct CudaSimulation {
     pub(super) particles: DeviceParticles,
     /// Stage 2: the pair list, and everything indexed by pair.
     pub(super) pairs: PairStage,
+    /// Stage 2: who builds the pair list (`[simulation.neighbor] mode`).
+    pub(super) list_builder: ListBuilder,
     /// Stage 6: the walls, `None` without walls.
     pub(super) walls: Option<WallStage>,
     /// A decomposed run's halo ([`super::halo`]).
@@ -111,6 +114,7 @@ impl CudaSimulation {
             None => host.particles.len(),
         };
         let grid = GridParams::new(&bounds, cutoff, 4 * particles.max(1));
+        let list_builder = ListBuilder::new(s, grid, host.parallel.is_some(), particles);
         let error = stream.alloc_zeros::<u32>(3)?;
         let gpu = Gpu {
             _ctx: ctx,
@@ -128,6 +132,7 @@ impl CudaSimulation {
             precision,
             particles: DeviceParticles::empty(&gpu.stream)?,
             pairs: PairStage::new(&gpu)?,
+            list_builder,
             walls: None,
             halo: HaloStage::default(),
             integrator: Integrator::new(&gpu)?,
@@ -179,6 +184,18 @@ impl CudaSimulation {
         self.pairs.builds
     }
 
+    /// Who built the pair lists so far, with the seed's timings (docs/design.md §7).
+    pub fn neighbor_report(&self) -> crate::neighbor::NeighborReport {
+        self.list_builder.report()
+    }
+
+    /// Makes every host-built list fail its consistency check from now on, so that each is
+    /// replaced by a device build: the fallback of `hybrid`, forced (for tests).
+    #[doc(hidden)]
+    pub fn force_stale_host_lists(&mut self, on: bool) {
+        self.list_builder.force_stale(on);
+    }
+
     /// Wall lists built so far (at each pair-list build, and when a particle or a wall moved
     /// half the skin since the last one); 0 without walls.
     pub fn wall_list_builds(&self) -> u64 {
@@ -204,7 +221,8 @@ impl CudaSimulation {
         };
         let limits = DriftChecks {
             reference: &self.pairs.reference,
-            half_skin: 0.5 * self.gpu.skin,
+            half_skin: self.pairs.half_skin,
+            snapshot_distance: self.list_builder.snapshot_distance(),
             wall_reference,
             wall_half_reach,
             max_speed: self.host.guard.max_speed,
@@ -267,6 +285,12 @@ impl CudaSimulation {
             }
             if flags.rebuild != 0 {
                 self.pairs.rebuild = true;
+            } else if flags.snapshot != 0 && !self.pairs.rebuild {
+                // The hybrid list's snapshot (seed Fig. 1B, B4): the host builds the next list
+                // while the GPU steps on this one.
+                let generation = self.pairs.generation;
+                self.list_builder
+                    .start_prebuild(&self.gpu, &self.particles, generation)?;
             }
         }
         if flags.wall_rebuild != 0

@@ -74,6 +74,8 @@ pub struct NeighborSection {
     pub skin: Option<f64>,
     /// Who builds the list.
     pub mode: Option<NeighborModeName>,
+    /// The skin of lists the host pre-builds (m).
+    pub hybrid_skin: Option<f64>,
 }
 /// Values of `simulation.neighbor.mode`.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]

@@ -53,6 +53,16 @@ impl Validator<'_> {
             simulation.neighbor.skin = 0.2 * scene.max_bounding_radius();
             scene.simulation = simulation;
         }
+        let n = &mut scene.simulation.neighbor;
+        if n.hybrid_skin.is_nan() {
+            n.hybrid_skin = 2.0 * n.skin;
+        } else if !(n.hybrid_skin >= n.skin && n.hybrid_skin.is_finite()) {
+            let (h, s) = (n.hybrid_skin, n.skin);
+            self.err(
+                "simulation.neighbor.hybrid_skin",
+                format!("must be finite and at least simulation.neighbor.skin ({s} m), got {h}"),
+            );
+        }
         self.domain_resolution(&scene);
         let ts = critical_time_step(&scene);
         self.wall_speeds(&scene, ts.dt);

@@ -57,7 +57,12 @@ impl Validator<'_> {
             dt,
             end_time,
             seed: s.seed,
-            neighbor: NeighborSettings { skin, mode },
+            neighbor: NeighborSettings {
+                skin,
+                mode,
+                // Resolved with the default skin (assemble.rs).
+                hybrid_skin: n.and_then(|n| n.hybrid_skin).unwrap_or(f64::NAN),
+            },
             guard,
         }
     }

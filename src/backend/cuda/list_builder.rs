@@ -1,0 +1,487 @@
+//! Stage 2 on the GPU: who builds the pair list, per `[simulation.neighbor] mode`
+//! (docs/design.md §7; the hybrid CPU–GPU seed, shared/papers/hybrid-cpu-gpu-verlet.txt).
+//!
+//! - `gpu`: the device bins, sorts and searches ([`super::pairs`]).
+//! - `cpu`: the seed's sequential mode (its Fig. 1A): at a rebuild the host takes the device's
+//!   positions, builds the list on rayon threads ([`build_slot_list`]) and uploads it; the GPU
+//!   waits.
+//! - `hybrid`: the seed's parallel mode (its Fig. 1B). When some particle has moved
+//!   `max((S − s)/2, S/4)` from the current list's reference (`kick_drift`'s `snapshot`
+//!   flag; `s` the skin, `S` the hybrid skin), the host takes a snapshot of the positions and
+//!   builds the next list with the skin `S` on a thread of its own while the GPU keeps
+//!   stepping (B4, B5). When the current list expires, the GPU waits for the host list if it
+//!   is not ready (B8), then checks on the device that no particle has moved more than `S/2`
+//!   from the snapshot (seed Eq. 2, B10: every pair that can touch is then in the list) and
+//!   takes it; if one has, the device builds the list itself (with `S`), so a missed contact
+//!   can never happen. The enlarged skin gives the snapshot's list the same remaining reach
+//!   when it is taken as a fresh device list: the host has a whole list lifetime to build it
+//!   (`S = 2s`), where the seed's `S = s` halves the GPU's stretch per list (its Eq. 6).
+//! - `auto`: measures seconds per step of `gpu`, `hybrid` and `gpu` again (and then `cpu` and
+//!   `gpu` when the host builds a list faster than the device) over a few list lifetimes
+//!   each, runs the fastest,
+//!   and measures again after twice as many lifetimes each time (the seed's q changes during
+//!   a run). Its `hybrid` never waits for the host: a late list is dropped and the device
+//!   builds, so trying it costs at most the snapshot's copy.
+//!
+//! Every list holds every pair that can touch while it is used, and nothing else about a
+//! list reaches the trajectory (neighbor::slot_list), so every mode steps bit for bit like
+//! `gpu`. A decomposed run rebuilds through the host's exchange, whose device build follows
+//! the migration; there every mode builds on the device (docs/design.md §7).
+
+use super::error::CudaError;
+use super::gpu::Gpu;
+use super::launch::{cfg, zeros};
+use super::layout::GridParams;
+use super::pairs::ListSource;
+use super::particles::DeviceParticles;
+use crate::neighbor::{Bounds, Builder, NeighborReport, SlotList, Switch, build_slot_list};
+use crate::scene::{NeighborMode, Scene};
+use cudarc::driver::CudaSlice;
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+/// A host build in flight: the thread, and the snapshot it builds from.
+struct Prebuild {
+    /// The pair stage's generation when the snapshot was taken: a build or an upload since
+    /// renumbered the slots the host list names.
+    generation: u64,
+    /// The positions it builds from, on the device (the validity check's reference).
+    snapshot: CudaSlice<f64>,
+    thread: JoinHandle<SlotList>,
+}
+
+/// A list interval: from the start of one build to the start of the next.
+struct Interval {
+    builder: Builder,
+    start: Instant,
+    step: u64,
+    /// Seconds of its build, as the GPU saw it.
+    build: f64,
+}
+
+/// `auto`'s state (see the module docs).
+struct Auto {
+    /// Seconds per step measured per builder (its trials of the latest round).
+    per_step: [Option<f64>; 3],
+    /// This round's measured seconds and steps per builder.
+    round: [(f64, u64); 3],
+    /// The trial under way: its builder, the intervals still to skip (the switch's
+    /// transition) and to measure, and the seconds and steps measured so far.
+    trial: Option<Trial>,
+    /// The builders still to try in this round.
+    queue: Vec<Builder>,
+    /// `cpu` was tried in this round.
+    cpu_tried: bool,
+    /// Intervals until the next round, and the gap after it (doubling).
+    until_round: u64,
+    gap: u64,
+}
+
+struct Trial {
+    builder: Builder,
+    skip: u32,
+    left: u32,
+    seconds: f64,
+    steps: u64,
+}
+
+/// The trials of a round: `gpu` before and after `hybrid`, so that a scene whose cost drifts
+/// (particles fed in, a packing settling) does not favour the one measured first.
+const ROUND: [Builder; 3] = [Builder::Gpu, Builder::Hybrid, Builder::Gpu];
+
+/// Intervals a trial skips after a switch, and measures.
+const TRIAL_SKIP: u32 = 1;
+const TRIAL_MEASURE: u32 = 3;
+/// Intervals between the first two rounds of trials; each gap doubles, up to the last.
+const FIRST_GAP: u64 = 32;
+const LAST_GAP: u64 = 2048;
+
+impl Auto {
+    fn new() -> Self {
+        Auto {
+            per_step: [None; 3],
+            round: [(0.0, 0); 3],
+            trial: None,
+            queue: ROUND.to_vec(),
+            cpu_tried: false,
+            until_round: 0,
+            gap: FIRST_GAP,
+        }
+    }
+}
+
+/// Stage 2's builder choice and its bookkeeping (see the module docs).
+pub(super) struct ListBuilder {
+    /// The builder of the next list.
+    builder: Builder,
+    skin: f64,
+    hybrid_skin: f64,
+    bounds: Bounds,
+    /// The device grids for lists of `skin` and `hybrid_skin`.
+    grid: GridParams,
+    hybrid_grid: GridParams,
+    pending: Option<Prebuild>,
+    auto: Option<Auto>,
+    interval: Option<Interval>,
+    /// The consistency check's reach is zero: every host list is stale (a test's way to force
+    /// the device fallback).
+    force_stale: bool,
+    flag: Option<CudaSlice<u32>>,
+    report: NeighborReport,
+    /// Sums for the report's means: host builds timed, device builds, GPU stretches.
+    tau_cpu: (f64, u64),
+    tau_dev: (f64, u64),
+    tau_gpu: (f64, u64),
+}
+
+impl ListBuilder {
+    pub(super) fn new(scene: &Scene, grid: GridParams, decomposed: bool, particles: usize) -> Self {
+        let n = &scene.simulation.neighbor;
+        let bounds = Bounds {
+            min: scene.domain.min,
+            max: scene.domain.max,
+            periodic: scene.domain.periodic,
+        };
+        let hybrid_cutoff = 2.0 * scene.max_bounding_radius() + n.hybrid_skin;
+        let builder = match (decomposed, n.mode) {
+            (true, _) | (_, NeighborMode::Gpu | NeighborMode::Auto) => Builder::Gpu,
+            (false, NeighborMode::Cpu) => Builder::Cpu,
+            (false, NeighborMode::Hybrid) => Builder::Hybrid,
+        };
+        ListBuilder {
+            builder,
+            skin: n.skin,
+            hybrid_skin: n.hybrid_skin,
+            bounds,
+            grid,
+            hybrid_grid: GridParams::new(&bounds, hybrid_cutoff, 4 * particles.max(1)),
+            pending: None,
+            auto: (n.mode == NeighborMode::Auto && !decomposed).then(Auto::new),
+            interval: None,
+            force_stale: false,
+            flag: None,
+            report: NeighborReport {
+                mode: n.mode.name().into(),
+                builder: builder.name().into(),
+                ..NeighborReport::default()
+            },
+            tau_cpu: (0.0, 0),
+            tau_dev: (0.0, 0),
+            tau_gpu: (0.0, 0),
+        }
+    }
+
+    /// Makes every host list fail the consistency check, so that each is replaced by a
+    /// device build (tests of the fallback).
+    pub(super) fn force_stale(&mut self, on: bool) {
+        self.force_stale = on;
+    }
+
+    /// How far a particle may move from the current list's reference before the next host
+    /// build's snapshot is due (`kick_drift`'s `snapshot` flag); infinite when none is wanted.
+    pub(super) fn snapshot_distance(&self) -> f64 {
+        if self.builder == Builder::Hybrid && self.pending.is_none() {
+            (0.5 * (self.hybrid_skin - self.skin)).max(0.25 * self.hybrid_skin)
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// The seed's B4–B5: copies the positions (with the radii and ids) of the current slots,
+    /// keeps the positions on the device as the check's reference, and starts the host build
+    /// of the next list on a thread of its own. `generation`: the pair stage's.
+    pub(super) fn start_prebuild(
+        &mut self,
+        gpu: &Gpu,
+        p: &DeviceParticles,
+        generation: u64,
+    ) -> Result<(), CudaError> {
+        if self.pending.is_some() || self.builder != Builder::Hybrid {
+            return Ok(());
+        }
+        let st = &gpu.stream;
+        let snapshot = st.clone_dtod(&p.position)?;
+        let x = st.clone_dtoh(&snapshot)?;
+        let r = st.clone_dtoh(&p.radius)?;
+        let id = st.clone_dtoh(&p.id)?;
+        let n = p.n;
+        let (bounds, skin) = (self.bounds, self.hybrid_skin);
+        let thread = std::thread::Builder::new()
+            .name("polydem-prebuild".into())
+            .spawn(move || build_slot_list(&x[..3 * n], &r[..n], &id[..n], &bounds, skin))
+            .map_err(|e| CudaError::Prebuild(e.to_string()))?;
+        self.pending = Some(Prebuild {
+            generation,
+            snapshot,
+            thread,
+        });
+        Ok(())
+    }
+
+    /// The start of a build at `step`: closes the list interval that ends here (its GPU
+    /// stretch, and `auto`'s measurement, which may change the builder).
+    pub(super) fn begin_build(&mut self, step: u64) {
+        let now = Instant::now();
+        if let Some(iv) = self.interval.take() {
+            let total = now.duration_since(iv.start).as_secs_f64();
+            self.tau_gpu.0 += (total - iv.build).max(0.0);
+            self.tau_gpu.1 += 1;
+            let steps = step.saturating_sub(iv.step);
+            self.auto_interval(iv.builder, total, steps, step);
+        }
+        self.interval = Some(Interval {
+            builder: self.builder,
+            start: now,
+            step,
+            build: 0.0,
+        });
+    }
+
+    /// The end of the build begun by [`ListBuilder::begin_build`].
+    pub(super) fn end_build(&mut self) {
+        if let Some(iv) = &mut self.interval {
+            iv.build = iv.start.elapsed().as_secs_f64();
+        }
+    }
+
+    /// Where the next list comes from, by the current builder: the device (`Device`), or a
+    /// host list with the snapshot it was built from. `p`: the particles now; `generation`:
+    /// the pair stage's.
+    pub(super) fn source(
+        &mut self,
+        gpu: &Gpu,
+        p: &DeviceParticles,
+        generation: u64,
+    ) -> Result<Option<(SlotList, CudaSlice<f64>)>, CudaError> {
+        let pending = self.pending.take();
+        if p.n == 0 {
+            return Ok(None);
+        }
+        match self.builder {
+            Builder::Gpu => Ok(None),
+            Builder::Cpu => {
+                let st = &gpu.stream;
+                let snapshot = st.clone_dtod(&p.position)?;
+                let t0 = Instant::now();
+                let x = st.clone_dtoh(&snapshot)?;
+                let r = st.clone_dtoh(&p.radius)?;
+                let id = st.clone_dtoh(&p.id)?;
+                let n = p.n;
+                let list = build_slot_list(&x[..3 * n], &r[..n], &id[..n], &self.bounds, self.skin);
+                self.report.host_wait_s += t0.elapsed().as_secs_f64();
+                self.tau_cpu.0 += list.seconds;
+                self.tau_cpu.1 += 1;
+                Ok(Some((list, snapshot)))
+            }
+            Builder::Hybrid => {
+                let Some(pre) = pending else {
+                    return Ok(None);
+                };
+                if pre.generation != generation {
+                    return Ok(None);
+                }
+                if !pre.thread.is_finished() && self.auto.is_some() {
+                    // `auto` never waits: the device builds and the late list is dropped
+                    // (its thread finishes on its own).
+                    self.report.late_host_lists += 1;
+                    return Ok(None);
+                }
+                let t0 = Instant::now();
+                let list = pre
+                    .thread
+                    .join()
+                    .map_err(|_| CudaError::Prebuild("the host build panicked".into()))?;
+                self.report.host_wait_s += t0.elapsed().as_secs_f64();
+                self.tau_cpu.0 += list.seconds;
+                self.tau_cpu.1 += 1;
+                if list.order.len() != p.n || !self.consistent(gpu, p, &pre.snapshot)? {
+                    self.report.stale_host_lists += 1;
+                    return Ok(None);
+                }
+                Ok(Some((list, pre.snapshot)))
+            }
+        }
+    }
+
+    /// The seed's B10 on the device: no particle moved more than half the hybrid skin from
+    /// `snapshot` (Eq. 2), so the list built from it holds every pair that can touch now.
+    fn consistent(
+        &mut self,
+        gpu: &Gpu,
+        p: &DeviceParticles,
+        snapshot: &CudaSlice<f64>,
+    ) -> Result<bool, CudaError> {
+        let st = &gpu.stream;
+        let flag = match &mut self.flag {
+            Some(f) => f,
+            None => self.flag.insert(zeros::<u32>(st, 1)?),
+        };
+        st.memset_zeros(flag)?;
+        let half = if self.force_stale {
+            0.0
+        } else {
+            0.5 * self.hybrid_skin
+        };
+        let n = p.n as i32;
+        // SAFETY: both position buffers hold 3n values, `flag` one.
+        unsafe {
+            gpu.k.moved_beyond(
+                st,
+                cfg(p.n),
+                &n,
+                &p.position,
+                snapshot,
+                &gpu.grid,
+                &half,
+                flag,
+            )?
+        };
+        let mut out = [0u32];
+        st.memcpy_dtoh(flag, &mut out)?;
+        Ok(out[0] == 0)
+    }
+
+    /// The device build's skin and grid for the current builder (`hybrid` lists keep the
+    /// hybrid skin, so that the next snapshot comes at the same point).
+    pub(super) fn device_source(&self) -> ListSource<'static> {
+        if self.builder == Builder::Hybrid {
+            ListSource::Device {
+                skin: self.hybrid_skin,
+                grid: self.hybrid_grid,
+            }
+        } else {
+            ListSource::Device {
+                skin: self.skin,
+                grid: self.grid,
+            }
+        }
+    }
+
+    /// Counts a finished build and its GPU seconds.
+    pub(super) fn count_build(&mut self, host: bool, seconds: f64) {
+        if host {
+            self.report.host_builds += 1;
+        } else {
+            self.report.device_builds += 1;
+            self.tau_dev.0 += seconds;
+            self.tau_dev.1 += 1;
+        }
+    }
+
+    /// `auto`: a list interval of `builder` took `seconds` over `steps`; picks the builder of
+    /// the list that the build at `step` makes.
+    fn auto_interval(&mut self, builder: Builder, seconds: f64, steps: u64, step: u64) {
+        // `cpu` is worth a trial only when the host builds a list faster than the device.
+        let mean = |(s, k): (f64, u64)| (k > 0).then(|| s / k as f64);
+        let cpu_worth = matches!(
+            (mean(self.tau_cpu), mean(self.tau_dev)),
+            (Some(c), Some(d)) if c < d
+        );
+        let Some(auto) = self.auto.as_mut() else {
+            return;
+        };
+        if let Some(t) = auto.trial.as_mut() {
+            if builder == t.builder && steps > 0 {
+                if t.skip > 0 {
+                    t.skip -= 1;
+                } else {
+                    t.seconds += seconds;
+                    t.steps += steps;
+                    t.left -= 1;
+                }
+            }
+            if t.left == 0 {
+                let r = &mut auto.round[t.builder.index()];
+                r.0 += t.seconds;
+                r.1 += t.steps;
+                auto.per_step[t.builder.index()] = Some(r.0 / r.1.max(1) as f64);
+                auto.trial = None;
+            }
+        } else if auto.until_round > 0 {
+            auto.until_round -= 1;
+            if auto.until_round == 0 {
+                auto.queue = ROUND.to_vec();
+                auto.round = [(0.0, 0); 3];
+                auto.cpu_tried = false;
+            }
+        }
+        let mut next = self.builder;
+        let mut reason = None;
+        if auto.trial.is_none() && auto.until_round == 0 {
+            if auto.queue.is_empty() && cpu_worth && !auto.cpu_tried {
+                auto.queue.extend([Builder::Cpu, Builder::Gpu]);
+                auto.cpu_tried = true;
+            }
+            if !auto.queue.is_empty() {
+                let b = auto.queue.remove(0);
+                auto.trial = Some(Trial {
+                    builder: b,
+                    skip: if b == self.builder { 0 } else { TRIAL_SKIP },
+                    left: TRIAL_MEASURE,
+                    seconds: 0.0,
+                    steps: 0,
+                });
+                next = b;
+                reason = Some(format!("trial of {}", b.name()));
+            } else {
+                // The round is over: the fastest measured, until the next round.
+                let measured: Vec<(Builder, f64)> = Builder::ALL
+                    .into_iter()
+                    .filter_map(|b| auto.per_step[b.index()].map(|t| (b, t)))
+                    .collect();
+                if let Some(&(b, _)) = measured.iter().min_by(|x, y| x.1.total_cmp(&y.1)) {
+                    next = b;
+                    let parts: Vec<String> = measured
+                        .iter()
+                        .map(|(b, t)| format!("{} {t:.3e} s/step", b.name()))
+                        .collect();
+                    reason = Some(format!("fastest measured: {}", parts.join(", ")));
+                    tracing::info!(
+                        "neighbor mode auto: picks {} at step {step} ({})",
+                        b.name(),
+                        parts.join(", ")
+                    );
+                }
+                auto.until_round = auto.gap;
+                auto.gap = (2 * auto.gap).min(LAST_GAP);
+            }
+        }
+        self.report.measured_s_per_step = Builder::ALL
+            .into_iter()
+            .filter_map(|b| auto.per_step[b.index()].map(|t| (b, t)))
+            .collect();
+        if next != self.builder {
+            let reason = reason.unwrap_or_default();
+            tracing::info!(
+                "neighbor mode auto: {} → {} at step {step} ({reason})",
+                self.builder.name(),
+                next.name()
+            );
+            self.report.switches.push(Switch {
+                step,
+                from: self.builder,
+                to: next,
+                reason,
+            });
+            if next != Builder::Hybrid {
+                self.pending = None;
+            }
+            self.builder = next;
+        }
+    }
+
+    /// The report so far.
+    pub(super) fn report(&self) -> NeighborReport {
+        let mut r = self.report.clone();
+        r.builder = self.builder.name().into();
+        let mean = |(s, k): (f64, u64)| (k > 0).then(|| s / k as f64);
+        r.tau_cpu_s = mean(self.tau_cpu);
+        r.tau_build_gpu_s = mean(self.tau_dev);
+        r.tau_gpu_s = mean(self.tau_gpu);
+        r.q = match (r.tau_cpu_s, r.tau_gpu_s) {
+            (Some(c), Some(g)) if g > 0.0 => Some(c / g),
+            _ => None,
+        };
+        r
+    }
+}
