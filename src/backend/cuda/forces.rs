@@ -34,6 +34,9 @@ impl CudaSimulation {
         self.list_builder
             .count_build(host_list.is_some(), t0.elapsed().as_secs_f64());
         self.list_builder.end_build();
+        if host_list.is_none() {
+            self.list_builder.after_build(&self.gpu, &self.particles)?;
+        }
         if let Some(par) = self.host.parallel.as_deref() {
             self.halo.setup(&self.gpu, self.particles.n, par, &order)?;
         }

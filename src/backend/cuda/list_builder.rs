@@ -16,12 +16,17 @@
 //!   can never happen. The enlarged skin gives the snapshot's list the same remaining reach
 //!   when it is taken as a fresh device list: the host has a whole list lifetime to build it
 //!   (`S = 2s`), where the seed's `S = s` halves the GPU's stretch per list (its Eq. 6).
-//! - `auto`: measures seconds per step of `gpu`, `hybrid` and `gpu` again (and then `cpu` and
-//!   `gpu` when the host builds a list faster than the device) over a few list lifetimes
-//!   each, runs the fastest,
-//!   and measures again after twice as many lifetimes each time (the seed's q changes during
-//!   a run). Its `hybrid` never waits for the host: a late list is dropped and the device
-//!   builds, so trying it costs at most the snapshot's copy.
+//! - `auto`: rounds of trials, each a few list lifetimes long, by wall-clock seconds per
+//!   step with the builds included. A round measures `gpu` while a probe times one host
+//!   build in the background (the seed's τ_CPU; probes are rationed to about 1 % of the
+//!   run's time, the first after a second); `hybrid` is tried only when the host builds
+//!   a list in less than 0.8 of the GPU's stretch per list (else its lists come too late) and
+//!   the device's build is at least 2 % of that stretch (else there is nothing to gain), `cpu`
+//!   only when the host builds faster than the device, and `gpu` once more after them, so
+//!   that a scene whose cost drifts favours neither. A trial more than 10 % slower than `gpu`
+//!   ends early. The fastest runs until the next round, 64 lifetimes later, each gap twice the
+//!   last (up to 4096): the seed's q changes during a run. Auto's `hybrid` never waits: a
+//!   late host list is dropped and the device builds.
 //!
 //! Every list holds every pair that can touch while it is used, and nothing else about a
 //! list reaches the trajectory (neighbor::slot_list), so every mode steps bit for bit like
@@ -65,18 +70,29 @@ struct Auto {
     per_step: [Option<f64>; 3],
     /// This round's measured seconds and steps per builder.
     round: [(f64, u64); 3],
-    /// The trial under way: its builder, the intervals still to skip (the switch's
-    /// transition) and to measure, and the seconds and steps measured so far.
+    /// This round's `gpu` intervals: seconds and count (the seed's stretch per list).
+    gpu_intervals: (f64, u64),
+    /// The trial under way.
     trial: Option<Trial>,
     /// The builders still to try in this round.
     queue: Vec<Builder>,
-    /// `cpu` was tried in this round.
-    cpu_tried: bool,
+    /// The round's probe of the host's build time is due (after the next device build).
+    want_probe: bool,
+    /// The probe in flight: a host build from the positions of a device build, run while the
+    /// GPU steps and then dropped; and its measured seconds once it has finished.
+    probe: Option<JoinHandle<SlotList>>,
+    probe_seconds: Option<f64>,
+    /// When the last probe started, and when the builder was made: probes are rationed to
+    /// about 1 % of the run's time ([`PROBE_EVERY`], [`FIRST_PROBE_S`]).
+    last_probe: Option<Instant>,
+    created: Instant,
     /// Intervals until the next round, and the gap after it (doubling).
     until_round: u64,
     gap: u64,
 }
 
+/// A trial: its builder, the intervals still to skip (the switch's transition) and to
+/// measure, and the seconds and steps measured so far.
 struct Trial {
     builder: Builder,
     skip: u32,
@@ -85,27 +101,59 @@ struct Trial {
     steps: u64,
 }
 
-/// The trials of a round: `gpu` before and after `hybrid`, so that a scene whose cost drifts
-/// (particles fed in, a packing settling) does not favour the one measured first.
-const ROUND: [Builder; 3] = [Builder::Gpu, Builder::Hybrid, Builder::Gpu];
-
 /// Intervals a trial skips after a switch, and measures.
 const TRIAL_SKIP: u32 = 1;
 const TRIAL_MEASURE: u32 = 3;
+/// A trial of another builder ends early when it is this much slower per step than `gpu`.
+const TRIAL_LOSS: f64 = 1.10;
+/// Hybrid is tried only when the host builds a list in this fraction of the GPU's stretch
+/// per list (else the list would be late and dropped), and when the device's build is at
+/// least this fraction of that stretch (else there is nothing to gain).
+const HOST_FITS: f64 = 0.8;
+const BUILD_WORTH: f64 = 0.02;
+/// The first probe waits for this much run time (s): a shorter run has nothing to gain.
+const FIRST_PROBE_S: f64 = 1.0;
+/// A probe starts at least this many times the last probe's build time after it.
+const PROBE_EVERY: f64 = 100.0;
 /// Intervals between the first two rounds of trials; each gap doubles, up to the last.
-const FIRST_GAP: u64 = 32;
-const LAST_GAP: u64 = 2048;
+const FIRST_GAP: u64 = 64;
+const LAST_GAP: u64 = 4096;
 
 impl Auto {
     fn new() -> Self {
         Auto {
             per_step: [None; 3],
             round: [(0.0, 0); 3],
+            gpu_intervals: (0.0, 0),
             trial: None,
-            queue: ROUND.to_vec(),
-            cpu_tried: false,
+            queue: vec![Builder::Gpu],
+            want_probe: true,
+            probe: None,
+            probe_seconds: None,
+            last_probe: None,
+            created: Instant::now(),
             until_round: 0,
             gap: FIRST_GAP,
+        }
+    }
+
+    /// A new round: `gpu` first, a fresh probe of the host.
+    fn start_round(&mut self) {
+        self.queue = vec![Builder::Gpu];
+        self.per_step = [None; 3];
+        self.round = [(0.0, 0); 3];
+        self.gpu_intervals = (0.0, 0);
+        self.want_probe = true;
+    }
+
+    /// Whether a probe may start now: not before [`FIRST_PROBE_S`] of run time, and then
+    /// [`PROBE_EVERY`] times the last probe's build time after it, so that probing (a host
+    /// build on every core, beside the thread that drives the GPU) costs about 1 % at most.
+    fn probe_allowed(&self) -> bool {
+        match (self.last_probe, self.probe_seconds) {
+            (None, _) => self.created.elapsed().as_secs_f64() >= FIRST_PROBE_S,
+            (Some(t), Some(c)) => t.elapsed().as_secs_f64() >= PROBE_EVERY * c,
+            (Some(_), None) => false,
         }
     }
 }
@@ -368,18 +416,54 @@ impl ListBuilder {
         }
     }
 
+    /// `auto`: after a device build, the round's probe of the host's build time (see
+    /// [`Auto`]), from the positions the device just built from.
+    pub(super) fn after_build(&mut self, gpu: &Gpu, p: &DeviceParticles) -> Result<(), CudaError> {
+        let Some(auto) = self.auto.as_mut() else {
+            return Ok(());
+        };
+        if !auto.want_probe
+            || auto.probe.is_some()
+            || self.builder != Builder::Gpu
+            || p.n == 0
+            || !auto.probe_allowed()
+        {
+            return Ok(());
+        }
+        auto.want_probe = false;
+        auto.last_probe = Some(Instant::now());
+        let st = &gpu.stream;
+        let x = st.clone_dtoh(&p.position)?;
+        let r = st.clone_dtoh(&p.radius)?;
+        let id = st.clone_dtoh(&p.id)?;
+        let n = p.n;
+        let (bounds, skin) = (self.bounds, self.hybrid_skin);
+        let thread = std::thread::Builder::new()
+            .name("polydem-probe".into())
+            .spawn(move || build_slot_list(&x[..3 * n], &r[..n], &id[..n], &bounds, skin))
+            .map_err(|e| CudaError::Prebuild(e.to_string()))?;
+        auto.probe = Some(thread);
+        Ok(())
+    }
+
     /// `auto`: a list interval of `builder` took `seconds` over `steps`; picks the builder of
     /// the list that the build at `step` makes.
     fn auto_interval(&mut self, builder: Builder, seconds: f64, steps: u64, step: u64) {
-        // `cpu` is worth a trial only when the host builds a list faster than the device.
         let mean = |(s, k): (f64, u64)| (k > 0).then(|| s / k as f64);
-        let cpu_worth = matches!(
-            (mean(self.tau_cpu), mean(self.tau_dev)),
-            (Some(c), Some(d)) if c < d
-        );
+        let tau_dev = mean(self.tau_dev);
         let Some(auto) = self.auto.as_mut() else {
             return;
         };
+        // The probe's result, once its thread is done.
+        if auto.probe.as_ref().is_some_and(|t| t.is_finished())
+            && let Some(t) = auto.probe.take()
+            && let Ok(list) = t.join()
+        {
+            auto.probe_seconds = Some(list.seconds);
+            self.tau_cpu.0 += list.seconds;
+            self.tau_cpu.1 += 1;
+        }
+        let mut note = None;
         if let Some(t) = auto.trial.as_mut() {
             if builder == t.builder && steps > 0 {
                 if t.skip > 0 {
@@ -388,6 +472,15 @@ impl ListBuilder {
                     t.seconds += seconds;
                     t.steps += steps;
                     t.left -= 1;
+                    if builder == Builder::Gpu {
+                        auto.gpu_intervals.0 += seconds;
+                        auto.gpu_intervals.1 += 1;
+                    } else if let Some(g) = auto.per_step[Builder::Gpu.index()]
+                        && t.seconds / t.steps as f64 > TRIAL_LOSS * g
+                    {
+                        // Clearly slower: no need to measure it further.
+                        t.left = 0;
+                    }
                 }
             }
             if t.left == 0 {
@@ -395,23 +488,43 @@ impl ListBuilder {
                 r.0 += t.seconds;
                 r.1 += t.steps;
                 auto.per_step[t.builder.index()] = Some(r.0 / r.1.max(1) as f64);
+                let first_gpu = t.builder == Builder::Gpu && auto.round[0].1 == t.steps;
                 auto.trial = None;
+                if first_gpu {
+                    // What else is worth a trial, from the probe and the device's builds.
+                    let stretch = mean(auto.gpu_intervals).unwrap_or(0.0);
+                    let (fits, worth, faster) = match (auto.probe_seconds, tau_dev) {
+                        (Some(c), Some(d)) => {
+                            (c < HOST_FITS * stretch, d >= BUILD_WORTH * stretch, c < d)
+                        }
+                        _ => (false, false, false),
+                    };
+                    if fits && worth {
+                        auto.queue.push(Builder::Hybrid);
+                    }
+                    if faster {
+                        auto.queue.push(Builder::Cpu);
+                    }
+                    if !auto.queue.is_empty() {
+                        auto.queue.push(Builder::Gpu);
+                    }
+                    let fmt = |x: Option<f64>| x.map_or("unknown".into(), |x| format!("{x:.2e} s"));
+                    note = Some(format!(
+                        "host build {}, device build {}, GPU stretch per list {stretch:.2e} s",
+                        fmt(auto.probe_seconds),
+                        fmt(tau_dev)
+                    ));
+                }
             }
         } else if auto.until_round > 0 {
             auto.until_round -= 1;
             if auto.until_round == 0 {
-                auto.queue = ROUND.to_vec();
-                auto.round = [(0.0, 0); 3];
-                auto.cpu_tried = false;
+                auto.start_round();
             }
         }
         let mut next = self.builder;
         let mut reason = None;
         if auto.trial.is_none() && auto.until_round == 0 {
-            if auto.queue.is_empty() && cpu_worth && !auto.cpu_tried {
-                auto.queue.extend([Builder::Cpu, Builder::Gpu]);
-                auto.cpu_tried = true;
-            }
             if !auto.queue.is_empty() {
                 let b = auto.queue.remove(0);
                 auto.trial = Some(Trial {
@@ -437,14 +550,20 @@ impl ListBuilder {
                         .collect();
                     reason = Some(format!("fastest measured: {}", parts.join(", ")));
                     tracing::info!(
-                        "neighbor mode auto: picks {} at step {step} ({})",
+                        "neighbor mode auto: picks {} at step {step} ({}{})",
                         b.name(),
-                        parts.join(", ")
+                        parts.join(", "),
+                        note.as_deref().map_or(String::new(), |n| format!("; {n}"))
                     );
                 }
                 auto.until_round = auto.gap;
                 auto.gap = (2 * auto.gap).min(LAST_GAP);
             }
+        }
+        if let Some(n) = &note
+            && next != self.builder
+        {
+            tracing::info!("neighbor mode auto: {n}");
         }
         self.report.measured_s_per_step = Builder::ALL
             .into_iter()
