@@ -120,6 +120,15 @@ fn base_and_example_scenes_load() {
     assert_eq!(s.pairs.get(1, 0).restitution, 0.6);
     assert_eq!(s.output.series_interval, 100.0 * 1e-5);
     assert!((s.simulation.neighbor.skin - 0.1 * 0.01).abs() < 1e-15);
+    // The hybrid skin defaults to twice the skin, the mode to auto.
+    assert_eq!(
+        s.simulation.neighbor.hybrid_skin,
+        2.0 * s.simulation.neighbor.skin
+    );
+    assert_eq!(
+        s.simulation.neighbor.mode,
+        polydem::scene::NeighborMode::Auto
+    );
 
     let dir = repo_root().join("launch/examples");
     let pour = load_scene(&dir.join("pour_box.toml")).unwrap_or_else(|e| panic!("{e}"));
@@ -973,4 +982,25 @@ fn check_warns_only_past_the_safe_face_step() {
         }
         println!("{name}: dt fraction {fraction} at 0.05, {fraction_06} at 0.06");
     }
+}
+
+/// `hybrid_skin` below the skin is refused, naming both; a valid pair and the mode are read.
+#[test]
+fn the_hybrid_skin_is_at_least_the_skin() {
+    let text = replace(
+        "seed = 11\n",
+        "seed = 11\n[simulation.neighbor]\nskin = 0.002\nhybrid_skin = 0.001\n",
+    );
+    let msg = error_naming(&text, "simulation.neighbor.hybrid_skin");
+    assert!(msg.contains("at least simulation.neighbor.skin"), "{msg}");
+    let text = replace(
+        "seed = 11\n",
+        "seed = 11\n[simulation.neighbor]\nskin = 0.002\nhybrid_skin = 0.005\nmode = \"hybrid\"\n",
+    );
+    let s = parse(&text).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.simulation.neighbor.hybrid_skin, 0.005);
+    assert_eq!(
+        s.simulation.neighbor.mode,
+        polydem::scene::NeighborMode::Hybrid
+    );
 }

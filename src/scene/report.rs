@@ -84,5 +84,7 @@ pub fn check_report(scene: &Scene) -> serde_json::Value {
             "steps": finite((end / ts.dt).ceil()),
         },
         "neighbor_skin": scene.simulation.neighbor.skin,
+        "neighbor_mode": scene.simulation.neighbor.mode.name(),
+        "neighbor_hybrid_skin": scene.simulation.neighbor.hybrid_skin,
     })
 }

@@ -604,3 +604,144 @@ impl ListBuilder {
         r
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::parse_scene;
+
+    /// A scene of spheres with `mode` (the builder needs its skins and box only).
+    fn builder(mode: &str) -> ListBuilder {
+        let text = format!(
+            r#"[simulation]
+dt = 1e-6
+end_time = 1.0
+[simulation.neighbor]
+mode = "{mode}"
+[domain]
+min = [0.0, 0.0, 0.0]
+max = [0.1, 0.1, 0.1]
+[[materials]]
+name = "m"
+youngs_modulus = 1e7
+poisson_ratio = 0.3
+density = 2500.0
+[[material_pairs]]
+materials = ["m", "m"]
+restitution = 0.5
+friction = 0.5
+[[particle_types]]
+name = "s"
+material = "m"
+generator = {{ kind = "sphere", size = 0.001 }}
+"#
+        );
+        let scene = parse_scene(&text, std::path::Path::new("."), "t.toml").unwrap();
+        let bounds = Bounds {
+            min: scene.domain.min,
+            max: scene.domain.max,
+            periodic: scene.domain.periodic,
+        };
+        let grid = GridParams::new(&bounds, scene.cutoff(), 4000);
+        ListBuilder::new(&scene, grid, false, 1000)
+    }
+
+    /// Feeds `auto` list intervals of 100 steps, each builder taking its seconds per step from
+    /// `cost`, with a device build of `device` s and a probe that measured `host` s; returns
+    /// the builder after `intervals` intervals and the builders used, in order.
+    fn drive(
+        b: &mut ListBuilder,
+        cost: impl Fn(Builder) -> f64,
+        device: f64,
+        host: f64,
+        intervals: u64,
+    ) -> Vec<Builder> {
+        let mut used = Vec::new();
+        for k in 0..intervals {
+            let now = b.builder;
+            used.push(now);
+            if now != Builder::Cpu {
+                b.count_build(false, device);
+            }
+            if let Some(a) = b.auto.as_mut() {
+                a.probe_seconds = Some(host);
+                a.want_probe = false;
+            }
+            b.auto_interval(now, 100.0 * cost(now), 100, 100 * (k + 1));
+        }
+        used
+    }
+
+    /// Hybrid 10 % faster, a host that builds in a fifth of the GPU's stretch and a device
+    /// build worth 5 % of it: auto tries gpu, hybrid, gpu, then runs hybrid, and logs it.
+    #[test]
+    fn auto_picks_hybrid_when_it_measures_faster() {
+        let mut b = builder("auto");
+        let cost = |x: Builder| if x == Builder::Hybrid { 0.9e-3 } else { 1.0e-3 };
+        let used = drive(&mut b, cost, 5e-3, 0.02, 40);
+        assert_eq!(b.builder, Builder::Hybrid, "used {used:?}");
+        let r = b.report();
+        assert!(r.switches.len() >= 3, "{:?}", r.switches);
+        assert_eq!(r.switches.last().unwrap().to, Builder::Hybrid);
+        assert!(
+            r.switches
+                .last()
+                .unwrap()
+                .reason
+                .starts_with("fastest measured")
+        );
+        let hybrid = r
+            .measured_s_per_step
+            .iter()
+            .find(|m| m.0 == Builder::Hybrid);
+        assert!((hybrid.unwrap().1 - 0.9e-3).abs() < 1e-12);
+        // It keeps hybrid until the next round, 64 intervals after the pick (interval 12),
+        // which tries gpu, hybrid and gpu again and picks hybrid again.
+        let rest = drive(&mut b, cost, 5e-3, 0.02, 60);
+        assert!(rest[..30].iter().all(|&x| x == Builder::Hybrid), "{rest:?}");
+        assert!(rest[30..].contains(&Builder::Gpu), "{rest:?}");
+        assert_eq!(b.builder, Builder::Hybrid);
+    }
+
+    /// A host build ten times the GPU's stretch per list (the spheres on the H200): hybrid is
+    /// never tried, auto stays on gpu.
+    #[test]
+    fn auto_does_not_try_hybrid_when_the_host_cannot_keep_up() {
+        let mut b = builder("auto");
+        let used = drive(&mut b, |_| 1.0e-3, 5e-3, 1.0, 200);
+        assert!(used.iter().all(|&x| x == Builder::Gpu), "{used:?}");
+        assert!(b.report().switches.is_empty());
+    }
+
+    /// A hybrid 50 % slower than gpu: its trial ends after one measured interval (after the
+    /// skipped one), and auto returns to gpu.
+    #[test]
+    fn a_losing_trial_ends_early() {
+        let mut b = builder("auto");
+        let cost = |x: Builder| if x == Builder::Hybrid { 1.5e-3 } else { 1.0e-3 };
+        let used = drive(&mut b, cost, 5e-3, 0.02, 30);
+        let hybrid = used.iter().filter(|&&x| x == Builder::Hybrid).count();
+        assert_eq!(hybrid, 2, "{used:?}");
+        assert_eq!(b.builder, Builder::Gpu);
+    }
+
+    /// Fixed modes never switch; a decomposed run builds on the device whatever the mode.
+    #[test]
+    fn fixed_modes_keep_their_builder() {
+        for (mode, want) in [
+            ("gpu", Builder::Gpu),
+            ("cpu", Builder::Cpu),
+            ("hybrid", Builder::Hybrid),
+        ] {
+            let mut b = builder(mode);
+            drive(&mut b, |_| 1e-3, 5e-3, 0.02, 50);
+            assert_eq!(b.builder, want);
+        }
+        let mut b = builder("hybrid");
+        b.builder = Builder::Gpu;
+        assert_eq!(b.snapshot_distance(), f64::INFINITY);
+        let h = builder("hybrid");
+        // Snapshot at max((S − s)/2, S/4) with S = 2s: s/2.
+        assert!((h.snapshot_distance() - 0.5 * h.skin).abs() < 1e-15);
+    }
+}
