@@ -573,3 +573,39 @@ fn interrupting_mpirun_stops_every_rank_at_the_same_step() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Every neighbour mode on 2 GPU ranks ends bitwise like one GPU in `gpu` mode (double): a
+/// decomposed run builds on the device after the host's exchange whatever the mode
+/// (docs/design.md §7), and the mode is not part of the checkpoint's scene fingerprint.
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn every_neighbor_mode_on_two_gpu_ranks_matches_one_gpu() {
+    let one = temp_dir("mpi-gpu-modes-1");
+    run_gpu(
+        1,
+        "launch/mpi/pour.toml",
+        &one,
+        "double",
+        &["--neighbor-mode", "gpu"],
+    );
+    for mode in ["gpu", "cpu", "hybrid", "auto"] {
+        let dir = temp_dir(&format!("mpi-gpu-modes-2-{mode}"));
+        let s = run_gpu(
+            2,
+            "launch/mpi/pour.toml",
+            &dir,
+            "double",
+            &["--neighbor-mode", mode],
+        );
+        assert_eq!(s["neighbor"]["mode"], mode);
+        assert_eq!(
+            s["neighbor"]["builder"], "gpu",
+            "a decomposed run builds on the device"
+        );
+        for step in ["step_0000001000.ckpt", "step_0000002000.ckpt"] {
+            same_checkpoint(&one, &dir, step, &format!("2 GPU ranks, mode {mode}"));
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    let _ = std::fs::remove_dir_all(&one);
+}

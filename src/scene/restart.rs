@@ -21,7 +21,8 @@ pub const SECTIONS_RECORD: &str = "scene_sections";
 /// Each section is hashed (FNV-1a 64, the same on every platform and run) from the `Debug` text
 /// of its resolved values: floats print with the shortest digits that parse back to the same
 /// bits, so two scenes hash equal exactly when their values are equal. `simulation.end_time`,
-/// `[simulation.guard]`, `domain.on_leaving`, `[output]` and `[parallel]` are left out:
+/// `[simulation.guard]`, `simulation.neighbor.mode` and `hybrid_skin`, `domain.on_leaving`,
+/// `[output]` and `[parallel]` are left out:
 /// changing them does not change the state a step produces, and a restart is how a run is
 /// extended, its output changed, or a run the guard or a lost particle stopped continued.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -40,7 +41,16 @@ impl SceneFingerprint {
         // The guard and the leaving rule only decide whether a run stops: a run stopped by
         // either is continued with them relaxed.
         sim.guard = Default::default();
-        add("simulation".into(), format!("{sim:?}"));
+        // Who builds the pair list changes no bit of the run (docs/design.md §7): a run may
+        // continue in another mode. The hybrid skin is left out of the text, so that
+        // checkpoints written before it existed keep their fingerprint.
+        sim.neighbor.mode = crate::scene::NeighborMode::Auto;
+        let text = format!("{sim:?}");
+        let text = match (text.find(", hybrid_skin: "), text.find(" }, guard")) {
+            (Some(a), Some(b)) if a < b => format!("{}{}", &text[..a], &text[b..]),
+            _ => text,
+        };
+        add("simulation".into(), text);
         let mut domain = scene.domain;
         domain.on_leaving = Default::default();
         add("domain".into(), format!("{domain:?}"));
@@ -149,8 +159,8 @@ impl SceneFingerprint {
         };
         Err(format!(
             "written for another scene: {list}; a restart may change only \
-             `simulation.end_time`, `[simulation.guard]`, `domain.on_leaving`, `[output]` and \
-             `[parallel]`"
+             `simulation.end_time`, `[simulation.guard]`, `simulation.neighbor.mode` and \
+             `hybrid_skin`, `domain.on_leaving`, `[output]` and `[parallel]`"
         ))
     }
 }
@@ -244,4 +254,62 @@ pub fn check_against_scene(c: &Checkpoint, scene: &Scene) -> Result<(), String> 
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{NeighborMode, parse_scene};
+
+    fn scene(neighbor: &str) -> Scene {
+        let text = format!(
+            r#"[simulation]
+dt = 1e-6
+end_time = 1.0
+[simulation.neighbor]
+{neighbor}
+[domain]
+min = [0.0, 0.0, 0.0]
+max = [0.1, 0.1, 0.1]
+[[materials]]
+name = "m"
+youngs_modulus = 1e7
+poisson_ratio = 0.3
+density = 2500.0
+[[material_pairs]]
+materials = ["m", "m"]
+restitution = 0.5
+friction = 0.5
+[[particle_types]]
+name = "s"
+material = "m"
+generator = {{ kind = "sphere", size = 0.001 }}
+"#
+        );
+        parse_scene(&text, std::path::Path::new("."), "t.toml").unwrap()
+    }
+
+    /// Who builds the pair list is not part of the fingerprint (a run may continue in another
+    /// mode, bit for bit the same), and the text hashed is the one from before the hybrid skin
+    /// existed; the skin still is.
+    #[test]
+    fn the_neighbor_mode_and_hybrid_skin_do_not_change_the_fingerprint() {
+        let a = scene("skin = 0.0002");
+        let b = scene("skin = 0.0002\nmode = \"hybrid\"\nhybrid_skin = 0.001");
+        assert_eq!(b.simulation.neighbor.mode, NeighborMode::Hybrid);
+        assert_eq!(SceneFingerprint::of(&a), SceneFingerprint::of(&b));
+        let c = scene("skin = 0.0003");
+        assert_ne!(SceneFingerprint::of(&a), SceneFingerprint::of(&c));
+        // The hashed text of the simulation section, as before `hybrid_skin`.
+        let mut sim = a.simulation.clone();
+        sim.end_time = 0.0;
+        sim.guard = Default::default();
+        let old = format!("{sim:?}").replace(", hybrid_skin: 0.0004", "");
+        assert!(!old.contains("hybrid_skin"));
+        let simulation = SceneFingerprint::of(&a).sections[0].clone();
+        assert_eq!(
+            simulation,
+            ("simulation".to_string(), fnv1a64(old.as_bytes()))
+        );
+    }
 }
