@@ -45,6 +45,47 @@ use cudarc::driver::CudaSlice;
 use std::thread::JoinHandle;
 use std::time::Instant;
 
+/// The device's slots as a host build needs them (the seed's B4): positions, bounding radii and
+/// global ids.
+struct HostSlots {
+    x: Vec<f64>,
+    r: Vec<f64>,
+    id: Vec<u64>,
+    n: usize,
+}
+
+impl HostSlots {
+    /// Copies `positions` (the particles' or a snapshot of them) with `p`'s radii and ids.
+    fn copy(gpu: &Gpu, p: &DeviceParticles, positions: &CudaSlice<f64>) -> Result<Self, CudaError> {
+        let st = &gpu.stream;
+        Ok(HostSlots {
+            x: st.clone_dtoh(positions)?,
+            r: st.clone_dtoh(&p.radius)?,
+            id: st.clone_dtoh(&p.id)?,
+            n: p.n,
+        })
+    }
+
+    /// The slot list with `skin`, built here (rayon).
+    fn build(&self, bounds: &Bounds, skin: f64) -> SlotList {
+        let n = self.n;
+        build_slot_list(&self.x[..3 * n], &self.r[..n], &self.id[..n], bounds, skin)
+    }
+
+    /// The slot list with `skin`, built on a thread of its own named `name`.
+    fn spawn(
+        self,
+        name: &str,
+        bounds: Bounds,
+        skin: f64,
+    ) -> Result<JoinHandle<SlotList>, CudaError> {
+        std::thread::Builder::new()
+            .name(name.into())
+            .spawn(move || self.build(&bounds, skin))
+            .map_err(|e| CudaError::Prebuild(e.to_string()))
+    }
+}
+
 /// A host build in flight: the thread, and the snapshot it builds from.
 struct Prebuild {
     /// The pair stage's generation when the snapshot was taken: a build or an upload since
@@ -247,17 +288,9 @@ impl ListBuilder {
         if self.pending.is_some() || self.builder != Builder::Hybrid {
             return Ok(());
         }
-        let st = &gpu.stream;
-        let snapshot = st.clone_dtod(&p.position)?;
-        let x = st.clone_dtoh(&snapshot)?;
-        let r = st.clone_dtoh(&p.radius)?;
-        let id = st.clone_dtoh(&p.id)?;
-        let n = p.n;
-        let (bounds, skin) = (self.bounds, self.hybrid_skin);
-        let thread = std::thread::Builder::new()
-            .name("polydem-prebuild".into())
-            .spawn(move || build_slot_list(&x[..3 * n], &r[..n], &id[..n], &bounds, skin))
-            .map_err(|e| CudaError::Prebuild(e.to_string()))?;
+        let snapshot = gpu.stream.clone_dtod(&p.position)?;
+        let slots = HostSlots::copy(gpu, p, &snapshot)?;
+        let thread = slots.spawn("polydem-prebuild", self.bounds, self.hybrid_skin)?;
         self.pending = Some(Prebuild {
             generation,
             snapshot,
@@ -308,14 +341,9 @@ impl ListBuilder {
         match self.builder {
             Builder::Gpu => Ok(None),
             Builder::Cpu => {
-                let st = &gpu.stream;
-                let snapshot = st.clone_dtod(&p.position)?;
+                let snapshot = gpu.stream.clone_dtod(&p.position)?;
                 let t0 = Instant::now();
-                let x = st.clone_dtoh(&snapshot)?;
-                let r = st.clone_dtoh(&p.radius)?;
-                let id = st.clone_dtoh(&p.id)?;
-                let n = p.n;
-                let list = build_slot_list(&x[..3 * n], &r[..n], &id[..n], &self.bounds, self.skin);
+                let list = HostSlots::copy(gpu, p, &snapshot)?.build(&self.bounds, self.skin);
                 self.report.host_wait_s += t0.elapsed().as_secs_f64();
                 self.tau_cpu.0 += list.seconds;
                 self.tau_cpu.1 += 1;
@@ -432,17 +460,8 @@ impl ListBuilder {
         }
         auto.want_probe = false;
         auto.last_probe = Some(Instant::now());
-        let st = &gpu.stream;
-        let x = st.clone_dtoh(&p.position)?;
-        let r = st.clone_dtoh(&p.radius)?;
-        let id = st.clone_dtoh(&p.id)?;
-        let n = p.n;
-        let (bounds, skin) = (self.bounds, self.hybrid_skin);
-        let thread = std::thread::Builder::new()
-            .name("polydem-probe".into())
-            .spawn(move || build_slot_list(&x[..3 * n], &r[..n], &id[..n], &bounds, skin))
-            .map_err(|e| CudaError::Prebuild(e.to_string()))?;
-        auto.probe = Some(thread);
+        let slots = HostSlots::copy(gpu, p, &p.position)?;
+        auto.probe = Some(slots.spawn("polydem-probe", self.bounds, self.hybrid_skin)?);
         Ok(())
     }
 
