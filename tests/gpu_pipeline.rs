@@ -12,61 +12,9 @@ use polydem::pipeline::{RestoredState, Simulation};
 use polydem::scene::parse_scene;
 use std::collections::HashMap;
 
-/// 240 frictional dodecahedra (or spheres: `kind`) dropped into the open box and onto each
-/// other (those placed above the rim fall in), 40 more fed at a rate from above.
+/// The dense pour of [`dense_pour_text`] (seed 5, 1 m/s).
 fn scene_text(kind: &str) -> String {
-    let root = repo_root();
-    format!(
-        r#"gravity = [0.0, 0.0, -9.81]
-[simulation]
-dt = 2e-5
-end_time = 10.0
-seed = 5
-[domain]
-min = [-0.06, -0.06, -0.01]
-max = [0.06, 0.06, 0.25]
-[[materials]]
-name = "grain"
-youngs_modulus = 1e6
-poisson_ratio = 0.3
-density = 2500.0
-[[materials]]
-name = "steel"
-youngs_modulus = 2e11
-poisson_ratio = 0.3
-density = 7800.0
-[[material_pairs]]
-materials = ["grain", "grain"]
-restitution = 0.5
-friction = 0.5
-[[material_pairs]]
-materials = ["grain", "steel"]
-restitution = 0.5
-friction = 0.4
-[[particle_types]]
-name = "d"
-material = "grain"
-generator = {{ kind = "{kind}", size = 0.012 }}
-scale = {{ distribution = "uniform", min = 0.8, max = 1.2 }}
-[[insertions]]
-type = "d"
-region = {{ kind = "box", min = [-0.042, -0.042, 0.006], max = [0.042, 0.042, 0.2] }}
-count = 240
-velocity = [0.0, 0.0, -1.0]
-[[insertions]]
-type = "d"
-region = {{ kind = "box", min = [-0.04, -0.04, 0.205], max = [0.04, 0.04, 0.24] }}
-rate = 4000.0
-total = 40
-[[walls]]
-name = "box"
-mesh = "{}"
-material = "steel"
-[output]
-dir = "out"
-"#,
-        root.join("meshes/walls/box_open_top.stl").display()
-    )
+    dense_pour_text(kind, 5, 1.0)
 }
 
 fn scene() -> polydem::scene::Scene {

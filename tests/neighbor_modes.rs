@@ -19,65 +19,10 @@ use polydem::pipeline::Simulation;
 use polydem::scene::{NeighborMode, Scene, parse_scene};
 use std::collections::HashMap;
 
-/// 240 frictional dodecahedra dropped into the open box onto each other, 40 more fed at a
-/// rate from above (insertion on the host mid-run), walls of another material.
-fn pour_text() -> String {
-    format!(
-        r#"gravity = [0.0, 0.0, -9.81]
-[simulation]
-dt = 2e-5
-end_time = 10.0
-seed = 9
-[domain]
-min = [-0.06, -0.06, -0.01]
-max = [0.06, 0.06, 0.25]
-[[materials]]
-name = "grain"
-youngs_modulus = 1e6
-poisson_ratio = 0.3
-density = 2500.0
-[[materials]]
-name = "steel"
-youngs_modulus = 2e11
-poisson_ratio = 0.3
-density = 7800.0
-[[material_pairs]]
-materials = ["grain", "grain"]
-restitution = 0.5
-friction = 0.5
-[[material_pairs]]
-materials = ["grain", "steel"]
-restitution = 0.5
-friction = 0.4
-[[particle_types]]
-name = "d"
-material = "grain"
-generator = {{ kind = "dodecahedron", size = 0.012 }}
-scale = {{ distribution = "uniform", min = 0.8, max = 1.2 }}
-[[insertions]]
-type = "d"
-region = {{ kind = "box", min = [-0.042, -0.042, 0.006], max = [0.042, 0.042, 0.2] }}
-count = 240
-velocity = [0.0, 0.0, -1.5]
-[[insertions]]
-type = "d"
-region = {{ kind = "box", min = [-0.04, -0.04, 0.205], max = [0.04, 0.04, 0.24] }}
-rate = 4000.0
-total = 40
-[[walls]]
-name = "box"
-mesh = "{}"
-material = "steel"
-[output]
-dir = "out"
-"#,
-        repo_root().join("meshes/walls/box_open_top.stl").display()
-    )
-}
-
 /// The pour with `skin` (m; `None`: the default) and `mode`.
 fn pour(skin: Option<f64>, mode: NeighborMode) -> Scene {
-    let mut scene = parse_scene(&pour_text(), &repo_root(), "neighbor_modes.toml").unwrap();
+    let text = dense_pour_text("dodecahedron", 9, 1.5);
+    let mut scene = parse_scene(&text, &repo_root(), "neighbor_modes.toml").unwrap();
     if let Some(s) = skin {
         scene.simulation.neighbor.skin = s;
         scene.simulation.neighbor.hybrid_skin = 2.0 * s;

@@ -162,3 +162,34 @@ pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
 pub fn parse_scene(text: &str, base_dir: &Path, file_name: &str) -> Result<Scene, SceneError> {
     validate::build(text, base_dir, file_name)
 }
+
+/// A minimal scene for unit tests: a box of 0.1 m with one material and spheres of 1 mm, no
+/// particles placed, and `neighbor` as the body of its `[simulation.neighbor]`.
+#[cfg(test)]
+pub(crate) fn test_sphere_scene(neighbor: &str) -> Scene {
+    let text = format!(
+        r#"[simulation]
+dt = 1e-6
+end_time = 1.0
+[simulation.neighbor]
+{neighbor}
+[domain]
+min = [0.0, 0.0, 0.0]
+max = [0.1, 0.1, 0.1]
+[[materials]]
+name = "m"
+youngs_modulus = 1e7
+poisson_ratio = 0.3
+density = 2500.0
+[[material_pairs]]
+materials = ["m", "m"]
+restitution = 0.5
+friction = 0.5
+[[particle_types]]
+name = "s"
+material = "m"
+generator = {{ kind = "sphere", size = 0.001 }}
+"#
+    );
+    parse_scene(&text, Path::new("."), "test.toml").unwrap()
+}

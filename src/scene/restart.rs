@@ -259,34 +259,10 @@ pub fn check_against_scene(c: &Checkpoint, scene: &Scene) -> Result<(), String> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{NeighborMode, parse_scene};
+    use crate::scene::{NeighborMode, test_sphere_scene};
 
     fn scene(neighbor: &str) -> Scene {
-        let text = format!(
-            r#"[simulation]
-dt = 1e-6
-end_time = 1.0
-[simulation.neighbor]
-{neighbor}
-[domain]
-min = [0.0, 0.0, 0.0]
-max = [0.1, 0.1, 0.1]
-[[materials]]
-name = "m"
-youngs_modulus = 1e7
-poisson_ratio = 0.3
-density = 2500.0
-[[material_pairs]]
-materials = ["m", "m"]
-restitution = 0.5
-friction = 0.5
-[[particle_types]]
-name = "s"
-material = "m"
-generator = {{ kind = "sphere", size = 0.001 }}
-"#
-        );
-        parse_scene(&text, std::path::Path::new("."), "t.toml").unwrap()
+        test_sphere_scene(neighbor)
     }
 
     /// Who builds the pair list is not part of the fingerprint (a run may continue in another

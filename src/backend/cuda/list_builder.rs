@@ -627,35 +627,11 @@ impl ListBuilder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::parse_scene;
+    use crate::scene::test_sphere_scene;
 
     /// A scene of spheres with `mode` (the builder needs its skins and box only).
     fn builder(mode: &str) -> ListBuilder {
-        let text = format!(
-            r#"[simulation]
-dt = 1e-6
-end_time = 1.0
-[simulation.neighbor]
-mode = "{mode}"
-[domain]
-min = [0.0, 0.0, 0.0]
-max = [0.1, 0.1, 0.1]
-[[materials]]
-name = "m"
-youngs_modulus = 1e7
-poisson_ratio = 0.3
-density = 2500.0
-[[material_pairs]]
-materials = ["m", "m"]
-restitution = 0.5
-friction = 0.5
-[[particle_types]]
-name = "s"
-material = "m"
-generator = {{ kind = "sphere", size = 0.001 }}
-"#
-        );
-        let scene = parse_scene(&text, std::path::Path::new("."), "t.toml").unwrap();
+        let scene = test_sphere_scene(&format!("mode = \"{mode}\""));
         let bounds = Bounds {
             min: scene.domain.min,
             max: scene.domain.max,
