@@ -30,8 +30,8 @@
 //!   implementations.
 //! - [`domain`]: MPI domain decomposition: subdomains, exchange, halo, migration, load
 //!   balance, and the [`domain::Comm`] trait.
-//! - [`run`]: the driver of `polydem run`, `check` and `bench`: start or restore, outputs, the
-//!   step loop, the summary.
+//! - [`run`]: the driver of `polydem run`, `check`, `bench` and `pack`: start or restore,
+//!   outputs, the step loop, the summary.
 //! - [`scene`]: scene files: schema, validation, insertion, walls, the restart fingerprint.
 //! - [`shape`]: particle templates: convex hulls, merged faces, mass properties, generators,
 //!   STL/OBJ import.
@@ -42,7 +42,7 @@
 //! - [`integrate`]: velocity Verlet and the rotation splitting.
 //! - [`state`]: the particles (structure of arrays) and per-step observables.
 //! - [`stability`]: the stability guard's bounds.
-//! - [`io`]: VTU/PVTU/PVD frames, CSV series, checkpoints, atomic writes.
+//! - [`io`]: VTU/PVTU/PVD frames, CSV series, checkpoints, packings, atomic writes.
 //! - [`probe`]: the contact-geometry probe (`polydem probe`).
 //! - [`accuracy`]: `polydem bench accuracy`, restitution and energy against run time.
 //! - [`interrupt`]: SIGINT and SIGTERM stop a run after a step, with a checkpoint.

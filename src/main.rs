@@ -98,6 +98,24 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         cases: Option<Vec<String>>,
     },
+    /// Compresses a scene's loosely inserted particles in a fully periodic box to a target
+    /// number of contacts per particle and writes the packing, which `[[insertions]] packing`
+    /// tiles (docs/scene.md). Prints a JSON report.
+    Pack {
+        /// Scene file: periodic on every axis, no gravity, no walls.
+        scene: PathBuf,
+        /// Target contacts per particle (2 × contacts / particles, after settling).
+        #[arg(long)]
+        contacts: f64,
+        /// The packing file to write.
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(long, value_enum, default_value = "auto")]
+        backend: BackendChoice,
+        /// Pair-geometry arithmetic on the GPU.
+        #[arg(long, value_enum, default_value = "double")]
+        gpu_precision: polydem::backend::cuda::Precision,
+    },
     /// Lists GPUs, the CUDA driver and NVRTC versions, as JSON.
     Info,
     /// Shape templates: mass properties and face counts.
@@ -324,6 +342,24 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                 "{}",
                 serde_json::to_string_pretty(&polydem::run::check(&scene)?)?
             )?;
+            Ok(0)
+        }
+        Command::Pack {
+            scene,
+            contacts,
+            out: file,
+            backend,
+            gpu_precision,
+        } => {
+            use std::io::Write;
+            let report = polydem::run::pack(&polydem::run::PackOptions {
+                scene,
+                contacts,
+                out: file,
+                backend,
+                precision: gpu_precision,
+            })?;
+            writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
             Ok(0)
         }
         Command::Info => {

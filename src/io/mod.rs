@@ -4,6 +4,7 @@
 //!   particle, one `.pvtu` per frame, `frames.pvd` listing the frames with their times, and the
 //!   walls as triangle meshes in their own `.vtu` files and `walls.pvd`.
 //! - [`csv`]: per-frame particle tables and the time series of energies, contacts and wall forces.
+//! - [`packing`]: a frozen periodic cell of particles (`polydem pack`), which insertions tile.
 //! - [`checkpoint`]: a binary snapshot of every field, the contact history and the insertion and
 //!   random state, from which a run continues bitwise as if never stopped.
 //!
@@ -13,6 +14,7 @@
 
 pub mod checkpoint;
 pub mod csv;
+pub mod packing;
 pub mod vtk;
 
 pub use checkpoint::{
@@ -20,6 +22,7 @@ pub use checkpoint::{
     write_checkpoint,
 };
 pub use csv::{SeriesRow, SeriesWriter, write_particle_csv};
+pub use packing::{PackedParticle, Packing, PackingError};
 pub use vtk::{FRAME_FIELDS, FrameView, FrameWriter, WallView};
 
 use std::fs::{self, File};

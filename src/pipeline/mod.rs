@@ -134,6 +134,36 @@ impl Simulation {
         Ok(())
     }
 
+    /// Scales a fully periodic box and every particle centre about the box's lower corner by
+    /// `factor` (below 1 compresses), then re-evaluates the forces as [`Simulation::refresh`]
+    /// does: the affine step of a compression packing (`polydem pack`, [`crate::run::pack`]).
+    /// Velocities and the contact history are the caller's. Refused for a box that is not
+    /// periodic on every axis, a scene with walls, or a decomposed run, where a uniform
+    /// rescaling would move particles through walls or across ranks.
+    pub fn rescale_periodic_box(&mut self, factor: f64) -> Result<(), SimulationError> {
+        let step = self.step;
+        let refuse = |message: String| Err(SimulationError::Domain { step, message });
+        if !(factor > 0.0 && factor.is_finite()) {
+            return refuse(format!("box scale factor must be positive, got {factor}"));
+        }
+        if self.bounds.periodic != [true; 3] || !self.scene.walls.is_empty() {
+            return refuse(
+                "only a box periodic on every axis and without walls can be rescaled".into(),
+            );
+        }
+        if self.parallel.is_some() {
+            return refuse("a decomposed run cannot be rescaled".into());
+        }
+        let min = self.bounds.min;
+        let max = min + (self.bounds.max - min) * factor;
+        for x in self.particles.position.iter_mut() {
+            *x = min + (*x - min) * factor;
+        }
+        self.bounds.max = max;
+        self.scene.domain.max = max;
+        self.refresh()
+    }
+
     /// Pair lists built so far (the first one included).
     pub fn pair_list_builds(&self) -> u64 {
         self.pairs.builds

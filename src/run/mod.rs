@@ -11,11 +11,13 @@ mod bench;
 mod check;
 mod checkpoints;
 mod output;
+mod pack;
 mod summary;
 
 pub use bench::{BenchOptions, bench, bench_on};
 pub use check::{ENERGY_FACE_FRACTION, SAFE_FACE_FRACTION, check, time_step_warnings};
 pub use output::{OUTPUT_ENTRIES, prepare_output_dir};
+pub use pack::{PackOptions, pack};
 
 use crate::backend::cuda::Precision;
 use crate::backend::{BackendChoice, Device, Engine, Start, select_device};

@@ -18,7 +18,7 @@ mod walls;
 pub use error::{KeyError, SceneError};
 pub use insertion::{
     DEFAULT_MAX_ATTEMPTS, InsertReport, Inserter, InserterState, Insertion, InsertionMode,
-    OrientationMode, Region,
+    OrientationMode, Region, TiledPacking,
 };
 pub use report::check_report;
 pub use settings::{

@@ -35,6 +35,38 @@ impl Drop for CudaSimulation {
     }
 }
 
+/// The binning grid of `host`'s domain and a list builder on it. A rank of a decomposed run
+/// bins on the whole domain's grid (ghosts keep their true centroids), sized for the whole
+/// run's particles.
+fn domain_grid(host: &Simulation) -> (GridParams, ListBuilder) {
+    let s = &host.scene;
+    let bounds = Bounds {
+        min: s.domain.min,
+        max: s.domain.max,
+        periodic: s.domain.periodic,
+    };
+    let particles = match host.parallel.as_deref() {
+        Some(par) => par.comm.sum_u64(&[host.particles.len() as u64])[0] as usize,
+        None => host.particles.len(),
+    };
+    let grid = GridParams::new(&bounds, s.cutoff(), 4 * particles.max(1));
+    let list_builder = ListBuilder::new(s, grid, host.parallel.is_some(), particles);
+    (grid, list_builder)
+}
+
+impl CudaSimulation {
+    /// Follows a change of the host's domain (a rescaled periodic box,
+    /// [`Simulation::rescale_periodic_box`]): the binning grid, the periodic wrap and the list
+    /// builder are made again for it (an `auto` neighbour mode starts its trials afresh); the
+    /// next step rebuilds the pair list.
+    pub(super) fn domain_changed(&mut self) {
+        let (grid, list_builder) = domain_grid(&self.host);
+        self.gpu.grid = grid;
+        self.list_builder = list_builder;
+        self.pairs.rebuild = true;
+    }
+}
+
 /// A simulation stepped on the GPU. See the module docs.
 pub struct CudaSimulation {
     /// Host copy: scene, inserter, time, step, statistics, and (when synced) the state.
@@ -100,21 +132,8 @@ impl CudaSimulation {
             }
         }
         let materials = stream.clone_htod(&materials)?;
-        let bounds = Bounds {
-            min: s.domain.min,
-            max: s.domain.max,
-            periodic: s.domain.periodic,
-        };
         let skin = s.simulation.neighbor.skin;
-        let cutoff = s.cutoff();
-        // A rank of a decomposed run bins on the whole domain's grid (ghosts keep their true
-        // centroids), sized for the whole run's particles.
-        let particles = match host.parallel.as_deref() {
-            Some(par) => par.comm.sum_u64(&[host.particles.len() as u64])[0] as usize,
-            None => host.particles.len(),
-        };
-        let grid = GridParams::new(&bounds, cutoff, 4 * particles.max(1));
-        let list_builder = ListBuilder::new(s, grid, host.parallel.is_some(), particles);
+        let (grid, list_builder) = domain_grid(&host);
         let error = stream.alloc_zeros::<u32>(3)?;
         let gpu = Gpu {
             _ctx: ctx,

@@ -134,7 +134,8 @@ impl CudaSimulation {
     /// Applies `f` to the host copy of the current state and uploads the result; the next step
     /// rebuilds the pair list. When `f` changed only the motion (positions, orientations,
     /// velocities, forces), only those arrays go back up, into the device's order; otherwise
-    /// everything does, with the contact history.
+    /// everything does, with the contact history. When `f` changed the domain (a rescaled
+    /// periodic box), the grid and the list builder follow it.
     pub fn edit_host(&mut self, f: impl FnOnce(&mut Simulation)) -> Result<(), CudaError> {
         self.sync_host()?;
         let before = (
@@ -145,7 +146,11 @@ impl CudaSimulation {
             self.host.particles.inertia.clone(),
             self.host.history.clone(),
         );
+        let domain = self.host.scene.domain;
         f(&mut self.host);
+        if self.host.scene.domain != domain {
+            self.domain_changed();
+        }
         let p = &self.host.particles;
         let motion_only = before.0 == p.id
             && before.1 == p.kind

@@ -120,6 +120,18 @@ impl Inserter {
         for (k, &n_due) in due.iter().enumerate() {
             let ins = &scene.insertions[k];
             let is_count = matches!(ins.mode, InsertionMode::Count(_));
+            if let (Some(tiled), Region::Box { min, .. }) = (&ins.packing, &ins.region) {
+                // Validation checked that the count is the tiling's.
+                for _ in 0..n_due {
+                    let (c, orientation, scale) = tiled.particle(self.inserted[k], min);
+                    Self::push(ins, particles, scene, (scale, orientation), c, next_id);
+                    self.inserted[k] += 1;
+                    report.inserted += 1;
+                }
+                self.last_insertion_time = Some(t);
+                self.count_done[k] = true;
+                continue;
+            }
             if let (Some(spacing), Region::Box { min, max }) = (ins.lattice, &ins.region) {
                 // Validation checked that the lattice holds the count.
                 // The 1e-9 absorbs the rounding of a region sized as an exact multiple of the spacing.

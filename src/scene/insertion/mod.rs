@@ -17,6 +17,7 @@ mod region;
 
 pub use region::Region;
 
+use crate::io::Packing;
 use crate::rng::Rng;
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -69,6 +70,44 @@ pub struct Insertion {
     /// region, x fastest, then y, then z (count only). No overlap test: the spacing decides,
     /// so a lattice can start as a dense packing in contact (benchmarks, compaction).
     pub lattice: Option<Vector3<f64>>,
+    /// A frozen packing tiled over the box region (count only): particle `j` is particle
+    /// `j mod n` of the cell in tile `j div n` (x fastest), with the cell's orientation and
+    /// scale. No overlap test and no random draw: the packing decides.
+    pub packing: Option<TiledPacking>,
+}
+
+/// A [`Packing`] and how many times its cell repeats along x, y and z to fill a box region.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TiledPacking {
+    /// The file it was read from.
+    pub file: std::path::PathBuf,
+    /// The cell's particles.
+    pub packing: std::sync::Arc<Packing>,
+    /// Copies of the cell along x, y and z.
+    pub tiles: [u64; 3],
+}
+
+impl TiledPacking {
+    /// Particles of the whole tiling.
+    pub fn count(&self) -> u64 {
+        self.tiles.iter().product::<u64>() * self.packing.particles.len() as u64
+    }
+
+    /// Particle `j` of the tiling placed in the box whose lower corner is `min`: its centre,
+    /// orientation and scale.
+    pub fn particle(&self, j: u64, min: &Vector3<f64>) -> (Vector3<f64>, UnitQuaternion<f64>, f64) {
+        let n = self.packing.particles.len() as u64;
+        let (tile, k) = (j / n, (j % n) as usize);
+        let t = [
+            tile % self.tiles[0],
+            (tile / self.tiles[0]) % self.tiles[1],
+            tile / (self.tiles[0] * self.tiles[1]),
+        ];
+        let p = &self.packing.particles[k];
+        let c =
+            Vector3::from_fn(|a, _| min[a] + self.packing.cell[a] * t[a] as f64 + p.position[a]);
+        (c, p.orientation, p.scale)
+    }
 }
 
 impl Insertion {

@@ -26,7 +26,7 @@ impl Inserter {
     }
 
     /// Appends a particle of the insertion's type at `c` with the insertion's velocities.
-    fn push(
+    pub(super) fn push(
         ins: &Insertion,
         particles: &mut Particles,
         scene: &Scene,

@@ -66,6 +66,9 @@ pub struct InsertionSection {
     /// Lattice spacing (m) along x, y, z: particles go to the points of a simple cubic lattice
     /// filling the box region instead of random positions (count only; no overlap test).
     pub lattice: Option<Vec3>,
+    /// A packing file (`polydem pack`) whose periodic cell is tiled over the box region
+    /// (count only; orientations and scales from the file).
+    pub packing: Option<String>,
 }
 /// Kinds of insertion region.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]

@@ -104,6 +104,10 @@ impl Validator<'_> {
                 }
                 v
             });
+            let packing = s
+                .packing
+                .as_deref()
+                .and_then(|file| self.packing(i, file, s, &region, &mode, scene, particle_type));
             out.push(Insertion {
                 particle_type,
                 region,
@@ -113,10 +117,109 @@ impl Validator<'_> {
                 angular_velocity,
                 max_attempts,
                 lattice,
+                packing,
             });
         }
         self.start_memory(&out);
         out
+    }
+
+    /// `insertions[i].packing`: the file read and checked, and the box region measured in
+    /// whole cells; `None` (with errors recorded) when anything does not fit.
+    #[allow(clippy::too_many_arguments)]
+    fn packing(
+        &mut self,
+        i: usize,
+        file: &str,
+        s: &schema::InsertionSection,
+        region: &Region,
+        mode: &InsertionMode,
+        scene: &Scene,
+        particle_type: usize,
+    ) -> Option<TiledPacking> {
+        let k = |f: &str| format!("insertions[{i}].{f}");
+        for (name, set) in [
+            ("lattice", s.lattice.is_some()),
+            ("orientation", s.orientation.is_some()),
+        ] {
+            if set {
+                self.err(
+                    &k(name),
+                    "not allowed with packing (the packing gives every position and orientation)",
+                );
+            }
+        }
+        let path = self.resolve(file);
+        let packing = match Packing::read(&path) {
+            Ok(p) => p,
+            Err(e) => {
+                self.err(&k("packing"), e.to_string());
+                return None;
+            }
+        };
+        let Region::Box { min, max } = region else {
+            self.err(&k("packing"), "only allowed with a box region");
+            return None;
+        };
+        let mut tiles = [0u64; 3];
+        for a in 0..3 {
+            let size = max[a] - min[a];
+            let n = (size / packing.cell[a]).round();
+            if n < 1.0 || (n * packing.cell[a] - size).abs() > 1e-9 * size {
+                self.err(
+                    &k("region"),
+                    format!(
+                        "the box must be a whole number of the packing's cells ({:e} m along {}); its size there is {size:e} m = {:.6} cells",
+                        packing.cell[a],
+                        ["x", "y", "z"][a],
+                        size / packing.cell[a]
+                    ),
+                );
+                return None;
+            }
+            tiles[a] = n as u64;
+        }
+        let tiled = TiledPacking {
+            file: path,
+            packing: std::sync::Arc::new(packing),
+            tiles,
+        };
+        match mode {
+            InsertionMode::Count(n) if *n == tiled.count() => {}
+            InsertionMode::Count(n) => self.err(
+                &k("count"),
+                format!(
+                    "{n} does not match the packing: {} particles per cell × {}×{}×{} cells = {}",
+                    tiled.packing.particles.len(),
+                    tiles[0],
+                    tiles[1],
+                    tiles[2],
+                    tiled.count()
+                ),
+            ),
+            _ => self.err(
+                &k("packing"),
+                "only allowed with count (a packing is placed at the start)",
+            ),
+        }
+        if let Some(dist) = scene.scale_distributions.get(particle_type) {
+            let scales = tiled.packing.particles.iter().map(|p| p.scale);
+            match dist {
+                ScaleDistribution::Fixed(f) if scales.clone().all(|x| x == *f) => {}
+                _ => {
+                    let (lo, hi) =
+                        scales.fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(x), b.max(x)));
+                    self.err(
+                        &k("packing"),
+                        format!(
+                            "the packing's scales ({lo:e} … {hi:e}) must all equal the particle type \"{}\"'s fixed scale ({dist:?})",
+                            s.particle_type
+                        ),
+                    );
+                }
+            }
+        }
+        Some(tiled)
     }
 
     /// Refuses count insertions whose particles, all placed at the start, cannot fit in this

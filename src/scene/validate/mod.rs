@@ -9,10 +9,11 @@ mod insertions;
 mod materials;
 mod simulation;
 
-use super::insertion::{DEFAULT_MAX_ATTEMPTS, Insertion, InsertionMode};
+use super::insertion::{DEFAULT_MAX_ATTEMPTS, Insertion, InsertionMode, TiledPacking};
 use super::schema::{self, SceneFile, SpanIndex, Vec3};
 use super::walls::Wall;
 use super::*;
+use crate::io::Packing;
 use crate::shape::ConvexTemplate;
 use nalgebra::Unit;
 use std::collections::HashMap;
