@@ -54,22 +54,30 @@ template <class T> struct ChebyshevCentre {
     int steps;
 };
 
+// A plane of type P in the arithmetic of T (exact; the identity when P is T).
+template <class T, class P> PD_HD Plane<T> plane_as(const Plane<P>& p) {
+    Plane<T> q;
+    q.normal = v3(T(p.normal.x), T(p.normal.y), T(p.normal.z));
+    q.offset = T(p.offset);
+    return q;
+}
+
 // The radius of the point x: its smallest slack over the planes of a and b.
-template <class T>
-PD_HD T smallest_slack(const Plane<T>* a, int na, const Plane<T>* b, int nb, V3<T> x) {
+template <class T, class P>
+PD_HD T smallest_slack(const Plane<P>* a, int na, const Plane<P>* b, int nb, V3<T> x) {
     T radius = Limits<T>::max();
     for (int i = 0; i < na + nb; ++i) {
-        const Plane<T>& p = i < na ? a[i] : b[i - na];
+        const Plane<T> p = plane_as<T>(i < na ? a[i] : b[i - na]);
         radius = min_(radius, p.offset - dot(p.normal, x));
     }
     return radius;
 }
 
-// interior::chebyshev_centre: solves the inscribed-ball LP over the planes of a (na planes) and
-// b (nb planes), starting from `start`.
-template <class T>
-PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<T>* a, int na, const Plane<T>* b, int nb, V3<T> start) {
-#define PD_CC_PLANE(i) ((i) < na ? a[(i)] : b[(i) - na])
+// interior::chebyshev_centre (interior::solve): solves the inscribed-ball LP over the planes of
+// a (na planes) and b (nb planes), of type P, in the arithmetic of T, starting from `start`.
+template <class T, class P>
+PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<P>* a, int na, const Plane<P>* b, int nb, V3<T> start) {
+#define PD_CC_PLANE(i) plane_as<T>((i) < na ? a[(i)] : b[(i) - na])
     const int m = na + nb;
     const T tmax = Limits<T>::max();
 
@@ -100,7 +108,7 @@ PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<T>* a, int na, const Plane
 
     // The best point met (interior.rs): its radius is its smallest slack over every plane.
     V3<T> best_point = start;
-    T best_radius = smallest_slack(a, na, b, nb, start);
+    T best_radius = smallest_slack<T, P>(a, na, b, nb, start);
 
     int steps = 0;
     while (steps < PD_CHEBYSHEV_MAX_STEPS) {
@@ -207,7 +215,7 @@ PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<T>* a, int na, const Plane
         z = moved;
         {
             V3<T> point = v3(z.x, z.y, z.z);
-            T radius = smallest_slack(a, na, b, nb, point);
+            T radius = smallest_slack<T, P>(a, na, b, nb, point);
             if (radius > best_radius) {
                 best_point = point;
                 best_radius = radius;
@@ -222,7 +230,7 @@ PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<T>* a, int na, const Plane
     // The radius is recomputed from the final point so that it is exact for the point returned;
     // the best point met is returned if it is better.
     V3<T> point = v3(z.x, z.y, z.z);
-    T radius = smallest_slack(a, na, b, nb, point);
+    T radius = smallest_slack<T, P>(a, na, b, nb, point);
     if (best_radius > radius) {
         point = best_point;
         radius = best_radius;
@@ -232,6 +240,26 @@ PD_HD ChebyshevCentre<T> chebyshev_centre(const Plane<T>* a, int na, const Plane
     out.steps = steps;
     return out;
 #undef PD_CC_PLANE
+}
+
+// interior::chebyshev_centre_wide: the LP solved in double whatever the planes' type, from the
+// frame origin; the point returned in T with its radius recomputed in T. In double it is
+// chebyshev_centre itself. Mixed precision needs it for a face resting on a face: the LP's
+// radius grows along the thin wedge of their overlap at the rate of the faces' tilt, which f32
+// arithmetic cannot tell from zero (interior.rs gives the case).
+template <class T>
+PD_HD ChebyshevCentre<T> chebyshev_centre_wide(const Plane<T>* a, int na, const Plane<T>* b, int nb) {
+    ChebyshevCentre<double> c = chebyshev_centre<double, T>(a, na, b, nb, zero3<double>());
+    ChebyshevCentre<T> out;
+    out.point = v3(T(c.point.x), T(c.point.y), T(c.point.z));
+    out.radius = smallest_slack<T, T>(a, na, b, nb, out.point);
+    out.steps = c.steps;
+    return out;
+}
+template <>
+PD_HD ChebyshevCentre<double> chebyshev_centre_wide<double>(const Plane<double>* a, int na, const Plane<double>* b,
+                                                                 int nb) {
+    return chebyshev_centre<double, double>(a, na, b, nb, zero3<double>());
 }
 
 } // namespace pd

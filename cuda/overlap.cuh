@@ -324,7 +324,7 @@ PD_HD int overlap_volume(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, con
         *out = overlap_zero<T>();
         return STATUS_TOO_MANY_PLANES;
     }
-    ChebyshevCentre<T> centre = chebyshev_centre(a, na, b, nb, start);
+    ChebyshevCentre<T> centre = chebyshev_centre<T, T>(a, na, b, nb, start);
     return overlap_about(ws, a, na, b, nb, centre.point, out);
 }
 
@@ -407,7 +407,7 @@ PD_HD int pair_planes_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B
     PD_CLK(2)
     set_aside_faces_apart(ws.a, A.tpl, A.scale, A.pos, A.rot, ws.b, B.tpl, B.scale, B.pos, B.rot, origin, tol);
     PD_CLK(3)
-    ChebyshevCentre<T> centre = chebyshev_centre(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>());
+    ChebyshevCentre<T> centre = chebyshev_centre_wide(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes);
     PD_CLK(4)
     // A centre strictly inside every plane of both bodies proves an intersection with an
     // interior (the narrow-phase verdict without GJK): the planes in use hold it by the LP's
@@ -431,7 +431,7 @@ PD_HD int pair_planes_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B
         }
         restore_aside(ws.a);
         restore_aside(ws.b);
-        centre = chebyshev_centre(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>());
+        centre = chebyshev_centre_wide(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes);
     }
     PD_CLK(5)
     origin = origin + widen(centre.point);

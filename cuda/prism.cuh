@@ -106,7 +106,7 @@ PD_HD int prism_overlap_culled(OverlapWorkspace<T>& ws, PosedPolytope<T>& body, 
         }
     }
     const V3<T> start = body.centre - facet.normal * d;
-    ChebyshevCentre<T> centre = chebyshev_centre(body.planes, body.n_planes, kept, n_kept, start);
+    ChebyshevCentre<T> centre = chebyshev_centre<T, T>(body.planes, body.n_planes, kept, n_kept, start);
     bool proven = centre.radius > tol;
     for (int j = 0; j < body.n_aside && proven; ++j) {
         proven = plane_distance(body.aside[j], centre.point) < -tol;

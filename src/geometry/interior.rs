@@ -47,7 +47,54 @@ pub fn chebyshev_centre<T: Real>(
     b: &[Plane<T>],
     start: Vector3<T>,
 ) -> ChebyshevCentre<T> {
-    let plane = |i: usize| if i < a.len() { &a[i] } else { &b[i - a.len()] };
+    solve::<T, T>(a, b, start)
+}
+
+/// [`chebyshev_centre`] solved in f64 whatever the planes' type, from the frame origin; the
+/// point is returned in `T` with its radius recomputed in `T`. In f64 it is
+/// `chebyshev_centre` itself.
+///
+/// The pair geometry of mixed precision (f32 planes) needs it. A face resting on a face
+/// overlaps in a thin wedge: the LP's radius grows along the wedge at a rate of its faces'
+/// tilt, 1e-5 for a settled packing, which is below what the LP's f32 arithmetic can tell from
+/// zero (1024 ε = 1.2e-4 for the projected objective, 64 ε for the ratio test), so in f32 it
+/// stopped wherever it entered the wedge, often nanometres from a face. The proof of the
+/// intersection then failed and the overlap evaluated about that point was wrong by orders of
+/// magnitude (tests/mixed_flat_contacts.rs). The f32 planes carry the wedge's tilt to 1e-7,
+/// and the f64 LP finds their centre; the rest of the geometry, about that centre, keeps f32.
+pub fn chebyshev_centre_wide<T: Real>(a: &[Plane<T>], b: &[Plane<T>]) -> ChebyshevCentre<T> {
+    if T::EPSILON.f64() == f64::EPSILON {
+        return solve::<T, T>(a, b, Vector3::zeros());
+    }
+    let c = solve::<T, f64>(a, b, Vector3::zeros());
+    let point = Vector3::new(T::of(c.point.x), T::of(c.point.y), T::of(c.point.z));
+    let mut radius = T::max_value().unwrap_or(T::one());
+    for p in a.iter().chain(b) {
+        radius = radius.min(p.offset - p.normal.dot(&point));
+    }
+    ChebyshevCentre {
+        point,
+        radius,
+        steps: c.steps,
+    }
+}
+
+/// The LP over planes of type `P`, in the arithmetic of `T` (each plane converted as it is
+/// read; exact, and the identity when `P` is `T`).
+fn solve<P: Real, T: Real>(
+    a: &[Plane<P>],
+    b: &[Plane<P>],
+    start: Vector3<T>,
+) -> ChebyshevCentre<T> {
+    let convert = |p: &Plane<P>| Plane {
+        normal: Vector3::new(
+            T::of(p.normal.x.f64()),
+            T::of(p.normal.y.f64()),
+            T::of(p.normal.z.f64()),
+        ),
+        offset: T::of(p.offset.f64()),
+    };
+    let plane = |i: usize| convert(if i < a.len() { &a[i] } else { &b[i - a.len()] });
     let m = a.len() + b.len();
     let row = |i: usize| {
         let p = plane(i);

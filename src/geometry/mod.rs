@@ -28,7 +28,7 @@ pub mod vertex_enumeration;
 
 pub use clip::{FacetContact, facet_contact, section_polygon, sutherland_hodgman};
 pub use gjk::gjk_intersect;
-pub use interior::{ChebyshevCentre, chebyshev_centre};
+pub use interior::{ChebyshevCentre, chebyshev_centre, chebyshev_centre_wide};
 pub use overlap::{Overlap, OverlapError, OverlapWorkspace, overlap_pair, overlap_volume};
 pub use polytope::{Plane, PosedPolytope};
 pub use real::{Real, portable_cbrt, portable_sin_cos};

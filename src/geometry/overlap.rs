@@ -33,7 +33,7 @@
 
 use super::Real;
 use super::gjk::gjk_separating_axis;
-use super::interior::chebyshev_centre;
+use super::interior::{chebyshev_centre, chebyshev_centre_wide};
 use super::polytope::{Plane, PosedPolytope, set_aside_faces_apart, widen};
 use super::quickhull::{DualHull, HullError, MAX_HULL_FACES, MAX_HULL_POINTS};
 use super::vertex_enumeration::{ENUM_MAX_PLANES, FaceEnumeration};
@@ -528,8 +528,9 @@ pub fn overlap_pair<T: Real>(
     );
     // Start the LP at the frame origin, which is near the contact: its steps are then on the
     // scale of the overlap, and so is their round-off (which matters in f32 when one body is
-    // much smaller than the distance between the centres).
-    let mut centre = chebyshev_centre(ws.a.planes(), ws.b.planes(), Vector3::zeros());
+    // much smaller than the distance between the centres). In mixed precision the LP runs in
+    // f64 on the f32 planes ([`chebyshev_centre_wide`]: a face resting on a face).
+    let mut centre = chebyshev_centre_wide(ws.a.planes(), ws.b.planes());
     // A centre strictly inside every plane of both bodies proves that A ∩ B has an interior:
     // the bodies intersect (the narrow-phase verdict, without GJK) and the set-aside planes are
     // redundant. The planes in use hold it by the LP's radius, the set-aside ones are checked,
@@ -553,7 +554,7 @@ pub fn overlap_pair<T: Real>(
         if axis.is_none() {
             ws.a.restore_aside();
             ws.b.restore_aside();
-            centre = chebyshev_centre(ws.a.planes(), ws.b.planes(), Vector3::zeros());
+            centre = chebyshev_centre_wide(ws.a.planes(), ws.b.planes());
         }
         axis
     };
