@@ -246,3 +246,38 @@ fn committed_settled_benches_load() {
     }
     assert_eq!(scenes, 12, "four shapes at three sizes");
 }
+
+/// The restart fingerprint covers the packing's contents, not the path it was reached by: the
+/// same scene read from two directories fingerprints alike, and a changed packing does not.
+#[test]
+fn the_fingerprint_follows_the_packing_not_its_path() {
+    use polydem::scene::restart::SceneFingerprint;
+    let (out, _) = packed();
+    let (cell, n) = cell_of(out);
+    let (a, b) = (
+        temp_dir("bench-packing-fp-a"),
+        temp_dir("bench-packing-fp-b"),
+    );
+    let mut text = Packing::read(out).unwrap().to_text(&[]);
+    std::fs::write(a.join("cell.packing"), &text).unwrap();
+    std::fs::write(b.join("cell.packing"), &text).unwrap();
+    let scene = |dir: &Path| {
+        let t = tiled_scene(Path::new("cell.packing"), cell, [1, 1, 1], n as u64, "");
+        SceneFingerprint::of(&parse_scene(&t, dir, "fp.toml").unwrap())
+    };
+    assert_eq!(scene(&a), scene(&b));
+    // One particle moved by a micrometre: another fingerprint.
+    let line = text.lines().nth(4).unwrap().to_string();
+    let first: f64 = line.split_whitespace().next().unwrap().parse().unwrap();
+    text = text.replacen(
+        &line,
+        &line.replacen(
+            line.split_whitespace().next().unwrap(),
+            &format!("{:.11e}", first + 1e-6),
+            1,
+        ),
+        1,
+    );
+    std::fs::write(b.join("cell.packing"), &text).unwrap();
+    assert_ne!(scene(&a), scene(&b));
+}

@@ -77,7 +77,7 @@ pub struct Insertion {
 }
 
 /// A [`Packing`] and how many times its cell repeats along x, y and z to fill a box region.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct TiledPacking {
     /// The file it was read from.
     pub file: std::path::PathBuf,
@@ -85,6 +85,18 @@ pub struct TiledPacking {
     pub packing: std::sync::Arc<Packing>,
     /// Copies of the cell along x, y and z.
     pub tiles: [u64; 3],
+}
+
+/// The packing's contents and the tiling, not the file's path: the restart fingerprint hashes
+/// this text ([`crate::scene::restart::SceneFingerprint`]), and a run restarted from another directory,
+/// or with the scene given by another path, reads the same packing.
+impl std::fmt::Debug for TiledPacking {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TiledPacking")
+            .field("packing", &self.packing)
+            .field("tiles", &self.tiles)
+            .finish()
+    }
 }
 
 impl TiledPacking {
