@@ -20,9 +20,10 @@ use std::sync::OnceLock;
 
 const SPHERES: usize = 500;
 
-/// A loose box of `SPHERES` frictionless 1 mm spheres at solid fraction 0.15.
-fn loose_spheres() -> String {
-    let l = (SPHERES as f64 * std::f64::consts::PI / 6.0 * 1e-9 / 0.15).cbrt();
+/// A fully periodic box `[0, max]` of 1 mm spheres without gravity, friction `mu`, and one
+/// insertion of `insertion` (TOML lines after `type`).
+fn sphere_box(max: [f64; 3], mu: f64, insertion: &str) -> String {
+    let [x, y, z] = max;
     format!(
         r#"gravity = [0.0, 0.0, 0.0]
 [simulation]
@@ -31,7 +32,7 @@ end_time = 1.0
 seed = 5
 [domain]
 min = [0.0, 0.0, 0.0]
-max = [{l}, {l}, {l}]
+max = [{x:?}, {y:?}, {z:?}]
 periodic = [true, true, true]
 [[materials]]
 name = "grain"
@@ -41,18 +42,29 @@ density = 2500.0
 [[material_pairs]]
 materials = ["grain", "grain"]
 restitution = 0.5
-friction = 0.0
+friction = {mu:?}
 [[particle_types]]
 name = "sphere"
 material = "grain"
 generator = {{ kind = "sphere", size = 0.001 }}
 [[insertions]]
 type = "sphere"
-region = {{ kind = "box", min = [0.0005, 0.0005, 0.0005], max = [{m}, {m}, {m}] }}
-count = {SPHERES}
-max_attempts = 100000
-"#,
-        m = l - 0.0005
+{insertion}
+"#
+    )
+}
+
+/// A loose box of `SPHERES` frictionless spheres at solid fraction 0.15.
+fn loose_spheres() -> String {
+    let l = (SPHERES as f64 * std::f64::consts::PI / 6.0 * 1e-9 / 0.15).cbrt();
+    let m = l - 0.0005;
+    sphere_box(
+        [l; 3],
+        0.0,
+        &format!(
+            "region = {{ kind = \"box\", min = [0.0005, 0.0005, 0.0005], max = [{m}, {m}, {m}] }}\n\
+             count = {SPHERES}\nmax_attempts = 100000"
+        ),
     )
 }
 
@@ -76,42 +88,17 @@ fn packed() -> &'static (PathBuf, serde_json::Value) {
     })
 }
 
-/// A scene tiling `packing` `tiles` times (with `extra` lines added to the insertion).
+/// A scene tiling `packing` `tiles` times, μ = 0.5 (with `extra` lines added to the insertion).
 fn tiled_scene(packing: &Path, cell: [f64; 3], tiles: [u64; 3], count: u64, extra: &str) -> String {
-    let max = [0, 1, 2].map(|a| cell[a] * tiles[a] as f64);
-    format!(
-        r#"gravity = [0.0, 0.0, 0.0]
-[simulation]
-dt_fraction = 0.05
-end_time = 1.0
-[domain]
-min = [0.0, 0.0, 0.0]
-max = [{x:?}, {y:?}, {z:?}]
-periodic = [true, true, true]
-[[materials]]
-name = "grain"
-youngs_modulus = 1.0e7
-poisson_ratio = 0.3
-density = 2500.0
-[[material_pairs]]
-materials = ["grain", "grain"]
-restitution = 0.5
-friction = 0.5
-[[particle_types]]
-name = "sphere"
-material = "grain"
-generator = {{ kind = "sphere", size = 0.001 }}
-[[insertions]]
-type = "sphere"
-region = {{ kind = "box", min = [0.0, 0.0, 0.0], max = [{x:?}, {y:?}, {z:?}] }}
-count = {count}
-packing = "{p}"
-{extra}
-"#,
-        x = max[0],
-        y = max[1],
-        z = max[2],
-        p = packing.display()
+    let [x, y, z] = [0, 1, 2].map(|a| cell[a] * tiles[a] as f64);
+    sphere_box(
+        [x, y, z],
+        0.5,
+        &format!(
+            "region = {{ kind = \"box\", min = [0.0, 0.0, 0.0], max = [{x:?}, {y:?}, {z:?}] }}\n\
+             count = {count}\npacking = \"{}\"\n{extra}",
+            packing.display()
+        ),
     )
 }
 
