@@ -49,12 +49,14 @@ impl CudaSimulation {
     pub(super) fn forces(&mut self, dt: f64, kick: bool) -> Result<(), CudaError> {
         let t0 = Instant::now();
         if self.pairs.rebuild || self.pairs.list.is_none() {
+            // The build waits for the device (its counts come back to size the list).
             self.build_pairs()?;
         }
-        self.gpu.stream.synchronize()?;
         self.host.timers.neighbor += t0.elapsed().as_secs_f64();
-        let t0 = Instant::now();
         let st = self.gpu.stream.clone();
+        // From here to the error word the host queues work without waiting; the device's
+        // stage times come from events (`StageClock`).
+        self.gpu.clock.mark(0, &st)?;
         let view = self.particles.view(&st);
         let n_mat = self.host.scene.materials.len() as i32;
         let max_overlap = self.host.guard.max_overlap;
@@ -88,21 +90,14 @@ impl CudaSimulation {
         }
         let spheres_only = self.host.scene.spheres_only();
         self.pairs.launch_deferred(&self.gpu, &args, spheres_only)?;
-        // Kernels run asynchronously: wait for the stage so that its timer measures it (a few
-        // microseconds per stage, negligible against the step).
-        st.synchronize()?;
-        self.host.timers.pairs += t0.elapsed().as_secs_f64() - wall_host;
-        self.host.timers.walls += wall_host;
+        self.gpu.clock.mark(1, &st)?;
         if super::kernels::phase_clocks() {
             self.gpu.report_phase_clocks()?;
         }
-        let t0 = Instant::now();
         if let Some(w) = self.walls.as_mut() {
             w.finish(&self.gpu, self.particles.n, &view, n_mat, dt, max_overlap)?;
         }
-        st.synchronize()?;
-        self.host.timers.walls += t0.elapsed().as_secs_f64();
-        let t0 = Instant::now();
+        self.gpu.clock.mark(2, &st)?;
         let g = self.host.scene.gravity;
         let pairs = self.pairs.list.as_mut().expect("built above");
         self.integrator.reduce_and_kick(
@@ -119,9 +114,15 @@ impl CudaSimulation {
         if let Some(w) = &mut self.walls {
             std::mem::swap(&mut w.spring_in, &mut w.spring_out);
         }
+        self.gpu.clock.mark(3, &st)?;
         let mut error = [0u32; 3];
         st.memcpy_dtoh(&self.gpu.error, &mut error)?;
-        self.host.timers.reduce += t0.elapsed().as_secs_f64();
+        // The pairs' span includes the host's wall work queued inside it (a wall list build
+        // waits for its count); that is the walls' time.
+        let [pairs, walls, reduce] = self.gpu.clock.spans()?;
+        self.host.timers.pairs += (pairs - wall_host).max(0.0);
+        self.host.timers.walls += walls + wall_host;
+        self.host.timers.reduce += reduce;
         // A geometry error fails the step; the fused kick has already applied this step's
         // forces to the velocities on the device (the run stops with the error: `engine.step()?`).
         if error[0] != 0 || error[1] != 0 {

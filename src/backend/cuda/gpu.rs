@@ -6,6 +6,7 @@ use super::error::CudaError;
 use super::kernels::KernelConfig;
 use super::launch::Kernels;
 use super::layout::{GridParams, PairMaterial};
+use cudarc::driver::sys::CUevent_flags;
 use cudarc::driver::{CudaContext, CudaEvent, CudaSlice, CudaStream, LaunchConfig};
 use std::sync::Arc;
 
@@ -41,6 +42,40 @@ pub(super) struct Gpu {
     /// cuda/contact.cu: a 64-bit key in the first two values) and the stability guard's deep
     /// contact (the third).
     pub(super) error: CudaSlice<u32>,
+    /// The stage boundaries of a step's force evaluation, timed on the device.
+    pub(super) clock: StageClock,
+}
+
+/// The device's time per stage of the force evaluation without a host wait per stage: events
+/// recorded on the main stream at the stage boundaries (before the pairs, after them, after
+/// the walls, after the reduction), read once the step's error word has been copied back,
+/// which waits for all of them. A wait per stage cost the step a round trip each (the host
+/// waits, then the device waits for the next launch), which a small scene pays at every step.
+pub(super) struct StageClock {
+    marks: [CudaEvent; 4],
+}
+
+impl StageClock {
+    pub(super) fn new(ctx: &Arc<CudaContext>) -> Result<Self, CudaError> {
+        let timed = || ctx.new_event(Some(CUevent_flags::CU_EVENT_DEFAULT));
+        Ok(StageClock {
+            marks: [timed()?, timed()?, timed()?, timed()?],
+        })
+    }
+
+    /// Records boundary `k` (0 ..= 3) after the work queued so far on `stream`.
+    pub(super) fn mark(&self, k: usize, stream: &CudaStream) -> Result<(), CudaError> {
+        self.marks[k].record(stream)?;
+        Ok(())
+    }
+
+    /// Seconds between consecutive boundaries: pairs, walls, reduction (waits for the last).
+    pub(super) fn spans(&self) -> Result<[f64; 3], CudaError> {
+        let span = |a: usize| -> Result<f64, CudaError> {
+            Ok(f64::from(self.marks[a].elapsed_ms(&self.marks[a + 1])?) * 1e-3)
+        };
+        Ok([span(0)?, span(1)?, span(2)?])
+    }
 }
 
 impl Gpu {

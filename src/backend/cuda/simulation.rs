@@ -6,7 +6,7 @@
 //! copies nothing back but its status flags and error word (28 bytes).
 
 use super::error::CudaError;
-use super::gpu::{Gpu, WallStream};
+use super::gpu::{Gpu, StageClock, WallStream};
 use super::halo::HaloStage;
 use super::integrator::{DriftChecks, Integrator};
 use super::kernels::{KernelConfig, Precision};
@@ -135,8 +135,10 @@ impl CudaSimulation {
         let skin = s.simulation.neighbor.skin;
         let (grid, list_builder) = domain_grid(&host);
         let error = stream.alloc_zeros::<u32>(3)?;
+        let clock = StageClock::new(&ctx)?;
         let gpu = Gpu {
             _ctx: ctx,
+            clock,
             stream,
             wall_stream,
             k,
