@@ -254,12 +254,22 @@ PD_DEVICE void evaluate_pair(const PairArgs& q, size_t k) {
     PairGeometry g;
     PD_CLK(0)
     PD_CLK_COUNT(11)
+#if PD_DOUBLE_GEOMETRY
     int status = overlap_pair_t<GeomReal, true>(ws, A, B, &g);
-#if !PD_DOUBLE_GEOMETRY
-    // f32 cannot resolve every overlap's dual hull: a thin slab between two faces lying on each
-    // other (a stack of cubes, a cube landing flat) puts its two large faces' dual points at
-    // 1/δ and the others at ~1/L. Such a pair is evaluated again in f64, the CPU's precision.
-    if (status == STATUS_HULL_DEGENERATE || status == STATUS_HULL_TOPOLOGY || status == STATUS_HULL_CAPACITY) {
+#else
+    // Mixed precision (geometry::overlap::overlap_pair_mixed): f32 where the centre proves an
+    // overlap thick enough for it, f64 otherwise (STATUS_WIDE), and f64 again where f32 cannot
+    // resolve the dual hull: a thin slab between two faces lying on each other puts its two
+    // large faces' dual points at 1/δ and the others at ~1/L.
+    V3<double> frame;
+    bool ready;
+    int status = pair_planes_t<GeomReal, true, true>(ws, A, B, &g, &frame, &ready);
+    if (status == STATUS_OK && ready) {
+        status = overlap_of_planes<GeomReal, true>(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes,
+                                                   ws.b.n_planes, frame, &g);
+    }
+    if (status == STATUS_WIDE || status == STATUS_HULL_DEGENERATE || status == STATUS_HULL_TOPOLOGY ||
+        status == STATUS_HULL_CAPACITY) {
         PairWorkspace<double> wide;
         status = overlap_pair_t<double, true>(wide, A, B, &g);
     }
@@ -356,9 +366,11 @@ extern "C" __global__ void PD_PAIR_BOUNDS pair_planes(int first, int n_pairs, Pa
             bool ready;
             PD_CLK(0)
             PD_CLK_COUNT(11)
-            int status = pair_planes_t<GeomReal, false>(ws, A, B, &g, &frame, &ready);
+            // Mixed precision sends the pairs f32 cannot resolve to the full evaluation, in f64.
+            int status = pair_planes_t<GeomReal, false, !PD_DOUBLE_GEOMETRY>(ws, A, B, &g, &frame, &ready);
             int m = ws.a.n_planes + ws.b.n_planes;
-            if (status == STATUS_DEFERRED || (status == STATUS_OK && ready && m > PD_ENUM_MAX_PLANES)) {
+            if (status == STATUS_DEFERRED || status == STATUS_WIDE ||
+                (status == STATUS_OK && ready && m > PD_ENUM_MAX_PLANES)) {
                 append(deferred, deferred_count, (unsigned int)kk);
             } else if (status == STATUS_OK && ready) {
                 StagedPlanes& s = staged[k];

@@ -386,7 +386,12 @@ PD_HD bool axis_separates(const BodyRef& A, const BodyRef& B, V3<double> axis, d
 // The work splits in two at the frame move: pair_planes_t leaves the planes about the centre,
 // overlap_pair_t then computes their overlap. The GPU's lean pass stages the planes between
 // two kernels, so that the faces run in warps of pairs with equal plane counts.
-template <class T, bool kFull>
+//
+// With kWide (mixed precision, T = float), a pair whose intersection the centre does not prove,
+// or proves with a Chebyshev radius below PD_MIXED_WIDE_ULPS f32 epsilons of ra + rb, returns
+// STATUS_WIDE: f32 cannot place the planes of a face resting on a face to the overlap's
+// thickness, and the caller evaluates such a pair in f64 (Rust's overlap_pair_mixed).
+template <class T, bool kFull, bool kWide = false>
 PD_HD int pair_planes_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out,
                         V3<double>* frame, bool* ready) {
     *ready = false;
@@ -418,6 +423,9 @@ PD_HD int pair_planes_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B
                   norm2(centre.point - ws.b.centre) < T(rb) * T(rb);
     for (int i = 0; i < ws.a.n_aside && proven; ++i) proven = plane_distance(ws.a.aside[i], centre.point) < -tol;
     for (int i = 0; i < ws.b.n_aside && proven; ++i) proven = plane_distance(ws.b.aside[i], centre.point) < -tol;
+    if (kWide && !(proven && (double)centre.radius >= PD_MIXED_WIDE_ULPS * (double)Limits<float>::epsilon() * (ra + rb))) {
+        return STATUS_WIDE;
+    }
     if (!proven) {
         if (!kFull) return STATUS_DEFERRED;
         PD_CLK_COUNT(12)

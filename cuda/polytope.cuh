@@ -42,7 +42,15 @@ enum GeometryStatus {
     // did not prove an intersection, or the faces need the dual hull; the pair needs the full
     // evaluation (never returned by overlap_pair).
     STATUS_DEFERRED = 7,
+    // Mixed precision (pair_planes_t<float, ·, true>): the Chebyshev centre did not prove an
+    // intersection, or proved one thinner than f32 resolves (PD_MIXED_WIDE_ULPS); the pair is
+    // evaluated in f64 (Rust's overlap_pair_mixed; never returned by overlap_pair).
+    STATUS_WIDE = 8,
 };
+
+// Mixed precision evaluates in f64 a pair whose Chebyshev radius (about half its overlap's
+// thickness) is below this many f32 epsilons of ra + rb (geometry::overlap::MIXED_WIDE_ULPS).
+#define PD_MIXED_WIDE_ULPS 512.0
 
 // A convex template in its body frame, as plain arrays: kernels point it at constant or global
 // memory, the host harness at ordinary arrays. Mirrors the parts of `shape::ConvexTemplate` the

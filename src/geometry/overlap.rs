@@ -33,7 +33,7 @@
 
 use super::Real;
 use super::gjk::gjk_separating_axis;
-use super::interior::{chebyshev_centre, chebyshev_centre_wide};
+use super::interior::{ChebyshevCentre, chebyshev_centre, chebyshev_centre_wide};
 use super::polytope::{Plane, PosedPolytope, set_aside_faces_apart, widen};
 use super::quickhull::{DualHull, HullError, MAX_HULL_FACES, MAX_HULL_POINTS};
 use super::vertex_enumeration::{ENUM_MAX_PLANES, FaceEnumeration};
@@ -500,50 +500,15 @@ pub fn axis_separates(
 /// plane that reaches the other body's ball.
 pub fn overlap_pair<T: Real>(
     ws: &mut PairWorkspace<T>,
-    (ta, sa, pose_a): (&ConvexTemplate, f64, &Isometry3<f64>),
-    (tb, sb, pose_b): (&ConvexTemplate, f64, &Isometry3<f64>),
+    a: (&ConvexTemplate, f64, &Isometry3<f64>),
+    b: (&ConvexTemplate, f64, &Isometry3<f64>),
 ) -> Result<PairGeometry, OverlapError> {
-    // Frame origin on the centre line where the bounding spheres would touch: near the contact,
-    // so that the planes that bound the overlap pass close to the origin and their f32 offsets
-    // and normals carry round-off proportional to the overlap's size, not the particles'.
-    let (xa, xb) = (pose_a.translation.vector, pose_b.translation.vector);
-    let (ra, rb) = (ta.circumscribed_radius * sa, tb.circumscribed_radius * sb);
-    let origin = xa + (xb - xa) * (ra / (ra + rb));
-    // The planes only: the vertices are placed when GJK needs them (few pairs, see below).
-    ws.a.place_planes(ta, sa, pose_a, &origin);
-    ws.b.place_planes(tb, sb, pose_b, &origin);
-    // Exact culling first (a plane whose half-space holds the other body's bounding ball bounds
-    // nothing), then the faces that miss the other body set aside: what is left is about the
-    // planes that bound the overlap, and the LP below runs on those.
-    let tol = T::of(64.0) * T::EPSILON * T::of(ra + rb);
-    ws.a.retain_planes_reaching(&ws.b.centre, T::of(rb), tol);
-    ws.b.retain_planes_reaching(&ws.a.centre, T::of(ra), tol);
-    set_aside_faces_apart(
-        &mut ws.a,
-        (ta, sa, pose_a),
-        &mut ws.b,
-        (tb, sb, pose_b),
-        &origin,
-        tol,
-    );
-    // Start the LP at the frame origin, which is near the contact: its steps are then on the
-    // scale of the overlap, and so is their round-off (which matters in f32 when one body is
-    // much smaller than the distance between the centres). In mixed precision the LP runs in
-    // f64 on the f32 planes ([`chebyshev_centre_wide`]: a face resting on a face).
-    let mut centre = chebyshev_centre_wide(ws.a.planes(), ws.b.planes());
-    // A centre strictly inside every plane of both bodies proves that A ∩ B has an interior:
-    // the bodies intersect (the narrow-phase verdict, without GJK) and the set-aside planes are
-    // redundant. The planes in use hold it by the LP's radius, the set-aside ones are checked,
-    // and the planes culled against a ball hold every point of that ball: a centre inside both
-    // balls is inside them too. Otherwise GJK decides, and an intersection that the check could
-    // not prove (touching or flat) is evaluated on every plane that reaches the other's ball.
-    let inside = |p: &Plane<T>| p.distance(&centre.point) < -tol;
-    let in_ball = |c: &Vector3<T>, r: f64| (centre.point - c).norm_squared() < T::of(r) * T::of(r);
-    let proven = centre.radius > tol
-        && in_ball(&ws.a.centre, ra)
-        && in_ball(&ws.b.centre, rb)
-        && ws.a.aside_planes().iter().all(inside)
-        && ws.b.aside_planes().iter().all(inside);
+    let ((ta, sa, pose_a), (tb, sb, pose_b)) = (a, b);
+    let CentredPlanes {
+        origin,
+        mut centre,
+        proven,
+    } = centred_planes(ws, a, b);
     let separating_axis = if proven {
         None
     } else {
@@ -583,4 +548,121 @@ pub fn overlap_pair<T: Real>(
         separating_axis: separating_axis.map(|v| widen(&v)),
         overlap,
     })
+}
+
+/// The first half of [`overlap_pair`]: the frame origin near the contact, the planes placed,
+/// culled and set aside in `ws`, the Chebyshev centre of those in use, and whether it proves
+/// that A ∩ B has an interior.
+struct CentredPlanes<T: Real> {
+    origin: Vector3<f64>,
+    centre: ChebyshevCentre<T>,
+    proven: bool,
+}
+
+fn centred_planes<T: Real>(
+    ws: &mut PairWorkspace<T>,
+    (ta, sa, pose_a): (&ConvexTemplate, f64, &Isometry3<f64>),
+    (tb, sb, pose_b): (&ConvexTemplate, f64, &Isometry3<f64>),
+) -> CentredPlanes<T> {
+    // Frame origin on the centre line where the bounding spheres would touch: near the contact,
+    // so that the planes that bound the overlap pass close to the origin and their f32 offsets
+    // and normals carry round-off proportional to the overlap's size, not the particles'.
+    let (xa, xb) = (pose_a.translation.vector, pose_b.translation.vector);
+    let (ra, rb) = (ta.circumscribed_radius * sa, tb.circumscribed_radius * sb);
+    let origin = xa + (xb - xa) * (ra / (ra + rb));
+    // The planes only: the vertices are placed when GJK needs them (few pairs).
+    ws.a.place_planes(ta, sa, pose_a, &origin);
+    ws.b.place_planes(tb, sb, pose_b, &origin);
+    // Exact culling first (a plane whose half-space holds the other body's bounding ball bounds
+    // nothing), then the faces that miss the other body set aside: what is left is about the
+    // planes that bound the overlap, and the LP below runs on those.
+    let tol = T::of(64.0) * T::EPSILON * T::of(ra + rb);
+    ws.a.retain_planes_reaching(&ws.b.centre, T::of(rb), tol);
+    ws.b.retain_planes_reaching(&ws.a.centre, T::of(ra), tol);
+    set_aside_faces_apart(
+        &mut ws.a,
+        (ta, sa, pose_a),
+        &mut ws.b,
+        (tb, sb, pose_b),
+        &origin,
+        tol,
+    );
+    // Start the LP at the frame origin, which is near the contact: its steps are then on the
+    // scale of the overlap, and so is their round-off (which matters in f32 when one body is
+    // much smaller than the distance between the centres). In mixed precision the LP runs in
+    // f64 on the f32 planes ([`chebyshev_centre_wide`]: a face resting on a face).
+    let centre = chebyshev_centre_wide(ws.a.planes(), ws.b.planes());
+    // A centre strictly inside every plane of both bodies proves that A ∩ B has an interior:
+    // the bodies intersect (the narrow-phase verdict, without GJK) and the set-aside planes are
+    // redundant. The planes in use hold it by the LP's radius, the set-aside ones are checked,
+    // and the planes culled against a ball hold every point of that ball: a centre inside both
+    // balls is inside them too.
+    let inside = |p: &Plane<T>| p.distance(&centre.point) < -tol;
+    let in_ball = |c: &Vector3<T>, r: f64| (centre.point - c).norm_squared() < T::of(r) * T::of(r);
+    let proven = centre.radius > tol
+        && in_ball(&ws.a.centre, ra)
+        && in_ball(&ws.b.centre, rb)
+        && ws.a.aside_planes().iter().all(inside)
+        && ws.b.aside_planes().iter().all(inside);
+    CentredPlanes {
+        origin,
+        centre,
+        proven,
+    }
+}
+
+/// Mixed precision evaluates in f64 a pair whose Chebyshev radius (about half its overlap's
+/// thickness) is below this many f32 epsilons of `ra + rb`, the sum of the circumscribed radii
+/// (`PD_MIXED_WIDE_ULPS` of cuda/polytope.cuh): a radius of 512 ε (ra + rb) is a slab about
+/// 1000 f32 ulps of the pair's size thick (1.2e-7 m for 1 mm particles).
+pub const MIXED_WIDE_ULPS: f64 = 512.0;
+
+/// The pair geometry of the GPU's mixed precision (`--gpu-precision mixed`; `evaluate_pair`
+/// and the lean passes of cuda/contact.cu take the same decisions): [`overlap_pair`] in f32
+/// where the Chebyshev centre proves an overlap at least [`MIXED_WIDE_ULPS`] f32 epsilons of
+/// the pair's size thick, in f64 otherwise, and in f64 again where the f32 dual hull fails.
+///
+/// A face resting on a face is an overlap nanometres thick across a face millimetres wide: in
+/// f32 its planes are placed to about 1e-7 of the particle size, so a slab thinner than a few
+/// hundred ulps has its volume, centroid and moment wrong by tens of per cent (measured on a
+/// settled packing, `tests/mixed_flat_contacts.rs`); such pairs are a fraction of a per cent
+/// of a packing's contacts. A pair the centre does not prove (touching, or GJK's to decide)
+/// goes to f64 too: its overlap, if any, is thin.
+pub fn overlap_pair_mixed(
+    w32: &mut PairWorkspace<f32>,
+    w64: &mut PairWorkspace<f64>,
+    a: (&ConvexTemplate, f64, &Isometry3<f64>),
+    b: (&ConvexTemplate, f64, &Isometry3<f64>),
+) -> Result<PairGeometry, OverlapError> {
+    let ((ta, sa, pose_a), (tb, sb, pose_b)) = (a, b);
+    let (ra, rb) = (ta.circumscribed_radius * sa, tb.circumscribed_radius * sb);
+    let CentredPlanes {
+        origin,
+        centre,
+        proven,
+    } = centred_planes(w32, a, b);
+    let wide_below = MIXED_WIDE_ULPS * f64::from(f32::EPSILON) * (ra + rb);
+    if !(proven && f64::from(centre.radius) >= wide_below) {
+        return overlap_pair(w64, a, b);
+    }
+    let origin = origin + widen(&centre.point);
+    w32.a.reposition_planes(ta, sa, pose_a, &origin);
+    w32.b.reposition_planes(tb, sb, pose_b, &origin);
+    match overlap_about(
+        &mut w32.overlap,
+        w32.a.planes(),
+        w32.b.planes(),
+        Vector3::zeros(),
+        true,
+    ) {
+        Ok(o) => Ok(PairGeometry {
+            intersects: true,
+            separating_axis: None,
+            overlap: o.to_world(&origin),
+        }),
+        Err(OverlapError::Hull(
+            HullError::Degenerate | HullError::Topology | HullError::CapacityExceeded,
+        )) => overlap_pair(w64, a, b),
+        Err(e) => Err(e),
+    }
 }
