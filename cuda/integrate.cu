@@ -77,11 +77,11 @@ PD_DEVICE double wrap_coordinate(double x, double lo, double hi) {
 // (PairList::needs_rebuild), `outside` = number of particles outside a closed domain box,
 // `unstable` = 1 when a position or velocity is not finite, or an owned particle's angular
 // velocity or orientation is not, or it moves faster than `max_speed` (|v| + |ω| radius; the
-// stability guard, Simulation::check_motion), `first_unstable` = the smallest local index of
-// such a particle (for the error message), `snapshot` = 1 when some particle moved more than
-// `snapshot_distance` since the last list build (the hybrid list's snapshot is due,
-// docs/design.md §7; infinite when none is wanted), `wall_rebuild` = 1 when, with `wall_reference` not
-// null, some particle is
+// stability guard, Simulation::check_motion), `first_unstable` = the bitwise complement of the
+// smallest local index of such a particle, for the error message (a complement, so that zeroed
+// flags are cleared), `snapshot` = 1 when some particle moved more than `snapshot_distance`
+// since the last list build (the hybrid list's snapshot is due, docs/design.md §7; infinite
+// when none is wanted), `wall_rebuild` = 1 when, with `wall_reference` not null, some particle is
 // farther than `wall_half_reach` from where the wall list was built (the plain difference: a
 // periodic wrap moves a particle against the walls; the host has already taken the walls' own
 // motion off the half skin). Ghosts of a decomposed run are neither kicked nor drifted (their
@@ -210,7 +210,7 @@ extern "C" __global__ void kick_drift(KickDriftParams args) {
     }
     if (bad) {
         flags->unstable = 1u;
-        atomicMin(&flags->first_unstable, (unsigned int)i);
+        atomicMax(&flags->first_unstable, ~(unsigned int)i);
     }
 }
 

@@ -62,13 +62,13 @@ PD_CHECK_OFFSET(PairMaterial, log_norm, PAIR_MATERIAL);
 
 #if defined(__CUDACC_RTC__) || defined(__CUDACC__)
 
-// The per-step status flags of `kick_drift` (layout.rs `StepFlags`), zeroed by the host but for
-// `first_unstable` (all ones) and read back after the drift.
+// The per-step status flags of `kick_drift` (layout.rs `StepFlags`), zeroed by the host and read
+// back after the drift.
 struct StepFlags {
     unsigned int rebuild;        // some particle moved more than half the skin since the list build
     unsigned int outside;        // particles outside a closed domain box
     unsigned int unstable;       // a position or velocity is not finite, or the guard's speed bound
-    unsigned int first_unstable; // the smallest local index of such a particle
+    unsigned int first_unstable; // ~(the smallest local index of such a particle); 0: none
     unsigned int wall_rebuild;   // some particle left the wall list's reach
     unsigned int snapshot;       // some particle moved more than the snapshot distance (a host build is due)
 };

@@ -45,7 +45,8 @@ impl Integrator {
 
     /// The first half of a step for every particle: half kick with last step's forces, drift,
     /// periodic wrap when `wrap`, and when `checks` the per-step checks against `limits`, whose
-    /// flags it returns (read back, the stream synchronised; without checks the cleared flags).
+    /// flags it returns (read back, which waits for the drift; without checks the cleared flags,
+    /// and nothing is waited for).
     #[allow(clippy::too_many_arguments)]
     pub(super) fn kick_drift(
         &mut self,
@@ -58,9 +59,9 @@ impl Integrator {
         limits: DriftChecks,
     ) -> Result<StepFlags, CudaError> {
         let st = &gpu.stream;
-        let mut flags = [StepFlags::cleared()];
+        let mut flags = [StepFlags::default()];
         if checks {
-            st.memcpy_htod(&flags, &mut self.flags)?;
+            st.memset_zeros(&mut self.flags)?;
         }
         let args = KickDriftParams {
             n: p.n as i32,
@@ -93,9 +94,10 @@ impl Integrator {
         // positions; `flags` holds one StepFlags.
         unsafe { gpu.k.kick_drift(st, cfg(p.n), &args)? };
         if checks {
+            // A copy into pageable memory returns once it is done: the step's one wait before
+            // the forces.
             st.memcpy_dtoh(&self.flags, &mut flags)?;
         }
-        st.synchronize()?;
         Ok(flags[0])
     }
 

@@ -102,7 +102,7 @@ unsafe impl DeviceRepr for PairMaterial {}
 pub type DevPtr = u64;
 
 /// The per-step status flags `kick_drift` reduces into (`cuda/layout.cuh: StepFlags`); the host
-/// zeroes them, but `first_unstable` (all ones), and reads them back after the drift.
+/// zeroes them (a memset, which needs no host buffer) and reads them back after the drift.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StepFlags {
@@ -112,7 +112,8 @@ pub struct StepFlags {
     pub outside: u32,
     /// A position or velocity is not finite, or a particle broke the guard's speed bound.
     pub unstable: u32,
-    /// The smallest local index of such a particle.
+    /// The bitwise complement of the smallest local index of such a particle (0: none), so
+    /// that cleared flags are all zeros.
     pub first_unstable: u32,
     /// Some particle left the wall list's reach.
     pub wall_rebuild: u32,
@@ -122,12 +123,9 @@ pub struct StepFlags {
 }
 
 impl StepFlags {
-    /// The flags as the host sets them before the drift.
-    pub fn cleared() -> Self {
-        StepFlags {
-            first_unstable: u32::MAX,
-            ..StepFlags::default()
-        }
+    /// The smallest local index of a particle that failed the checks.
+    pub fn first_unstable(&self) -> usize {
+        !self.first_unstable as usize
     }
 }
 

@@ -266,7 +266,7 @@ impl CudaSimulation {
         let t0 = Instant::now();
         if flags.unstable != 0 {
             self.sync_host()?;
-            let i = flags.first_unstable as usize;
+            let i = flags.first_unstable();
             if i < self.host.particles.len() {
                 let problem = self.host.instability_of(i);
                 return Err(self.host.unstable(i, problem).into());
