@@ -19,7 +19,7 @@ import sys
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "scripts"))
-from settled_benches import read_packing  # noqa: E402
+from settled_benches import bench_scene, read_packing  # noqa: E402
 
 # name: (type name, particle type lines (paths relative to the sweep folder's scenes, which
 # the caller places two levels below the root), lattice spacing)
@@ -30,43 +30,6 @@ SHAPES = {
 TILES = [1, 2, 3, 5, 8, 13, 20, 29]
 LATTICES = [5, 10]
 
-HEADER = """gravity = [0.0, 0.0, 0.0]
-
-[simulation]
-dt_fraction = 0.05
-end_time = 1.0
-seed = 9
-
-[domain]
-min = [0.0, 0.0, 0.0]
-max = [{b0}, {b1}, {b2}]
-periodic = [true, true, true]
-
-[[materials]]
-name = "grain"
-youngs_modulus = 1.0e7
-poisson_ratio = 0.3
-density = 2500.0
-
-[[material_pairs]]
-materials = ["grain", "grain"]
-restitution = 0.5
-friction = 0.5
-
-[[particle_types]]
-name = "{type_name}"
-material = "grain"
-{type_lines}
-
-[[insertions]]
-type = "{type_name}"
-region = {{ kind = "box", min = [0.0, 0.0, 0.0], max = [{b0}, {b1}, {b2}] }}
-count = {n}
-{how}
-
-[output]
-dir = "{out}"
-"""
 
 
 def scenes(folder):
@@ -79,8 +42,7 @@ def scenes(folder):
             b = [repr(m * spacing)] * 3
             how = f"lattice = [{spacing}, {spacing}, {spacing}]\norientation = \"random\""
             path = folder / f"{shape}_lattice_{n}.toml"
-            path.write_text(HEADER.format(b0=b[0], b1=b[1], b2=b[2], type_name=type_name, type_lines=lines,
-                                          n=n, how=how, out=folder / "out"))
+            path.write_text(bench_scene(b, type_name, lines, n, how, folder / "out"))
             print(path, n)
         packing = ROOT / f"launch/bench/packings/{shape}.packing"
         cell, count, _ = read_packing(packing)
@@ -89,8 +51,7 @@ def scenes(folder):
             b = [repr(c * k) for c in cell]
             how = f'packing = "{packing}"'
             path = folder / f"{shape}_settled_{n}.toml"
-            path.write_text(HEADER.format(b0=b[0], b1=b[1], b2=b[2], type_name=type_name, type_lines=lines,
-                                          n=n, how=how, out=folder / "out"))
+            path.write_text(bench_scene(b, type_name, lines, n, how, folder / "out"))
             print(path, n)
 
 

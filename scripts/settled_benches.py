@@ -39,26 +39,11 @@ def read_packing(path):
     return cell, count, comments
 
 
-def main():
-    OUT.mkdir(exist_ok=True)
-    for shape, (type_name, type_lines, what) in SHAPES.items():
-        packing = PACKINGS / f"{shape}.packing"
-        if not packing.exists():
-            print(f"{packing} missing: run scripts/make_packings.sh first; {shape} skipped")
-            continue
-        cell, count, comments = read_packing(packing)
-        for size, tiles in TILINGS.items():
-            n = count * tiles[0] * tiles[1] * tiles[2]
-            box = [repr(c * t) for c, t in zip(cell, tiles)]
-            made = "\n".join(f"#   {c}" for c in comments)
-            text = f"""# Benchmark: {n} {what} in a settled random packing: the periodic cell of
-# launch/bench/packings/{shape}.packing ({count} particles) tiled {tiles[0]} x {tiles[1]} x {tiles[2]} in a fully periodic
-# box without gravity. The cell was made by compression:
-{made}
-# Written by scripts/settled_benches.py; run with
-# `polydem bench launch/bench/settled/{shape}_{size}.toml` (docs/performance.md).
-
-gravity = [0.0, 0.0, 0.0]
+def bench_scene(box, type_name, type_lines, count, how, out):
+    """The text of a benchmark scene: the lattice benches' material, fully periodic, no gravity,
+    `count` particles of one type filling the box `box` (three coordinates as strings), placed
+    as the insertion line(s) `how` say; output into `out`."""
+    return f"""gravity = [0.0, 0.0, 0.0]
 
 [simulation]
 dt_fraction = 0.05
@@ -89,12 +74,36 @@ material = "grain"
 [[insertions]]
 type = "{type_name}"
 region = {{ kind = "box", min = [0.0, 0.0, 0.0], max = [{box[0]}, {box[1]}, {box[2]}] }}
-count = {n}
-packing = "../packings/{shape}.packing"
+count = {count}
+{how}
 
 [output]
-dir = "../../../out/bench_settled_{shape}_{size}"
+dir = "{out}"
 """
+
+
+def main():
+    OUT.mkdir(exist_ok=True)
+    for shape, (type_name, type_lines, what) in SHAPES.items():
+        packing = PACKINGS / f"{shape}.packing"
+        if not packing.exists():
+            print(f"{packing} missing: run scripts/make_packings.sh first; {shape} skipped")
+            continue
+        cell, count, comments = read_packing(packing)
+        for size, tiles in TILINGS.items():
+            n = count * tiles[0] * tiles[1] * tiles[2]
+            box = [repr(c * t) for c, t in zip(cell, tiles)]
+            made = "\n".join(f"#   {c}" for c in comments)
+            header = f"""# Benchmark: {n} {what} in a settled random packing: the periodic cell of
+# launch/bench/packings/{shape}.packing ({count} particles) tiled {tiles[0]} x {tiles[1]} x {tiles[2]} in a fully periodic
+# box without gravity. The cell was made by compression:
+{made}
+# Written by scripts/settled_benches.py; run with
+# `polydem bench launch/bench/settled/{shape}_{size}.toml` (docs/performance.md).
+
+"""
+            text = header + bench_scene(box, type_name, type_lines, n, f'packing = "../packings/{shape}.packing"',
+                                        f"../../../out/bench_settled_{shape}_{size}")
             (OUT / f"{shape}_{size}.toml").write_text(text)
             print(OUT / f"{shape}_{size}.toml", n)
 
