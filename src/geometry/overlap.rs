@@ -525,21 +525,7 @@ pub fn overlap_pair<T: Real>(
     };
     let intersects = separating_axis.is_none();
     let overlap = if intersects {
-        // The frame moved onto the interior point (in f64) before the dual transform: the
-        // planes that bound the overlap then have offsets of the overlap's size, so their
-        // distances δ keep full relative precision in f32 even for a shallow contact of bodies
-        // large compared with it.
-        let origin = origin + widen(&centre.point);
-        ws.a.reposition_planes(ta, sa, pose_a, &origin);
-        ws.b.reposition_planes(tb, sb, pose_b, &origin);
-        overlap_about(
-            &mut ws.overlap,
-            ws.a.planes(),
-            ws.b.planes(),
-            Vector3::zeros(),
-            true,
-        )?
-        .to_world(&origin)
+        overlap_in_pair_frame(ws, a, b, &origin, &centre)?
     } else {
         Overlap::default()
     };
@@ -611,6 +597,31 @@ fn centred_planes<T: Real>(
     }
 }
 
+/// The second half of [`overlap_pair`]: the overlap of the planes in `ws`, evaluated about the
+/// interior point `centre` of the frame at `origin`, in world coordinates.
+fn overlap_in_pair_frame<T: Real>(
+    ws: &mut PairWorkspace<T>,
+    (ta, sa, pose_a): (&ConvexTemplate, f64, &Isometry3<f64>),
+    (tb, sb, pose_b): (&ConvexTemplate, f64, &Isometry3<f64>),
+    origin: &Vector3<f64>,
+    centre: &ChebyshevCentre<T>,
+) -> Result<Overlap<f64>, OverlapError> {
+    // The frame moved onto the interior point (in f64) before the dual transform: the planes
+    // that bound the overlap then have offsets of the overlap's size, so their distances δ keep
+    // full relative precision in f32 even for a shallow contact of bodies large compared with it.
+    let origin = origin + widen(&centre.point);
+    ws.a.reposition_planes(ta, sa, pose_a, &origin);
+    ws.b.reposition_planes(tb, sb, pose_b, &origin);
+    Ok(overlap_about(
+        &mut ws.overlap,
+        ws.a.planes(),
+        ws.b.planes(),
+        Vector3::zeros(),
+        true,
+    )?
+    .to_world(&origin))
+}
+
 /// Mixed precision evaluates in f64 a pair whose Chebyshev radius (about half its overlap's
 /// thickness) is below this many f32 epsilons of `ra + rb`, the sum of the circumscribed radii
 /// (`PD_MIXED_WIDE_ULPS` of cuda/polytope.cuh): a radius of 512 ε (ra + rb) is a slab about
@@ -634,7 +645,7 @@ pub fn overlap_pair_mixed(
     a: (&ConvexTemplate, f64, &Isometry3<f64>),
     b: (&ConvexTemplate, f64, &Isometry3<f64>),
 ) -> Result<PairGeometry, OverlapError> {
-    let ((ta, sa, pose_a), (tb, sb, pose_b)) = (a, b);
+    let ((ta, sa, _), (tb, sb, _)) = (a, b);
     let (ra, rb) = (ta.circumscribed_radius * sa, tb.circumscribed_radius * sb);
     let CentredPlanes {
         origin,
@@ -645,20 +656,11 @@ pub fn overlap_pair_mixed(
     if !(proven && f64::from(centre.radius) >= wide_below) {
         return overlap_pair(w64, a, b);
     }
-    let origin = origin + widen(&centre.point);
-    w32.a.reposition_planes(ta, sa, pose_a, &origin);
-    w32.b.reposition_planes(tb, sb, pose_b, &origin);
-    match overlap_about(
-        &mut w32.overlap,
-        w32.a.planes(),
-        w32.b.planes(),
-        Vector3::zeros(),
-        true,
-    ) {
-        Ok(o) => Ok(PairGeometry {
+    match overlap_in_pair_frame(w32, a, b, &origin, &centre) {
+        Ok(overlap) => Ok(PairGeometry {
             intersects: true,
             separating_axis: None,
-            overlap: o.to_world(&origin),
+            overlap,
         }),
         Err(OverlapError::Hull(
             HullError::Degenerate | HullError::Topology | HullError::CapacityExceeded,
