@@ -6,7 +6,8 @@ cd "$(dirname "$0")/.."  # the repository root
 export POLYDEM_ROOT=$PWD
 B=$(dirname "${BIN:-target/release/polydem}")
 log=${1:-sweep.jsonl}
-python3 scripts/n_sweep.py scenes /tmp/sw > /tmp/sw.list
+# smallest first, both shapes, so that a run cut short still spans the sizes
+python3 scripts/n_sweep.py scenes /tmp/sw | sort -k2 -n > /tmp/sw.list
 MAXN=${MAXN:-9000000}
 while read -r scene n; do
   [ "$n" -gt "$MAXN" ] && continue
