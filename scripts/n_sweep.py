@@ -57,8 +57,9 @@ def scenes(folder):
 
 def series_of(r):
     name = os.path.basename(r["scene"])
-    shape, kind = name.split("_")[:2]
-    label = f"{shape}, {kind}"
+    # lattices below one settled cell (1000 particles and fewer) and tiled settled cells
+    # above it: one line per shape, the lattice points drawn hollow
+    label = name.split("_")[0]
     if r["backend"] == "cpu":
         return f"{label}, CPU {r['device'].split(',')[-1].strip()}"
     return f"{label}, GPU {r['precision']}"
@@ -72,12 +73,13 @@ def plot(data, out):
     rows = [r for r in rows if "particle_steps_per_second" in r]
     series = {}
     for r in rows:
-        series.setdefault(series_of(r), []).append((r["particles"], r["particle_steps_per_second"]))
-    print("| series | particles | particle-steps/s |")
-    print("|---|---|---|")
+        kind = os.path.basename(r["scene"]).split("_")[1]
+        series.setdefault(series_of(r), []).append((r["particles"], r["particle_steps_per_second"], kind))
+    print("| series | packing | particles | particle-steps/s |")
+    print("|---|---|---|---|")
     for name, pts in sorted(series.items()):
-        for n, v in sorted(pts):
-            print(f"| {name} | {n} | {v:.3g} |")
+        for n, v, kind in sorted(pts):
+            print(f"| {name} | {kind} | {n} | {v:.3g} |")
     w, h = 900, 560
     x0, y0, pw, ph = 80, 40, 520, 440
     xlo, xhi, ylo, yhi = 2.0, 8.0, 4.0, 10.0
@@ -85,7 +87,7 @@ def plot(data, out):
     py = lambda v: y0 + ph - (math.log10(v) - ylo) / (yhi - ylo) * ph
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">',
              '<rect width="100%" height="100%" fill="white"/>',
-             f'<text x="{x0}" y="22" font-size="14">Particle-steps per second against particles (H200; CPU: its 16 cores)</text>']
+             f'<text x="{x0}" y="22" font-size="14">Particle-steps per second against particles (H200; CPU: its 16 cores; hollow: lattices)</text>']
     for e in range(int(xlo), int(xhi) + 1):
         xx = px(10.0 ** e)
         parts.append(f'<line x1="{xx:.1f}" x2="{xx:.1f}" y1="{y0}" y2="{y0 + ph}" stroke="#ddd"/>')
@@ -100,10 +102,11 @@ def plot(data, out):
         c = COLOURS[i % len(COLOURS)]
         dash = ' stroke-dasharray="5 3"' if "CPU" in name else ""
         pts = sorted(pts)
-        path = " ".join(f"{'M' if k == 0 else 'L'}{px(n):.1f},{py(v):.1f}" for k, (n, v) in enumerate(pts))
+        path = " ".join(f"{'M' if k == 0 else 'L'}{px(n):.1f},{py(v):.1f}" for k, (n, v, _) in enumerate(pts))
         parts.append(f'<path d="{path}" fill="none" stroke="{c}" stroke-width="2"{dash}/>')
-        for n, v in pts:
-            parts.append(f'<circle cx="{px(n):.1f}" cy="{py(v):.1f}" r="3" fill="{c}"/>')
+        for n, v, kind in pts:
+            fill = "white" if kind == "lattice" else c
+            parts.append(f'<circle cx="{px(n):.1f}" cy="{py(v):.1f}" r="3" fill="{fill}" stroke="{c}"/>')
         parts.append(f'<line x1="{x0 + pw + 20}" x2="{x0 + pw + 44}" y1="{y0 + 10 + 18 * i}" y2="{y0 + 10 + 18 * i}" stroke="{c}" stroke-width="2"{dash}/>')
         parts.append(f'<text x="{x0 + pw + 50}" y="{y0 + 14 + 18 * i}">{name}</text>')
     parts.append("</svg>")
