@@ -47,6 +47,7 @@
 //! - [`accuracy`]: `polydem bench accuracy`, restitution and energy against run time.
 //! - [`interrupt`]: SIGINT and SIGTERM stop a run after a step, with a checkpoint.
 //! - [`tuning`]: the `POLYDEM_*` environment knobs, read once and logged.
+//! - [`par`]: grain sizes of the CPU backend's rayon loops (small scenes stay on one thread).
 //! - [`rng`]: the insertion's portable, checkpointed random numbers.
 
 // The library never writes to stdout: the CLI's JSON output goes there (clippy.toml lets
@@ -62,6 +63,7 @@ pub mod integrate;
 pub mod interrupt;
 pub mod io;
 pub mod neighbor;
+pub mod par;
 pub mod pipeline;
 pub mod probe;
 pub mod rng;

@@ -39,6 +39,7 @@ pub fn half_kick(p: &mut Particles, gravity: &Vector3<f64>, dt: f64) {
             mass.par_iter()
                 .zip(inertia.par_iter().zip(orientation.par_iter())),
         )
+        .with_min_len(crate::par::CHEAP)
         .for_each(|(((v, w), (f, t)), (m, (i, q)))| {
             *v += (f / *m + gravity) * h;
             let pi =
@@ -60,11 +61,13 @@ pub fn drift(p: &mut Particles, dt: f64) {
     position
         .par_iter_mut()
         .zip(velocity.par_iter())
+        .with_min_len(crate::par::CHEAP)
         .for_each(|(x, v)| *x += v * dt);
     orientation
         .par_iter_mut()
         .zip(angular_velocity.par_iter_mut())
         .zip(inertia.par_iter())
+        .with_min_len(crate::par::CHEAP)
         .for_each(|((q, w), i)| {
             let (q_new, w_new) = free_rotation(q, w, i, dt);
             *q = q_new;

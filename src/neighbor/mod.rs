@@ -92,6 +92,7 @@ impl PairList {
         positions
             .par_iter()
             .zip(self.reference.par_iter())
+            .with_min_len(crate::par::CHEAP)
             .any(|(x, r)| bounds.displacement(r, x).norm_squared() > limit)
     }
 
@@ -189,6 +190,7 @@ impl PairList {
         }
         slices
             .into_par_iter()
+            .with_min_len(crate::par::SEARCH)
             .for_each(|s| s.sort_unstable_by_key(partner));
         self.offsets = count;
         self.refs = refs;
@@ -224,7 +226,11 @@ fn search(
     let cutoff = 2.0 * r_max + skin;
     let grid = Grid::new(region, cutoff, 4 * n);
     // Bin: cell of each particle, then particles sorted by cell (counting sort).
-    let cell: Vec<usize> = bins.par_iter().map(|x| grid.cell_of(x)).collect();
+    let cell: Vec<usize> = bins
+        .par_iter()
+        .with_min_len(crate::par::CHEAP)
+        .map(|x| grid.cell_of(x))
+        .collect();
     let mut start = vec![0u32; grid.cells() + 1];
     for &c in &cell {
         start[c + 1] += 1;
@@ -259,6 +265,7 @@ fn search(
     // Count, exclusive prefix sum, fill (seed Sec. 2.2).
     let counts: Vec<u32> = (0..n)
         .into_par_iter()
+        .with_min_len(crate::par::SEARCH)
         .map(|i| {
             let mut k = 0;
             partners(i, &mut |_| k += 1);
@@ -280,13 +287,17 @@ fn search(
             rest = r;
         }
     }
-    chunks.into_par_iter().enumerate().for_each(|(i, p)| {
-        let mut k = 0;
-        partners(i, &mut |j| {
-            p[k] = [i as u32, j as u32];
-            k += 1;
+    chunks
+        .into_par_iter()
+        .enumerate()
+        .with_min_len(crate::par::SEARCH)
+        .for_each(|(i, p)| {
+            let mut k = 0;
+            partners(i, &mut |j| {
+                p[k] = [i as u32, j as u32];
+                k += 1;
+            });
         });
-    });
     (pairs, counts)
 }
 

@@ -58,6 +58,7 @@ pub fn build_slot_list(
     }
     let x: Vec<Vector3<f64>> = positions
         .par_chunks_exact(3)
+        .with_min_len(crate::par::CHEAP)
         .map(|c| Vector3::new(c[0], c[1], c[2]))
         .collect();
     // Slots sorted by cell, then global id (the device build's order, cuda/neighbor.cu
@@ -66,9 +67,22 @@ pub fn build_slot_list(
     let grid = Grid::new(bounds, 2.0 * r_max + skin, 4 * n);
     let mut order: Vec<u32> = (0..n as u32).collect();
     order.par_sort_unstable_by_key(|&i| (grid.cell_of(&x[i as usize]), ids[i as usize]));
-    let xs: Vec<Vector3<f64>> = order.par_iter().map(|&i| x[i as usize]).collect();
-    let rs: Vec<f64> = order.par_iter().map(|&i| radii[i as usize]).collect();
-    let is: Vec<u64> = order.par_iter().map(|&i| ids[i as usize]).collect();
+    let gather = crate::par::CHEAP;
+    let xs: Vec<Vector3<f64>> = order
+        .par_iter()
+        .with_min_len(gather)
+        .map(|&i| x[i as usize])
+        .collect();
+    let rs: Vec<f64> = order
+        .par_iter()
+        .with_min_len(gather)
+        .map(|&i| radii[i as usize])
+        .collect();
+    let is: Vec<u64> = order
+        .par_iter()
+        .with_min_len(gather)
+        .map(|&i| ids[i as usize])
+        .collect();
     let (pairs, counts) = search(&xs, &xs, &rs, &is, n, bounds, bounds, skin);
     let mut offset = Vec::with_capacity(n + 1);
     offset.push(0u32);
@@ -79,6 +93,7 @@ pub fn build_slot_list(
     }
     let pairs = pairs
         .into_par_iter()
+        .with_min_len(crate::par::CHEAP)
         .map(|[a, b]| [a as i32, b as i32])
         .collect();
     SlotList {

@@ -42,6 +42,7 @@ impl Simulation {
         let n = p.len().min(self.radius.len());
         let found = (0..n)
             .into_par_iter()
+            .with_min_len(crate::par::CHEAP)
             .find_first(|&i| self.guard.check_motion(p, &self.radius, i).is_some());
         match found {
             Some(i) => Err(self.unstable(i, self.guard.check_motion(p, &self.radius, i))),

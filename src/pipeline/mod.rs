@@ -200,6 +200,7 @@ impl Simulation {
         let g = self.scene.gravity;
         let mut terms: Vec<(u64, [f64; 3])> = (0..p.len())
             .into_par_iter()
+            .with_min_len(crate::par::CHEAP)
             .map(|i| {
                 let wb = p.orientation[i].inverse_transform_vector(&p.angular_velocity[i]);
                 (

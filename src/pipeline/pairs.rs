@@ -107,6 +107,7 @@ impl Simulation {
             .pairs
             .par_iter()
             .zip(self.separating_axes.par_iter())
+            .with_min_len(crate::par::CONTACT)
             .map(|(pair, axis)| {
                 let (a, b) = (pair[0] as usize, pair[1] as usize);
                 // B's periodic image from the current centroids by the list build's minimum-image

@@ -37,6 +37,7 @@ impl Simulation {
             .par_iter_mut()
             .zip(p.torque.par_iter_mut())
             .enumerate()
+            .with_min_len(crate::par::SEARCH)
             .for_each(|(i, (f, t))| {
                 let mut force = Vector3::zeros();
                 let mut torque = Vector3::zeros();

@@ -42,6 +42,7 @@ impl Simulation {
         let poses: Vec<Isometry3<f64>> = s.walls.iter().map(|w| w.motion.transform(t)).collect();
         (0..p.len())
             .into_par_iter()
+            .with_min_len(crate::par::CONTACT)
             .map_init(Vec::new, |facets, i| {
                 with_workspace(|ws| {
                     let mut out = WallOutcome::default();
