@@ -45,6 +45,7 @@
 //! - [`io`]: VTU/PVTU/PVD frames, CSV series, checkpoints, packings, atomic writes.
 //! - [`probe`]: the contact-geometry probe (`polydem probe`).
 //! - [`accuracy`]: `polydem bench accuracy`, restitution and energy against run time.
+//! - [`analysis`]: observables of a saved state (`polydem analyze`): fill height, porosity.
 //! - [`interrupt`]: SIGINT and SIGTERM stop a run after a step, with a checkpoint.
 //! - [`tuning`]: the `POLYDEM_*` environment knobs, read once and logged.
 //! - [`par`]: grain sizes of the CPU backend's rayon loops (small scenes stay on one thread).
@@ -55,6 +56,7 @@
 #![warn(clippy::print_stdout)]
 
 pub mod accuracy;
+pub mod analysis;
 pub mod backend;
 pub mod contact;
 pub mod domain;

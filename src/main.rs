@@ -116,12 +116,60 @@ enum Command {
         #[arg(long, value_enum, default_value = "double")]
         gpu_precision: polydem::backend::cuda::Precision,
     },
+    /// Observables of a checkpoint of a scene (docs/production.md), as JSON.
+    Analyze {
+        #[command(subcommand)]
+        what: AnalyzeWhat,
+    },
     /// Lists GPUs, the CUDA driver and NVRTC versions, as JSON.
     Info,
     /// Shape templates: mass properties and face counts.
     Shape {
         #[command(subcommand)]
         action: ShapeAction,
+    },
+}
+
+#[derive(Subcommand)]
+enum AnalyzeWhat {
+    /// Fill height in a vertical cylindrical container: the highest particle point, the mean
+    /// height of the packing's top surface over the cross-section, and the bulk solid fraction.
+    FillHeight {
+        scene: PathBuf,
+        checkpoint: PathBuf,
+        /// Container axis, x and y (m).
+        #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.0, 0.0])]
+        centre: Vec<f64>,
+        /// Container inner radius (m).
+        #[arg(long)]
+        radius: f64,
+        /// Floor height (m).
+        #[arg(long, default_value_t = 0.0)]
+        floor: f64,
+        /// Spacing of the vertical lines sampled (m; default radius / 200).
+        #[arg(long)]
+        spacing: Option<f64>,
+    },
+    /// Porosity of a section of a vertical tube: overall, and in annuli from the wall to the
+    /// axis.
+    Porosity {
+        scene: PathBuf,
+        checkpoint: PathBuf,
+        /// Tube axis, x and y (m).
+        #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.0, 0.0])]
+        centre: Vec<f64>,
+        /// Tube inner radius (m).
+        #[arg(long)]
+        radius: f64,
+        /// Lower and upper ends of the section (m).
+        #[arg(long, value_delimiter = ',', num_args = 2)]
+        z: Vec<f64>,
+        /// Annuli from the wall to the axis.
+        #[arg(long, default_value_t = 50)]
+        annuli: usize,
+        /// Spacing of the sampled points (m; default radius / 100).
+        #[arg(long)]
+        spacing: Option<f64>,
     },
 }
 
@@ -333,6 +381,71 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                 use std::io::Write;
                 writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
             }
+            Ok(0)
+        }
+        Command::Analyze { what } => {
+            use polydem::analysis;
+            use std::io::Write;
+            let positive = |name: &str, v: f64| {
+                if v.is_finite() && v > 0.0 {
+                    Ok(v)
+                } else {
+                    Err(anyhow::anyhow!(
+                        "--{name} {v}: must be a positive length (m)"
+                    ))
+                }
+            };
+            let report = match what {
+                AnalyzeWhat::FillHeight {
+                    scene,
+                    checkpoint,
+                    centre,
+                    radius,
+                    floor,
+                    spacing,
+                } => {
+                    let radius = positive("radius", radius)?;
+                    let spacing = positive("spacing", spacing.unwrap_or(radius / 200.0))?;
+                    let (s, p) = analysis::load_state(&scene, &checkpoint)?;
+                    let (solids, top) = analysis::solids_of(&s, &p);
+                    let disk = analysis::Disk {
+                        centre: [centre[0], centre[1]],
+                        radius,
+                        floor,
+                    };
+                    serde_json::to_value(analysis::fill_height(&solids, top, &disk, spacing))?
+                }
+                AnalyzeWhat::Porosity {
+                    scene,
+                    checkpoint,
+                    centre,
+                    radius,
+                    z,
+                    annuli,
+                    spacing,
+                } => {
+                    let radius = positive("radius", radius)?;
+                    let spacing = positive("spacing", spacing.unwrap_or(radius / 100.0))?;
+                    if z[1].partial_cmp(&z[0]) != Some(std::cmp::Ordering::Greater) || annuli == 0 {
+                        anyhow::bail!(
+                            "--z {},{}: the upper end must be above the lower; --annuli {annuli}: at least 1",
+                            z[0],
+                            z[1]
+                        );
+                    }
+                    let (s, p) = analysis::load_state(&scene, &checkpoint)?;
+                    let (solids, _) = analysis::solids_of(&s, &p);
+                    let tube = analysis::Tube {
+                        centre: [centre[0], centre[1]],
+                        radius,
+                        z: [z[0], z[1]],
+                    };
+                    serde_json::to_value(analysis::radial_porosity(
+                        &solids, &tube, annuli, spacing,
+                    ))?
+                }
+            };
+            writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
             Ok(0)
         }
         Command::Check { scene } => {

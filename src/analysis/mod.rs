@@ -1,0 +1,176 @@
+//! Observables of a saved state (`polydem analyze`): what production runs are compared with
+//! experiments on (docs/production.md).
+//!
+//! - [`solids`]: the particles as solids: point coverage and vertical reach, on a grid.
+//! - [`fill`]: fill height and bulk solid fraction in a vertical container.
+//! - [`porosity`]: porosity of a tube section, overall and by distance from the wall.
+
+pub mod fill;
+pub mod porosity;
+pub mod solids;
+
+pub use fill::{Disk, FillHeight, fill_height};
+pub use porosity::{RadialPorosity, Tube, radial_porosity};
+pub use solids::PackedSolids;
+
+use crate::io::read_checkpoint;
+use crate::scene::restart::SceneFingerprint;
+use crate::scene::{Scene, load_scene};
+use crate::state::Particles;
+use anyhow::{Context, Result, anyhow};
+use std::path::Path;
+
+/// A scene and the particles of one of its checkpoints, refused when the checkpoint was
+/// written for another scene (the restart rule: docs/scene.md, Restarts).
+pub fn load_state(scene: &Path, checkpoint: &Path) -> Result<(Scene, Particles)> {
+    let s = load_scene(scene).with_context(|| format!("scene {}", scene.display()))?;
+    let c = read_checkpoint(checkpoint)?;
+    SceneFingerprint::of(&s)
+        .check(&c, 0)
+        .map_err(|e| anyhow!("{}: {e}", checkpoint.display()))?;
+    Ok((s, c.particles))
+}
+
+/// The packed solids of `particles` of `scene`, and their highest point.
+pub fn solids_of(scene: &Scene, particles: &Particles) -> (PackedSolids, f64) {
+    let solids = PackedSolids::new(&scene.templates, &scene.particle_types, particles);
+    let top = solids
+        .highest_point(&scene.templates, &scene.particle_types, particles)
+        .unwrap_or(f64::NEG_INFINITY);
+    (solids, top)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shape::{ConvexTemplate, Generator};
+    use crate::state::ParticleType;
+    use nalgebra::{UnitQuaternion, Vector3};
+
+    /// One particle of template `t` at `x`, turned by `q`.
+    fn one(t: ConvexTemplate, x: Vector3<f64>, q: UnitQuaternion<f64>) -> (PackedSolids, f64) {
+        let types = [ParticleType {
+            name: "p".into(),
+            template: 0,
+            material: 0,
+        }];
+        let mut p = Particles::default();
+        p.push(0, 0, 1.0, x, q, &t, 1000.0);
+        let templates = [t];
+        let solids = PackedSolids::new(&templates, &types, &p);
+        let top = solids.highest_point(&templates, &types, &p).unwrap();
+        (solids, top)
+    }
+
+    fn cube(edge: f64) -> ConvexTemplate {
+        Generator::Cube {
+            size: edge * 3f64.sqrt(),
+        }
+        .build()
+        .unwrap()
+    }
+
+    fn sphere(radius: f64) -> ConvexTemplate {
+        Generator::Sphere { size: 2.0 * radius }.build().unwrap()
+    }
+
+    #[test]
+    fn a_cube_reaches_its_face_or_its_edge() {
+        let a = 0.01;
+        let x = Vector3::new(0.0, 0.0, 0.1);
+        let (flat, top) = one(cube(a), x, UnitQuaternion::identity());
+        assert!((flat.top_at(0.001, 0.002).unwrap() - 0.105).abs() < 1e-15);
+        assert!((top - 0.105).abs() < 1e-15);
+        assert!(flat.top_at(0.0051, 0.0).is_none());
+        assert!(flat.contains(&Vector3::new(0.0049, -0.0049, 0.0951)));
+        assert!(!flat.contains(&Vector3::new(0.0051, 0.0, 0.1)));
+        // Turned 45° about x: an edge on top, a/√2 above the centre, falling off with |y|.
+        let q = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_4);
+        let (edge, top) = one(cube(a), x, q);
+        let h = a / 2f64.sqrt();
+        assert!((top - (0.1 + h)).abs() < 1e-15);
+        for y in [0.0, 0.002, -0.004] {
+            let z = edge.top_at(0.003, y).unwrap();
+            assert!((z - (0.1 + h - f64::abs(y))).abs() < 1e-15, "y {y}: {z}");
+        }
+        assert!(edge.top_at(0.0, 1.001 * h).is_none());
+        assert!(edge.top_at(0.0051, 0.0).is_none());
+    }
+
+    #[test]
+    fn fill_height_of_a_cube_and_of_a_sphere_on_the_floor() {
+        // A 2 cm cube on the floor over a disk of 5 mm: a flat top at 2 cm everywhere.
+        let a = 0.02;
+        let (s, top) = one(
+            cube(a),
+            Vector3::new(0.0, 0.0, a / 2.0),
+            UnitQuaternion::identity(),
+        );
+        let disk = Disk {
+            centre: [0.0, 0.0],
+            radius: 0.005,
+            floor: 0.0,
+        };
+        let f = fill_height(&s, top, &disk, 1e-4);
+        assert!((f.mean_surface - a).abs() < 1e-15 && (f.highest - a).abs() < 1e-15);
+        let phi = a * a / (std::f64::consts::PI * 0.005 * 0.005);
+        assert!((f.solid_fraction - phi).abs() < 1e-12 * phi);
+        // A sphere of radius r resting on the floor over a disk of radius r: the mean of
+        // r + √(r² − ρ²) over the disk is 5r/3; the grid of r/200 gets it to 3e-4 (the disk's jagged rim).
+        let r = 0.01;
+        let (s, top) = one(
+            sphere(r),
+            Vector3::new(0.0, 0.0, r),
+            UnitQuaternion::identity(),
+        );
+        let disk = Disk {
+            centre: [0.0, 0.0],
+            radius: r,
+            floor: 0.0,
+        };
+        let f = fill_height(&s, top, &disk, r / 200.0);
+        assert!((f.highest - 2.0 * r).abs() < 1e-15);
+        let err = (f.mean_surface - 5.0 * r / 3.0).abs() / (5.0 * r / 3.0);
+        assert!(
+            err < 3e-4,
+            "mean surface {} against {}: {err:e}",
+            f.mean_surface,
+            5.0 * r / 3.0
+        );
+    }
+
+    #[test]
+    fn radial_porosity_of_a_sphere_on_the_axis_matches_the_closed_form() {
+        // A sphere of radius a on the axis of a tube of radius 2a, the section z ∈ [−a, a]:
+        // solid fraction at distance ρ = r/a from the axis √(1 − ρ²) (ρ < 1), so an annulus
+        // [ρ0, ρ1] holds 2/3 [(1 − ρ0²)^{3/2} − (1 − ρ1²)^{3/2}] / (ρ1² − ρ0²), and the whole
+        // section (4/3 π a³)/(π 4a² 2a) = 1/6.
+        let a = 0.01;
+        let (s, _) = one(sphere(a), Vector3::zeros(), UnitQuaternion::identity());
+        let tube = Tube {
+            centre: [0.0, 0.0],
+            radius: 2.0 * a,
+            z: [-a, a],
+        };
+        let annuli = 20;
+        let p = radial_porosity(&s, &tube, annuli, a / 50.0);
+        assert!(
+            (p.mean - 5.0 / 6.0).abs() < 1e-3,
+            "mean porosity {}",
+            p.mean
+        );
+        let cap = |rho: f64| (1.0 - rho.min(1.0).powi(2)).powf(1.5);
+        for (d, phi) in p.wall_distance.iter().zip(&p.porosity) {
+            let half = tube.radius / annuli as f64 / 2.0;
+            let (r1, r0) = ((2.0 * a - d + half) / a, (2.0 * a - d - half) / a);
+            let solid = 2.0 / 3.0 * (cap(r0) - cap(r1)) / (r1 * r1 - r0 * r0);
+            assert!(
+                ((1.0 - phi) - solid).abs() < 4e-3,
+                "{d}: porosity {phi}, expected {}",
+                1.0 - solid
+            );
+        }
+        assert_eq!(p.porosity[0], 1.0);
+        assert!(p.porosity[annuli - 1] < 0.01);
+    }
+}
