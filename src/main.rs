@@ -407,13 +407,13 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                     let radius = positive("radius", radius)?;
                     let spacing = positive("spacing", spacing.unwrap_or(radius / 200.0))?;
                     let (s, p) = analysis::load_state(&scene, &checkpoint)?;
-                    let (solids, top) = analysis::solids_of(&s, &p);
+                    let solids = analysis::solids_of(&s, &p);
                     let disk = analysis::Disk {
                         centre: [centre[0], centre[1]],
                         radius,
                         floor,
                     };
-                    serde_json::to_value(analysis::fill_height(&solids, top, &disk, spacing))?
+                    serde_json::to_value(analysis::fill_height(&solids, &disk, spacing))?
                 }
                 AnalyzeWhat::Porosity {
                     scene,
@@ -434,7 +434,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                         );
                     }
                     let (s, p) = analysis::load_state(&scene, &checkpoint)?;
-                    let (solids, _) = analysis::solids_of(&s, &p);
+                    let solids = analysis::solids_of(&s, &p);
                     let tube = analysis::Tube {
                         centre: [centre[0], centre[1]],
                         radius,

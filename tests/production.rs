@@ -117,13 +117,13 @@ fn dodecahedra_settle_in_the_cylinder_to_a_random_packing() {
             "a grain at {x:?} is outside the cylinder"
         );
     }
-    let (solids, top) = analysis::solids_of(&sim.scene, p);
+    let solids = analysis::solids_of(&sim.scene, p);
     let disk = Disk {
         centre: [0.0, 0.0],
         radius: 0.05,
         floor: 0.0,
     };
-    let fill = analysis::fill_height(&solids, top, &disk, 0.0005);
+    let fill = analysis::fill_height(&solids, &disk, 0.0005);
     // 16 dodecahedra of 1.017e-5 m³ at a solid fraction φ fill H = 16 V / (φ π R²): 5.2 cm
     // at the loosest random packing of dodecahedra (0.40 with walls this close), 3.2 cm at the
     // densest (0.65); a grain's height lying flat is 2.45 cm.
@@ -158,10 +158,9 @@ fn catalyst_pellets_pack_looser_at_the_tube_wall() {
             "a pellet at {x:?} is outside the tube"
         );
     }
-    let (solids, top) = analysis::solids_of(&sim.scene, p);
+    let solids = analysis::solids_of(&sim.scene, p);
     let fill = analysis::fill_height(
         &solids,
-        top,
         &Disk {
             centre: [0.0, 0.0],
             radius: 0.0125,

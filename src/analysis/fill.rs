@@ -37,7 +37,7 @@ pub struct FillHeight {
 /// The fill height of `solids` in the container of cross-section `disk`, the top surface
 /// sampled on a square grid of spacing `spacing`. Particles wholly outside the disk count too:
 /// pass only the state of one container.
-pub fn fill_height(solids: &PackedSolids, highest: f64, disk: &Disk, spacing: f64) -> FillHeight {
+pub fn fill_height(solids: &PackedSolids, disk: &Disk, spacing: f64) -> FillHeight {
     let m = (disk.radius / spacing).ceil() as i64;
     let lines: Vec<(f64, f64)> = (-m..=m)
         .flat_map(|j| (-m..=m).map(move |i| (i as f64 * spacing, j as f64 * spacing)))
@@ -59,7 +59,7 @@ pub fn fill_height(solids: &PackedSolids, highest: f64, disk: &Disk, spacing: f6
     let container = std::f64::consts::PI * disk.radius * disk.radius * mean_surface;
     FillHeight {
         particles: solids.len(),
-        highest: highest - disk.floor,
+        highest: solids.highest_point().map_or(0.0, |z| z - disk.floor),
         mean_surface,
         solid_fraction: if container > 0.0 {
             volume / container

@@ -31,13 +31,9 @@ pub fn load_state(scene: &Path, checkpoint: &Path) -> Result<(Scene, Particles)>
     Ok((s, c.particles))
 }
 
-/// The packed solids of `particles` of `scene`, and their highest point.
-pub fn solids_of(scene: &Scene, particles: &Particles) -> (PackedSolids, f64) {
-    let solids = PackedSolids::new(&scene.templates, &scene.particle_types, particles);
-    let top = solids
-        .highest_point(&scene.templates, &scene.particle_types, particles)
-        .unwrap_or(f64::NEG_INFINITY);
-    (solids, top)
+/// The particles of `scene` placed as solids.
+pub fn solids_of(scene: &Scene, particles: &Particles) -> PackedSolids {
+    PackedSolids::new(&scene.templates, &scene.particle_types, particles)
 }
 
 #[cfg(test)]
@@ -48,7 +44,7 @@ mod tests {
     use nalgebra::{UnitQuaternion, Vector3};
 
     /// One particle of template `t` at `x`, turned by `q`.
-    fn one(t: ConvexTemplate, x: Vector3<f64>, q: UnitQuaternion<f64>) -> (PackedSolids, f64) {
+    fn one(t: ConvexTemplate, x: Vector3<f64>, q: UnitQuaternion<f64>) -> PackedSolids {
         let types = [ParticleType {
             name: "p".into(),
             template: 0,
@@ -56,10 +52,7 @@ mod tests {
         }];
         let mut p = Particles::default();
         p.push(0, 0, 1.0, x, q, &t, 1000.0);
-        let templates = [t];
-        let solids = PackedSolids::new(&templates, &types, &p);
-        let top = solids.highest_point(&templates, &types, &p).unwrap();
-        (solids, top)
+        PackedSolids::new(&[t], &types, &p)
     }
 
     fn cube(edge: f64) -> ConvexTemplate {
@@ -78,7 +71,8 @@ mod tests {
     fn a_cube_reaches_its_face_or_its_edge() {
         let a = 0.01;
         let x = Vector3::new(0.0, 0.0, 0.1);
-        let (flat, top) = one(cube(a), x, UnitQuaternion::identity());
+        let flat = one(cube(a), x, UnitQuaternion::identity());
+        let top = flat.highest_point().unwrap();
         assert!((flat.top_at(0.001, 0.002).unwrap() - 0.105).abs() < 1e-15);
         assert!((top - 0.105).abs() < 1e-15);
         assert!(flat.top_at(0.0051, 0.0).is_none());
@@ -86,7 +80,8 @@ mod tests {
         assert!(!flat.contains(&Vector3::new(0.0051, 0.0, 0.1)));
         // Turned 45° about x: an edge on top, a/√2 above the centre, falling off with |y|.
         let q = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_4);
-        let (edge, top) = one(cube(a), x, q);
+        let edge = one(cube(a), x, q);
+        let top = edge.highest_point().unwrap();
         let h = a / 2f64.sqrt();
         assert!((top - (0.1 + h)).abs() < 1e-15);
         for y in [0.0, 0.002, -0.004] {
@@ -101,7 +96,7 @@ mod tests {
     fn fill_height_of_a_cube_and_of_a_sphere_on_the_floor() {
         // A 2 cm cube on the floor over a disk of 5 mm: a flat top at 2 cm everywhere.
         let a = 0.02;
-        let (s, top) = one(
+        let s = one(
             cube(a),
             Vector3::new(0.0, 0.0, a / 2.0),
             UnitQuaternion::identity(),
@@ -111,14 +106,14 @@ mod tests {
             radius: 0.005,
             floor: 0.0,
         };
-        let f = fill_height(&s, top, &disk, 1e-4);
+        let f = fill_height(&s, &disk, 1e-4);
         assert!((f.mean_surface - a).abs() < 1e-15 && (f.highest - a).abs() < 1e-15);
         let phi = a * a / (std::f64::consts::PI * 0.005 * 0.005);
         assert!((f.solid_fraction - phi).abs() < 1e-12 * phi);
         // A sphere of radius r resting on the floor over a disk of radius r: the mean of
         // r + √(r² − ρ²) over the disk is 5r/3; the grid of r/200 gets it to 3e-4 (the disk's jagged rim).
         let r = 0.01;
-        let (s, top) = one(
+        let s = one(
             sphere(r),
             Vector3::new(0.0, 0.0, r),
             UnitQuaternion::identity(),
@@ -128,7 +123,7 @@ mod tests {
             radius: r,
             floor: 0.0,
         };
-        let f = fill_height(&s, top, &disk, r / 200.0);
+        let f = fill_height(&s, &disk, r / 200.0);
         assert!((f.highest - 2.0 * r).abs() < 1e-15);
         let err = (f.mean_surface - 5.0 * r / 3.0).abs() / (5.0 * r / 3.0);
         assert!(
@@ -146,7 +141,7 @@ mod tests {
         // [ρ0, ρ1] holds 2/3 [(1 − ρ0²)^{3/2} − (1 − ρ1²)^{3/2}] / (ρ1² − ρ0²), and the whole
         // section (4/3 π a³)/(π 4a² 2a) = 1/6.
         let a = 0.01;
-        let (s, _) = one(sphere(a), Vector3::zeros(), UnitQuaternion::identity());
+        let s = one(sphere(a), Vector3::zeros(), UnitQuaternion::identity());
         let tube = Tube {
             centre: [0.0, 0.0],
             radius: 2.0 * a,

@@ -21,6 +21,8 @@ pub struct PackedSolids {
     centre: Vec<Vector3<f64>>,
     radius: Vec<f64>,
     volume: Vec<f64>,
+    /// Highest point of each particle (its topmost vertex, or the sphere's pole).
+    top: Vec<f64>,
     /// Grid: lower corner, cell size (twice the largest radius), dimensions, and the particles
     /// of each cell (counting-sort layout: `order[start[c]..start[c + 1]]`).
     lo: Vector3<f64>,
@@ -42,6 +44,7 @@ impl PackedSolids {
         let mut solids = Vec::with_capacity(n);
         let mut radius = Vec::with_capacity(n);
         let mut volume = Vec::with_capacity(n);
+        let mut top = Vec::with_capacity(n);
         for i in 0..n {
             let t = &templates[types[particles.kind[i] as usize].template];
             let (s, q, x) = (
@@ -50,6 +53,12 @@ impl PackedSolids {
                 particles.position[i],
             );
             radius.push(t.circumscribed_radius * s);
+            top.push(if t.sphere {
+                x.z + t.circumscribed_radius * s
+            } else {
+                let up = t.vertices.iter().map(|v| (q * (v.coords * s)).z);
+                x.z + up.fold(f64::NEG_INFINITY, f64::max)
+            });
             volume.push(if t.sphere {
                 4.0 / 3.0 * std::f64::consts::PI * (t.circumscribed_radius * s).powi(3)
             } else {
@@ -91,6 +100,7 @@ impl PackedSolids {
             centre,
             radius,
             volume,
+            top,
             lo,
             cell,
             dims,
@@ -243,28 +253,9 @@ impl PackedSolids {
         top
     }
 
-    /// The highest point of every particle (its topmost vertex, or the sphere's pole).
-    pub fn highest_point(
-        &self,
-        templates: &[ConvexTemplate],
-        types: &[ParticleType],
-        particles: &Particles,
-    ) -> Option<f64> {
-        (0..particles.len())
-            .map(|i| {
-                let t = &templates[types[particles.kind[i] as usize].template];
-                if t.sphere {
-                    particles.position[i].z + self.radius[i]
-                } else {
-                    t.vertices
-                        .iter()
-                        .map(|v| {
-                            (particles.orientation[i] * (v.coords * particles.scale[i])).z
-                                + particles.position[i].z
-                        })
-                        .fold(f64::NEG_INFINITY, f64::max)
-                }
-            })
-            .reduce(f64::max)
+    /// The highest point of any particle (its topmost vertex, or a sphere's pole); `None`
+    /// without particles.
+    pub fn highest_point(&self) -> Option<f64> {
+        self.top.iter().cloned().reduce(f64::max)
     }
 }
