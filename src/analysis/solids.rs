@@ -143,11 +143,6 @@ impl PackedSolids {
         self.volume[i]
     }
 
-    /// Centre (centroid) of particle `i`.
-    pub fn centre(&self, i: usize) -> Vector3<f64> {
-        self.centre[i]
-    }
-
     fn cell_of(&self, x: &Vector3<f64>) -> [usize; 3] {
         [0, 1, 2].map(|k| {
             let c = ((x[k] - self.lo[k]) / self.cell).floor();
