@@ -130,19 +130,26 @@ enum Command {
     },
 }
 
+/// The state an analysis reads and the vertical cylinder it looks in.
+#[derive(clap::Args)]
+struct AnalyzedCylinder {
+    scene: PathBuf,
+    checkpoint: PathBuf,
+    /// The cylinder's axis, x and y (m).
+    #[arg(long, value_delimiter = ',', default_values_t = [0.0, 0.0])]
+    centre: Vec<f64>,
+    /// The cylinder's inner radius (m).
+    #[arg(long)]
+    radius: f64,
+}
+
 #[derive(Subcommand)]
 enum AnalyzeWhat {
     /// Fill height in a vertical cylindrical container: the highest particle point, the mean
     /// height of the packing's top surface over the cross-section, and the bulk solid fraction.
     FillHeight {
-        scene: PathBuf,
-        checkpoint: PathBuf,
-        /// Container axis, x and y (m).
-        #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.0, 0.0])]
-        centre: Vec<f64>,
-        /// Container inner radius (m).
-        #[arg(long)]
-        radius: f64,
+        #[command(flatten)]
+        at: AnalyzedCylinder,
         /// Floor height (m).
         #[arg(long, default_value_t = 0.0)]
         floor: f64,
@@ -153,16 +160,10 @@ enum AnalyzeWhat {
     /// Porosity of a section of a vertical tube: overall, and in annuli from the wall to the
     /// axis.
     Porosity {
-        scene: PathBuf,
-        checkpoint: PathBuf,
-        /// Tube axis, x and y (m).
-        #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0.0, 0.0])]
-        centre: Vec<f64>,
-        /// Tube inner radius (m).
-        #[arg(long)]
-        radius: f64,
+        #[command(flatten)]
+        at: AnalyzedCylinder,
         /// Lower and upper ends of the section (m).
-        #[arg(long, value_delimiter = ',', num_args = 2)]
+        #[arg(long, value_delimiter = ',', required = true)]
         z: Vec<f64>,
         /// Annuli from the wall to the axis.
         #[arg(long, default_value_t = 50)]
@@ -395,48 +396,51 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                     ))
                 }
             };
-            let report = match what {
-                AnalyzeWhat::FillHeight {
-                    scene,
-                    checkpoint,
-                    centre,
+            // The state, placed as solids, and the cylinder's axis and radius.
+            let open = |at: &AnalyzedCylinder| -> Result<(analysis::PackedSolids, [f64; 2], f64)> {
+                if at.centre.len() != 2 {
+                    anyhow::bail!("--centre {:?}: two numbers, x,y (m)", at.centre);
+                }
+                let radius = positive("radius", at.radius)?;
+                let (s, p) = analysis::load_state(&at.scene, &at.checkpoint)?;
+                Ok((
+                    analysis::solids_of(&s, &p),
+                    [at.centre[0], at.centre[1]],
                     radius,
-                    floor,
-                    spacing,
-                } => {
-                    let radius = positive("radius", radius)?;
-                    let spacing = positive("spacing", spacing.unwrap_or(radius / 200.0))?;
-                    let (s, p) = analysis::load_state(&scene, &checkpoint)?;
-                    let solids = analysis::solids_of(&s, &p);
+                ))
+            };
+            let report = match what {
+                AnalyzeWhat::FillHeight { at, floor, spacing } => {
+                    let r = positive("radius", at.radius)?;
+                    let spacing = positive("spacing", spacing.unwrap_or(r / 200.0))?;
+                    let (solids, centre, radius) = open(&at)?;
                     let disk = analysis::Disk {
-                        centre: [centre[0], centre[1]],
+                        centre,
                         radius,
                         floor,
                     };
                     serde_json::to_value(analysis::fill_height(&solids, &disk, spacing))?
                 }
                 AnalyzeWhat::Porosity {
-                    scene,
-                    checkpoint,
-                    centre,
-                    radius,
+                    at,
                     z,
                     annuli,
                     spacing,
                 } => {
-                    let radius = positive("radius", radius)?;
-                    let spacing = positive("spacing", spacing.unwrap_or(radius / 100.0))?;
-                    if z[1].partial_cmp(&z[0]) != Some(std::cmp::Ordering::Greater) || annuli == 0 {
+                    let r = positive("radius", at.radius)?;
+                    let spacing = positive("spacing", spacing.unwrap_or(r / 100.0))?;
+                    if z.len() != 2
+                        || z[1].partial_cmp(&z[0]) != Some(std::cmp::Ordering::Greater)
+                        || annuli == 0
+                    {
                         anyhow::bail!(
-                            "--z {},{}: the upper end must be above the lower; --annuli {annuli}: at least 1",
-                            z[0],
-                            z[1]
+                            "--z {z:?}: two heights ZMIN,ZMAX (m), the upper above the lower; \
+                             --annuli {annuli}: at least 1"
                         );
                     }
-                    let (s, p) = analysis::load_state(&scene, &checkpoint)?;
-                    let solids = analysis::solids_of(&s, &p);
+                    let (solids, centre, radius) = open(&at)?;
                     let tube = analysis::Tube {
-                        centre: [centre[0], centre[1]],
+                        centre,
                         radius,
                         z: [z[0], z[1]],
                     };

@@ -11,6 +11,17 @@ use polydem::pipeline::Simulation;
 use polydem::scene::{WallPlacement, load_scene, load_wall_mesh};
 use std::f64::consts::PI;
 
+/// The twin `scene` (under `launch/production/twins/`) run to its end on the CPU.
+fn run_twin(scene: &str) -> Simulation {
+    let scene = load_scene(&repo_root().join("launch/production/twins").join(scene)).unwrap();
+    let end = scene.simulation.end_time;
+    let mut sim = Simulation::builder(scene).build().unwrap();
+    while sim.time < end {
+        sim.step().unwrap();
+    }
+    sim
+}
+
 fn triangles(file: &str) -> Vec<[Vector3<f64>; 3]> {
     let path = repo_root().join("launch/production/meshes").join(file);
     load_wall_mesh(&path, &WallPlacement::default())
@@ -93,13 +104,7 @@ fn production_meshes_are_what_make_meshes_py_states() {
 /// fraction puts it.
 #[test]
 fn dodecahedra_settle_in_the_cylinder_to_a_random_packing() {
-    let scene =
-        load_scene(&repo_root().join("launch/production/twins/dodecahedra_cylinder.toml")).unwrap();
-    let end = scene.simulation.end_time;
-    let mut sim = Simulation::builder(scene).build().unwrap();
-    while sim.time < end {
-        sim.step().unwrap();
-    }
+    let sim = run_twin("dodecahedra_cylinder.toml");
     let p = &sim.particles;
     assert_eq!(p.len(), 16);
     // Come to rest: the fastest grain moves at less than 5 % of the speed of a fall through
@@ -144,12 +149,7 @@ fn dodecahedra_settle_in_the_cylinder_to_a_random_packing() {
 /// it (the wall effect of a narrow tube, D/d = 4.5).
 #[test]
 fn catalyst_pellets_pack_looser_at_the_tube_wall() {
-    let scene = load_scene(&repo_root().join("launch/production/twins/fixed_bed.toml")).unwrap();
-    let end = scene.simulation.end_time;
-    let mut sim = Simulation::builder(scene).build().unwrap();
-    while sim.time < end {
-        sim.step().unwrap();
-    }
+    let sim = run_twin("fixed_bed.toml");
     let p = &sim.particles;
     assert_eq!(p.len(), 30);
     for x in &p.position {
