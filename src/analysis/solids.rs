@@ -59,11 +59,8 @@ impl PackedSolids {
                 let up = t.vertices.iter().map(|v| (q * (v.coords * s)).z);
                 x.z + up.fold(f64::NEG_INFINITY, f64::max)
             });
-            volume.push(if t.sphere {
-                4.0 / 3.0 * std::f64::consts::PI * (t.circumscribed_radius * s).powi(3)
-            } else {
-                t.volume * s * s * s
-            });
+            // A sphere template's volume is the exact ball's (`ConvexTemplate::into_sphere`).
+            volume.push(t.volume * s * s * s);
             solids.push(if t.sphere {
                 Solid::Sphere
             } else {
