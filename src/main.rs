@@ -1,6 +1,6 @@
 //! The `polydem` command line.
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use polydem::backend::BackendChoice;
 use polydem::domain::{Comm, SerialComm};
@@ -135,7 +135,8 @@ enum Command {
 struct AnalyzedCylinder {
     scene: PathBuf,
     checkpoint: PathBuf,
-    /// The cylinder's axis, x and y (m).
+    /// The cylinder's axis, x and y (m). Only the particles whose centre lies inside the
+    /// cylinder count, so a scene of several containers side by side is analysed one at a time.
     #[arg(long, value_delimiter = ',', default_values_t = [0.0, 0.0])]
     centre: Vec<f64>,
     /// The cylinder's inner radius (m).
@@ -171,6 +172,30 @@ enum AnalyzeWhat {
         /// Spacing of the sampled points (m; default radius / 100).
         #[arg(long)]
         spacing: Option<f64>,
+    },
+    /// The flow of a quasi-2D drum turning about the y axis, averaged over frames: velocity
+    /// field, dynamic angle of repose and flowing layer depth (docs/production.md §2).
+    Drum {
+        /// The run's frame folder (`<output.dir>/particles`, written with formats = ["csv"]).
+        frames: PathBuf,
+        /// The drum's inner radius (m).
+        #[arg(long)]
+        radius: f64,
+        /// The drum's axis, x and z (m).
+        #[arg(long, value_delimiter = ',', default_values_t = [0.0, 0.0])]
+        centre: Vec<f64>,
+        /// The slice of y holding this drum's particles, YMIN,YMAX (m; default: every particle).
+        #[arg(long, value_delimiter = ',')]
+        y: Option<Vec<f64>>,
+        /// Frames before this time (s) are skipped: the start-up.
+        #[arg(long, default_value_t = 0.0)]
+        from: f64,
+        /// Cell size of the averaging grid (m; default radius / 30).
+        #[arg(long)]
+        cell: Option<f64>,
+        /// Writes the averaged field here as CSV: x,z,occupancy,vx,vz,samples per cell.
+        #[arg(long)]
+        field: Option<PathBuf>,
     },
 }
 
@@ -403,9 +428,10 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                 }
                 let radius = positive("radius", at.radius)?;
                 let (s, p) = analysis::load_state(&at.scene, &at.checkpoint)?;
+                let centre = [at.centre[0], at.centre[1]];
                 Ok((
-                    analysis::solids_of(&s, &p),
-                    [at.centre[0], at.centre[1]],
+                    analysis::solids_in_cylinder(&s, &p, centre, radius),
+                    centre,
                     radius,
                 ))
             };
@@ -447,6 +473,73 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                     serde_json::to_value(analysis::radial_porosity(
                         &solids, &tube, annuli, spacing,
                     ))?
+                }
+                AnalyzeWhat::Drum {
+                    frames,
+                    radius,
+                    centre,
+                    y,
+                    from,
+                    cell,
+                    field,
+                } => {
+                    let radius = positive("radius", radius)?;
+                    let cell = positive("cell", cell.unwrap_or(radius / 30.0))?;
+                    if centre.len() != 2 {
+                        anyhow::bail!("--centre {centre:?}: two numbers, x,z (m)");
+                    }
+                    let y = match y.as_deref() {
+                        None => [f64::NEG_INFINITY, f64::INFINITY],
+                        Some([a, b]) if b > a => [*a, *b],
+                        Some(v) => anyhow::bail!(
+                            "--y {v:?}: two numbers YMIN,YMAX (m), the second above the first"
+                        ),
+                    };
+                    let section = analysis::DrumSection {
+                        centre: [centre[0], centre[1]],
+                        radius,
+                        y,
+                    };
+                    let mut samples = analysis::DrumSamples::new(section, cell);
+                    let mut times = Vec::new();
+                    for tables in analysis::frame_tables(&frames)? {
+                        let mut rows = Vec::new();
+                        for t in &tables {
+                            rows.extend(polydem::io::read_particle_csv(t)?);
+                        }
+                        let Some(time) = rows.first().map(|r| r.time) else {
+                            continue;
+                        };
+                        if time < from {
+                            continue;
+                        }
+                        times.push(time);
+                        samples.add_frame(rows.iter().map(|r| (&r.position, &r.velocity)));
+                    }
+                    if times.is_empty() {
+                        anyhow::bail!("{}: no frame at or after --from {from} s", frames.display());
+                    }
+                    let flow = samples.flow();
+                    if let Some(path) = &field {
+                        let mut csv = String::from("x,z,occupancy,vx,vz,samples\n");
+                        for c in &flow.cells {
+                            csv.push_str(&format!(
+                                "{},{},{},{},{},{}\n",
+                                c.x, c.z, c.occupancy, c.vx, c.vz, c.samples
+                            ));
+                        }
+                        polydem::io::write_atomic(path, csv.as_bytes()).with_context(|| {
+                            format!("{}: cannot write the field", path.display())
+                        })?;
+                    }
+                    let mut v = serde_json::to_value(&flow)?;
+                    if let Some(o) = v.as_object_mut() {
+                        o.remove("cells");
+                        o.insert("radius".into(), radius.into());
+                        o.insert("first_time".into(), times[0].into());
+                        o.insert("last_time".into(), times[times.len() - 1].into());
+                    }
+                    v
                 }
             };
             writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;

@@ -10,7 +10,8 @@ use polydem::contact::history::{ContactHistory, ContactKey, ContactState};
 use polydem::io::checkpoint::MAGIC;
 use polydem::io::{
     Checkpoint, CheckpointError, FrameView, FrameWriter, SeriesRow, SeriesWriter, WallView,
-    encode_checkpoint, read_checkpoint, temporary_path, write_checkpoint, write_particle_csv,
+    encode_checkpoint, read_checkpoint, read_particle_csv, temporary_path, write_checkpoint,
+    write_particle_csv,
 };
 use polydem::shape::{ConvexTemplate, Generator};
 use polydem::state::Particles;
@@ -457,6 +458,31 @@ fn particle_csv_round_trips_f64_exactly() {
             assert_eq!(f(k + 2), x.to_bits(), "row {i} column {}", k + 2);
         }
     }
+    // Read back: every row bit for bit.
+    let back = read_particle_csv(&path).unwrap();
+    assert_eq!(back.len(), 5);
+    for (i, r) in back.iter().enumerate() {
+        assert_eq!(r.time.to_bits(), (1.0f64 / 3.0).to_bits());
+        assert_eq!(r.id, p.id[i]);
+        for k in 0..3 {
+            assert_eq!(r.position[k].to_bits(), p.position[i][k].to_bits());
+            assert_eq!(r.velocity[k].to_bits(), p.velocity[i][k].to_bits());
+            assert_eq!(
+                r.angular_velocity[k].to_bits(),
+                p.angular_velocity[i][k].to_bits()
+            );
+        }
+    }
+    // A damaged table is refused with its file, line and field.
+    let bad = dir.join("bad.csv");
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    lines[3] = lines[3].replacen(',', ",x", 3);
+    std::fs::write(&bad, lines.join("\n")).unwrap();
+    let e = read_particle_csv(&bad).unwrap_err().to_string();
+    assert!(e.contains("bad.csv") && e.contains("line 4"), "{e}");
+    std::fs::write(&bad, "a,b\n").unwrap();
+    let e = read_particle_csv(&bad).unwrap_err().to_string();
+    assert!(e.contains("line 1") && e.contains("header"), "{e}");
 }
 
 fn checkpoint() -> Checkpoint {

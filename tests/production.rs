@@ -37,31 +37,81 @@ fn centroid(t: &[Vector3<f64>; 3]) -> Vector3<f64> {
     (t[0] + t[1] + t[2]) / 3.0
 }
 
-/// Every triangle of a vertical tube of radius `r` from z = 0 to `height` with a floor: the
-/// side faces the axis, the floor faces up, and every vertex lies on the circle or the axis.
-fn check_tube(file: &str, r: f64, height: f64, segments: usize, rings: usize) {
-    let tris = triangles(file);
-    assert_eq!(
-        tris.len(),
-        segments + 2 * segments * rings,
-        "{file}: triangles"
-    );
-    for t in &tris {
-        let (c, n) = (centroid(t), normal(t));
-        if c.z.abs() < 1e-9 {
-            assert!(n.z > 0.999_999, "{file}: the floor faces up");
-        } else {
-            assert!(n.z.abs() < 1e-6, "{file}: the side is vertical");
+/// Whether the point `p` of the plane of triangle `t` lies inside it (its projection along
+/// the triangle's normal, to 1e-12 of its size).
+fn inside(t: &[Vector3<f64>; 3], p: &Vector3<f64>) -> bool {
+    let n = (t[1] - t[0]).cross(&(t[2] - t[0]));
+    (0..3).all(|k| {
+        let (a, b) = (t[k], t[(k + 1) % 3]);
+        (b - a).cross(&(p - a)).dot(&n) >= -1e-12 * n.norm_squared()
+    })
+}
+
+/// A flat disk of triangles (`plate`, normal `up`) that covers the circle of radius `r` about
+/// `centre` and is cut into triangles no longer than `size` on any side: the floor that
+/// `make_meshes.py ring_disk` states.
+fn check_plate(
+    file: &str,
+    plate: &[[Vector3<f64>; 3]],
+    centre: Vector3<f64>,
+    up: Vector3<f64>,
+    r: f64,
+    size: f64,
+) {
+    for t in plate {
+        assert!(
+            normal(t).dot(&up) > 0.999_999,
+            "{file}: a plate triangle faces {up:?}"
+        );
+        for k in 0..3 {
+            let edge = (t[(k + 1) % 3] - t[k]).norm();
             assert!(
-                n.dot(&Vector3::new(-c.x, -c.y, 0.0)) > 0.0,
-                "{file}: the side faces the axis"
+                edge < size,
+                "{file}: a plate edge of {edge} m, above {size}"
             );
         }
-        for v in t {
+    }
+    // Every point of the circle, just inside it, lies on some triangle: the plate has no gap
+    // at the wall standing on it.
+    let (e1, e2) = if up.z.abs() > 0.5 {
+        (Vector3::x(), Vector3::y())
+    } else {
+        (Vector3::z(), Vector3::x())
+    };
+    for j in 0..3600 {
+        let phi = 2.0 * PI * j as f64 / 3600.0;
+        for rho in [0.0, 0.3 * r, 0.7 * r, r * (1.0 - 1e-9)] {
+            let p = centre + rho * (phi.cos() * e1 + phi.sin() * e2);
+            assert!(
+                plate.iter().any(|t| inside(t, &p)),
+                "{file}: the plate misses the point at radius {rho}, angle {phi}"
+            );
+        }
+    }
+}
+
+/// A vertical tube of radius `r` from z = 0 to `height` with a floor: the side, `segments`
+/// around and `rings` high, faces the axis with every vertex on the circle; the floor faces
+/// up and closes it in triangles of about `floor_size`.
+fn check_tube(file: &str, r: f64, height: f64, segments: usize, rings: usize, floor_size: f64) {
+    let tris = triangles(file);
+    let (floor, side): (Vec<_>, Vec<_>) = tris
+        .iter()
+        .copied()
+        .partition(|t| centroid(t).z.abs() < 1e-9);
+    assert_eq!(side.len(), 2 * segments * rings, "{file}: side triangles");
+    for t in &side {
+        let (c, n) = (centroid(t), normal(t));
+        assert!(n.z.abs() < 1e-6, "{file}: the side is vertical");
+        assert!(
+            n.dot(&Vector3::new(-c.x, -c.y, 0.0)) > 0.0,
+            "{file}: the side faces the axis"
+        );
+        for v in t.iter() {
             let rho = v.xy().norm();
             assert!(
-                rho < 1e-9 || (rho - r).abs() < 1e-6 * r,
-                "{file}: a vertex at radius {rho}"
+                (rho - r).abs() < 1e-6 * r,
+                "{file}: a side vertex at radius {rho}"
             );
             assert!(
                 v.z > -1e-9 && v.z < height + 1e-6,
@@ -70,32 +120,53 @@ fn check_tube(file: &str, r: f64, height: f64, segments: usize, rings: usize) {
             );
         }
     }
+    check_plate(
+        file,
+        &floor,
+        Vector3::zeros(),
+        Vector3::z(),
+        r,
+        2.0 * floor_size,
+    );
     let top = tris.iter().flatten().map(|v| v.z).fold(0.0, f64::max);
     assert!((top - height).abs() < 1e-6, "{file}: top at {top}");
 }
 
 #[test]
 fn production_meshes_are_what_make_meshes_py_states() {
-    check_tube("dodecahedra_cylinder.stl", 0.05, 0.20, 96, 4);
-    check_tube("fixed_bed_tube.stl", 0.0125, 1.80, 64, 90);
-    check_tube("fixed_bed_tube_twin.stl", 0.0125, 0.10, 24, 5);
-    // The drum: a ring of radius 0.15 m about the y axis, 11 mm deep, facing the axis, and two
-    // end plates facing each other.
+    check_tube("dodecahedra_cylinder.stl", 0.05, 0.20, 96, 4, 0.03);
+    check_tube("fixed_bed_tube.stl", 0.0125, 1.80, 64, 90, 0.0055);
+    check_tube("fixed_bed_tube_twin.stl", 0.0125, 0.10, 24, 5, 0.0055);
+    // The drum: a ring of radius 0.15 m about the y axis, 11 mm deep, 192 segments, facing
+    // the axis, and two end plates of 10 mm triangles facing each other.
     let drum = triangles("drum.stl");
-    assert_eq!(drum.len(), 4 * 192);
-    for t in &drum {
+    let (plates, rim): (Vec<_>, Vec<_>) = drum
+        .iter()
+        .copied()
+        .partition(|t| (centroid(t).y.abs() - 0.0055).abs() < 1e-9);
+    assert_eq!(rim.len(), 2 * 192);
+    for t in &rim {
         let (c, n) = (centroid(t), normal(t));
-        if (c.y.abs() - 0.0055).abs() < 1e-9 {
-            assert!(
-                (n.y + c.y.signum()).abs() < 1e-6,
-                "the end plates face each other"
-            );
-        } else {
-            assert!(
-                n.y.abs() < 1e-6 && n.dot(&Vector3::new(-c.x, 0.0, -c.z)) > 0.0,
-                "the rim faces the axis"
-            );
-        }
+        assert!(
+            n.y.abs() < 1e-6 && n.dot(&Vector3::new(-c.x, 0.0, -c.z)) > 0.0,
+            "the rim faces the axis"
+        );
+    }
+    for side in [-1.0, 1.0] {
+        let plate: Vec<[Vector3<f64>; 3]> = plates
+            .iter()
+            .filter(|t| centroid(t).y * side > 0.0)
+            .copied()
+            .collect();
+        let centre = Vector3::new(0.0, 0.0055 * side, 0.0);
+        check_plate(
+            "drum.stl",
+            &plate,
+            centre,
+            Vector3::new(0.0, -side, 0.0),
+            0.15,
+            0.02,
+        );
     }
 }
 
@@ -142,6 +213,55 @@ fn dodecahedra_settle_in_the_cylinder_to_a_random_packing() {
     );
     // The top layer is partial: its highest grain stands at most two grains above the mean.
     assert!(fill.highest > fill.mean_surface && fill.highest < fill.mean_surface + 2.0 * 0.0308);
+}
+
+/// Case 2's twin: 45 of the drum's 1 cm dodecahedra in a 0.10 m drum at 45 rpm. Averaged over
+/// 0.5 … 1.5 s, the bed is lifted on the side the drum turns up (−x for +45 rpm about +y), its
+/// free surface stands at an angle of repose of a few tens of degrees, and a layer a grain or
+/// two deep flows down it over a bed that turns with the drum.
+#[test]
+fn the_drum_twin_lifts_its_bed_and_a_surface_layer_flows_down() {
+    let scene = load_scene(&repo_root().join("launch/production/twins/drum.toml")).unwrap();
+    let end = scene.simulation.end_time;
+    let mut sim = Simulation::builder(scene).build().unwrap();
+    let section = analysis::DrumSection {
+        centre: [0.0, 0.0],
+        radius: 0.05,
+        y: [-0.0055, 0.0055],
+    };
+    let mut samples = analysis::DrumSamples::new(section, 0.005);
+    let mut next = 0.5;
+    while sim.time < end {
+        sim.step().unwrap();
+        if sim.time >= next {
+            let p = &sim.particles;
+            samples.add_frame(p.position.iter().zip(&p.velocity));
+            next += 0.01;
+        }
+    }
+    assert_eq!(sim.particles.len(), 45);
+    let flow = samples.flow();
+    println!(
+        "drum twin: angle {:?}, layer {:?}, surface speed {:?}, line {:?}",
+        flow.angle_of_repose_deg, flow.flowing_layer_depth, flow.surface_speed, flow.surface_line
+    );
+    assert!(flow.frames >= 99, "{} frames", flow.frames);
+    // Lifted on −x: the surface falls towards +x.
+    let [_, slope] = flow.surface_line.expect("a free surface");
+    assert!(
+        slope < 0.0,
+        "surface slope {slope}: the bed is not lifted on the rising side"
+    );
+    let angle = flow.angle_of_repose_deg.unwrap();
+    assert!((20.0..70.0).contains(&angle), "angle of repose {angle}°");
+    // The surface flows down at a fraction of the rim speed (0.24 m/s) to a few m/s of free
+    // flight, over a layer between a third of a grain and three grains deep.
+    let speed = flow.surface_speed.unwrap();
+    assert!((0.05..3.0).contains(&speed), "surface speed {speed} m/s");
+    let depth = flow
+        .flowing_layer_depth
+        .expect("u changes sign below the surface");
+    assert!((0.003..0.03).contains(&depth), "flowing layer {depth} m");
 }
 
 /// Case 3's twin: 30 catalyst pellets (5.5 mm × 5.5 mm prisms) rained into the 25 mm tube form

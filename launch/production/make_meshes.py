@@ -36,15 +36,46 @@ def band(lower, upper):
     return tris
 
 
-def disk(r, z, segments, up=True):
-    """A fan of triangles closing the ring of radius r at height z; normal +z if `up`."""
-    pts = ring(r, z, segments)
+def ring_counts(r, size):
+    """Points on each ring of `ring_disk`: ring k of m = ceil(r / size) has chords of about
+    `size`, and at least 6 points."""
+    m = max(1, math.ceil(r / size))
+    return [max(6, round(2 * math.pi * r * k / m / size)) for k in range(1, m + 1)]
+
+
+def ring_disk(r, z, size, up=True):
+    """A disk covering the circle of radius r at height z, cut into triangles of about `size`
+    by concentric rings; the outermost ring's polygon circumscribes the circle, so the disk
+    closes the polygon of any wall of radius r standing on it (a fan of that wall's segments
+    would be slivers meeting at the centre, and a particle resting near it would touch dozens).
+    Normal +z if `up`."""
+    counts = ring_counts(r, size)
+    m = len(counts)
+    radii = [r * (k + 1) / m for k in range(m)]
+    # 1e-6 beyond the circumscribing radius: the STL's single precision moves a vertex by up to
+    # 6e-8 of its distance from the axis, and must not open a gap at the wall.
+    radii[-1] = r / math.cos(math.pi / counts[-1]) * (1 + 1e-6)
+    rings = [ring(rk, z, n) for rk, n in zip(radii, counts)]
     centre = (0.0, 0.0, z)
-    tris = []
-    for k in range(segments):
-        a, b = pts[k], pts[(k + 1) % segments]
-        tris.append((centre, a, b) if up else (centre, b, a))
-    return tris
+    tris = [(centre, rings[0][j], rings[0][(j + 1) % counts[0]]) for j in range(counts[0])]
+    for inner, outer in zip(rings, rings[1:]):
+        a, b = len(inner), len(outer)
+        i = j = 0
+        # Walk both rings by angle, always closing the triangle whose new point comes first.
+        while i < a or j < b:
+            if j == b or (i < a and (i + 1) / a < (j + 1) / b):
+                tris.append((inner[i], inner[(i + 1) % a], outer[j % b]))
+                i += 1
+            else:
+                tris.append((inner[i % a], outer[(j + 1) % b], outer[j]))
+                j += 1
+    out = []
+    for t in tris:
+        u = [t[1][k] - t[0][k] for k in range(3)]
+        v = [t[2][k] - t[0][k] for k in range(3)]
+        nz = u[0] * v[1] - u[1] * v[0]
+        out.append(t if (nz > 0) == up else (t[0], t[2], t[1]))
+    return out
 
 
 def tube(r, z0, z1, segments, rings):
@@ -72,20 +103,32 @@ def translate(tris, d):
 def dodecahedra_cylinder():
     """Seed Sec. 3.3: a transparent cylinder of 10 cm inner diameter and 20 cm height, closed at
     the bottom (z = 0), open at the top; axis z. 96 segments: the flats lie within 54 um of the
-    circle (r (1 - cos(pi/96))), 1/570 of the particle size."""
+    circle (r (1 - cos(pi/96))), 1/570 of the particle size. The floor is cut into triangles of
+    about the dice's size (30 mm)."""
     r, h, n = 0.05, 0.20, 96
-    return disk(r, 0.0, n, up=True) + tube(r, 0.0, h, n, 4)
+    return ring_disk(r, 0.0, 0.03, up=True) + tube(r, 0.0, h, n, 4)
 
 
 def drum():
     """Seed Sec. 3.4, Table 3: a quasi-2D drum of diameter 0.30 m and thickness 11 mm, axis y
     through the origin, closed by its two end plates (y = -5.5 mm and +5.5 mm). 192 segments:
-    the flats lie within 20 um of the circle and are 4.9 mm wide, half a particle."""
+    the flats lie within 20 um of the circle and are 4.9 mm wide, half a particle. The end
+    plates, on which every particle slides, are cut into triangles of about the particle's size
+    (10 mm)."""
     r, w, n = 0.15, 0.011, 192
     # Built along z from -w/2 to w/2 (the side faces the axis, the plates face each other),
     # then turned -90 degrees about x, which takes +z to +y.
     side = tube(r, -w / 2, w / 2, n, 1)
-    plates = disk(r, -w / 2, n, up=True) + disk(r, w / 2, n, up=False)
+    plates = ring_disk(r, -w / 2, 0.01, up=True) + ring_disk(r, w / 2, 0.01, up=False)
+    return rotate_x(side + plates, -90.0)
+
+
+def drum_twin():
+    """The drum twin's drum (twins/drum.toml): the same 11 mm depth and 10 mm plate triangles,
+    D = 0.10 m with 64 segments (flats 4.9 mm wide, as in the full drum)."""
+    r, w, n = 0.05, 0.011, 64
+    side = tube(r, -w / 2, w / 2, n, 1)
+    plates = ring_disk(r, -w / 2, 0.01, up=True) + ring_disk(r, w / 2, 0.01, up=False)
     return rotate_x(side + plates, -90.0)
 
 
@@ -93,9 +136,9 @@ def fixed_bed_tube():
     """Seed Sec. 4.2: a reactor tube of 25 mm inner diameter and 1.80 m height, closed at the
     bottom (z = 0); axis z. 64 segments: the flats lie within 15 um of the circle (1/370 of the
     5.5 mm catalyst), 1.2 mm wide; 90 bands of 20 mm, so that a facet is no taller than about
-    four particles."""
+    four particles. The floor is cut into triangles of about the pellet's size (5.5 mm)."""
     r, h, n = 0.0125, 1.80, 64
-    return disk(r, 0.0, n, up=True) + tube(r, 0.0, h, n, 90)
+    return ring_disk(r, 0.0, 0.0055, up=True) + tube(r, 0.0, h, n, 90)
 
 
 def fixed_bed_tube_twin():
@@ -103,12 +146,13 @@ def fixed_bed_tube_twin():
     24 segments (flats 3.3 mm wide, within 0.1 mm of the circle) so that a pellet on the wall
     touches a few facets instead of a dozen: the twin runs in seconds."""
     r, h, n = 0.0125, 0.10, 24
-    return disk(r, 0.0, n, up=True) + tube(r, 0.0, h, n, 5)
+    return ring_disk(r, 0.0, 0.0055, up=True) + tube(r, 0.0, h, n, 5)
 
 
 MESHES = {
     "dodecahedra_cylinder": dodecahedra_cylinder,
     "drum": drum,
+    "drum_twin": drum_twin,
     "fixed_bed_tube": fixed_bed_tube,
     "fixed_bed_tube_twin": fixed_bed_tube_twin,
 }

@@ -4,11 +4,14 @@
 //! - [`solids`]: the particles as solids: point coverage and vertical reach, on a grid.
 //! - [`fill`]: fill height and bulk solid fraction in a vertical container.
 //! - [`porosity`]: porosity of a tube section, overall and by distance from the wall.
+//! - [`drum`]: the averaged flow of a rotating drum, its angle of repose and flowing layer.
 
+pub mod drum;
 pub mod fill;
 pub mod porosity;
 pub mod solids;
 
+pub use drum::{DrumFlow, DrumSamples, DrumSection, FieldCell};
 pub use fill::{Disk, FillHeight, fill_height};
 pub use porosity::{RadialPorosity, Tube, radial_porosity};
 pub use solids::PackedSolids;
@@ -31,9 +34,63 @@ pub fn load_state(scene: &Path, checkpoint: &Path) -> Result<(Scene, Particles)>
     Ok((s, c.particles))
 }
 
+/// The particle tables of a run's frames (`<output>/particles/`, [`crate::io::write_particle_csv`]),
+/// grouped by frame in step order: one table per frame, or one per rank
+/// (`step_<step>_r<rank>.csv`) of a decomposed run. Files of other names are ignored.
+pub fn frame_tables(dir: &Path) -> Result<Vec<Vec<std::path::PathBuf>>> {
+    let mut by_step: std::collections::BTreeMap<u64, Vec<std::path::PathBuf>> = Default::default();
+    for entry in
+        std::fs::read_dir(dir).with_context(|| format!("{}: cannot list frames", dir.display()))?
+    {
+        let path = entry
+            .with_context(|| format!("{}: cannot list frames", dir.display()))?
+            .path();
+        let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
+            continue;
+        };
+        let Some(stem) = name
+            .strip_prefix("step_")
+            .and_then(|n| n.strip_suffix(".csv"))
+        else {
+            continue;
+        };
+        let step = stem.split("_r").next().unwrap_or(stem);
+        if let Ok(step) = step.parse::<u64>() {
+            by_step.entry(step).or_default().push(path);
+        }
+    }
+    if by_step.is_empty() {
+        anyhow::bail!(
+            "{}: no particle tables (step_<step>.csv; a run writes them with output.formats = [\"csv\"])",
+            dir.display()
+        );
+    }
+    Ok(by_step
+        .into_values()
+        .map(|mut v| {
+            v.sort();
+            v
+        })
+        .collect())
+}
+
 /// The particles of `scene` placed as solids.
 pub fn solids_of(scene: &Scene, particles: &Particles) -> PackedSolids {
     PackedSolids::new(&scene.templates, &scene.particle_types, particles)
+}
+
+/// The particles of `scene` whose centre lies inside the vertical cylinder of axis
+/// `centre` (x, y) and radius `radius`, placed as solids: one container's contents when a
+/// scene holds several.
+pub fn solids_in_cylinder(
+    scene: &Scene,
+    particles: &Particles,
+    centre: [f64; 2],
+    radius: f64,
+) -> PackedSolids {
+    PackedSolids::within(&scene.templates, &scene.particle_types, particles, |x| {
+        (x.x - centre[0]).powi(2) + (x.y - centre[1]).powi(2) <= radius * radius
+    })
 }
 
 #[cfg(test)]
@@ -132,6 +189,44 @@ mod tests {
             f.mean_surface,
             5.0 * r / 3.0
         );
+    }
+
+    #[test]
+    fn one_container_of_several_counts_only_its_own_particles() {
+        // Two cubes of 2 cm and 4 cm in containers 0.1 m apart: each container's fill height
+        // is its own cube's, and the volume counted is that cube's alone.
+        let (a, b) = (0.02, 0.04);
+        let t = cube(1.0);
+        let types = [ParticleType {
+            name: "p".into(),
+            template: 0,
+            material: 0,
+        }];
+        let mut p = Particles::default();
+        let q = UnitQuaternion::identity();
+        p.push(0, 0, a, Vector3::new(0.0, 0.0, a / 2.0), q, &t, 1000.0);
+        p.push(1, 0, b, Vector3::new(0.1, 0.0, b / 2.0), q, &t, 1000.0);
+        let container = |centre: [f64; 2]| {
+            PackedSolids::within(std::slice::from_ref(&t), &types, &p, |x| {
+                (x.x - centre[0]).powi(2) + (x.y - centre[1]).powi(2) <= 0.04 * 0.04
+            })
+        };
+        for (centre, edge) in [([0.0, 0.0], a), ([0.1, 0.0], b)] {
+            let s = container(centre);
+            assert_eq!(s.len(), 1);
+            assert!((s.volume(0) - edge.powi(3)).abs() < 1e-12 * edge.powi(3));
+            let disk = Disk {
+                centre,
+                radius: 0.005,
+                floor: 0.0,
+            };
+            let f = fill_height(&s, &disk, 1e-4);
+            assert!(
+                (f.highest - edge).abs() < 1e-12 * edge
+                    && (f.mean_surface - edge).abs() < 1e-12 * edge,
+                "{centre:?}: {f:?}"
+            );
+        }
     }
 
     #[test]

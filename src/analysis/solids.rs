@@ -40,12 +40,26 @@ impl PackedSolids {
         types: &[ParticleType],
         particles: &Particles,
     ) -> Self {
-        let n = particles.len();
+        Self::within(templates, types, particles, |_| true)
+    }
+
+    /// Places the particles of `particles` whose centre `keep` accepts: the contents of one
+    /// container of a scene that holds several side by side.
+    pub fn within(
+        templates: &[ConvexTemplate],
+        types: &[ParticleType],
+        particles: &Particles,
+        keep: impl Fn(&Vector3<f64>) -> bool,
+    ) -> Self {
+        let kept: Vec<usize> = (0..particles.len())
+            .filter(|&i| keep(&particles.position[i]))
+            .collect();
+        let n = kept.len();
         let mut solids = Vec::with_capacity(n);
         let mut radius = Vec::with_capacity(n);
         let mut volume = Vec::with_capacity(n);
         let mut top = Vec::with_capacity(n);
-        for i in 0..n {
+        for &i in &kept {
             let t = &templates[types[particles.kind[i] as usize].template];
             let (s, q, x) = (
                 particles.scale[i],
@@ -76,7 +90,7 @@ impl PackedSolids {
                 }
             });
         }
-        let centre = particles.position.clone();
+        let centre: Vec<Vector3<f64>> = kept.iter().map(|&i| particles.position[i]).collect();
         let r_max = radius.iter().cloned().fold(0.0, f64::max);
         let cell = if r_max > 0.0 { 2.0 * r_max } else { 1.0 };
         let (mut lo, mut hi) = (

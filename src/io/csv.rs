@@ -39,6 +39,82 @@ pub fn write_particle_csv(path: &Path, time: f64, view: &FrameView) -> io::Resul
     super::write_atomic(path, s.as_bytes())
 }
 
+/// One row of a particle table ([`write_particle_csv`]): what frame analyses read back.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParticleRow {
+    pub time: f64,
+    pub id: u64,
+    pub position: Vector3<f64>,
+    pub velocity: Vector3<f64>,
+    pub angular_velocity: Vector3<f64>,
+}
+
+/// Reads a particle table written by [`write_particle_csv`]. A file with another header, a
+/// row of another width or a field that is not a finite number is an error naming the file,
+/// the line and the field.
+pub fn read_particle_csv(path: &Path) -> io::Result<Vec<ParticleRow>> {
+    let text = fs::read_to_string(path).map_err(|e| with_path(e, path))?;
+    let mut lines = text.lines();
+    match lines.next() {
+        Some(h) if h == PARTICLE_CSV_HEADER => {}
+        h => {
+            return Err(invalid_data(
+                path,
+                format!(
+                    "line 1: header {:?}, expected {PARTICLE_CSV_HEADER:?} (a polydem particle table)",
+                    h.unwrap_or("")
+                ),
+            ));
+        }
+    }
+    let names: Vec<&str> = PARTICLE_CSV_HEADER.split(',').collect();
+    let mut rows = Vec::new();
+    for (k, line) in lines.enumerate() {
+        let at = k + 2;
+        if line.is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').collect();
+        if fields.len() != names.len() {
+            return Err(invalid_data(
+                path,
+                format!(
+                    "line {at}: {} fields, expected {}",
+                    fields.len(),
+                    names.len()
+                ),
+            ));
+        }
+        let id = fields[1].parse::<u64>().map_err(|_| {
+            invalid_data(path, format!("line {at}: id {:?} is not an id", fields[1]))
+        })?;
+        let mut v = [0.0; 15];
+        for (j, f) in fields.iter().enumerate() {
+            if j == 1 {
+                continue;
+            }
+            v[j] = f
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    invalid_data(
+                        path,
+                        format!("line {at}: {} {f:?} is not a finite number", names[j]),
+                    )
+                })?;
+        }
+        rows.push(ParticleRow {
+            time: v[0],
+            id,
+            position: Vector3::new(v[2], v[3], v[4]),
+            velocity: Vector3::new(v[5], v[6], v[7]),
+            angular_velocity: Vector3::new(v[8], v[9], v[10]),
+        });
+    }
+    Ok(rows)
+}
+
 /// One row of the time series.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SeriesRow {

@@ -21,7 +21,7 @@ pub use checkpoint::{
     Checkpoint, CheckpointError, decode_checkpoint, encode_checkpoint, read_checkpoint,
     write_checkpoint,
 };
-pub use csv::{SeriesRow, SeriesWriter, write_particle_csv};
+pub use csv::{ParticleRow, SeriesRow, SeriesWriter, read_particle_csv, write_particle_csv};
 pub use packing::{PackedParticle, Packing, PackingError};
 pub use vtk::{FRAME_FIELDS, FrameView, FrameWriter, WallView};
 
