@@ -170,6 +170,111 @@ fn production_meshes_are_what_make_meshes_py_states() {
     }
 }
 
+/// A corrugated silo of `make_meshes.py corrugated_silo` with its east half in `bands`: the
+/// hopper's vertices on its cone, the side's on the corrugated radius, every facet facing the
+/// axis, the bands on the east (x > 0) in order of height and the rest on the west, and the
+/// gate closing the outlet from below.
+#[allow(clippy::too_many_arguments)]
+fn check_silo(
+    name: &str,
+    d: f64,
+    outlet: f64,
+    hopper_deg: f64,
+    pitch: f64,
+    depth: f64,
+    segments: usize,
+    per_pitch: usize,
+    bands: usize,
+) {
+    let (r, r0, a) = (d / 2.0, outlet / 2.0, depth / 2.0);
+    let z_h = (r - r0) / hopper_deg.to_radians().tan();
+    let faces_axis = |t: &[Vector3<f64>; 3], file: &str| {
+        let (c, n) = (centroid(t), normal(t));
+        assert!(
+            n.dot(&Vector3::new(-c.x, -c.y, 0.0)) > 0.0,
+            "{file}: a facet faces away from the axis"
+        );
+        n
+    };
+    let hopper = triangles(&format!("{name}_hopper.stl"));
+    for t in &hopper {
+        assert!(faces_axis(t, "hopper").z > 0.0, "the hopper faces up");
+        for v in t {
+            let cone = r0 + (r - r0) * v.z / z_h;
+            assert!(
+                (v.xy().norm() - cone).abs() < 1e-6,
+                "a hopper vertex off the cone"
+            );
+        }
+    }
+    let on_side = |t: &[Vector3<f64>; 3], file: &str| {
+        faces_axis(t, file);
+        for v in t {
+            let rho = r + a * (2.0 * PI * (v.z - z_h) / pitch).sin();
+            assert!(
+                (v.xy().norm() - rho).abs() < 2e-6,
+                "{file}: a vertex at radius {} where the corrugation is at {rho}",
+                v.xy().norm()
+            );
+        }
+    };
+    let west = triangles(&format!("{name}_side_west.stl"));
+    let rings = west.len() / segments;
+    assert_eq!(west.len(), segments * rings, "west half: whole rings");
+    assert_eq!(
+        rings % (per_pitch * bands),
+        0,
+        "whole pitches in every band"
+    );
+    let height = rings as f64 / per_pitch as f64 * pitch;
+    for t in &west {
+        on_side(t, "side_west");
+        assert!(centroid(t).x < 0.0, "side_west holds the west half");
+    }
+    for b in 0..bands {
+        let file = format!("{name}_band_{b:02}.stl");
+        let band = triangles(&file);
+        assert_eq!(band.len(), segments * rings / bands, "{file}: facets");
+        let (lo, hi) = (
+            z_h + height * b as f64 / bands as f64,
+            z_h + height * (b + 1) as f64 / bands as f64,
+        );
+        for t in &band {
+            on_side(t, &file);
+            assert!(centroid(t).x > 0.0, "{file}: on the east half");
+            assert!(
+                t.iter().all(|v| v.z > lo - 1e-6 && v.z < hi + 1e-6),
+                "{file}: outside its band"
+            );
+        }
+    }
+    let gate = triangles(&format!("{name}_gate.stl"));
+    check_plate(
+        "gate",
+        &gate,
+        Vector3::zeros(),
+        Vector3::z(),
+        r0 * 1.09,
+        outlet / 4.0,
+    );
+}
+
+#[test]
+fn silo_meshes_are_what_make_meshes_py_states() {
+    check_silo(
+        "silo_quarter",
+        0.525,
+        0.1675,
+        30.0,
+        0.0435,
+        0.0083,
+        48,
+        6,
+        6,
+    );
+    check_silo("silo_twin", 0.21, 0.067, 30.0, 0.034, 0.0065, 24, 4, 2);
+}
+
 /// Case 1's twin: 16 of the seed's dodecahedra (30.8 mm) dropped into its 10 cm cylinder come
 /// to rest as a bed whose top surface is where their volume at a random packing's solid
 /// fraction puts it.

@@ -1,8 +1,10 @@
 #!/usr/bin/env python3
 """Writes the wall meshes of the production scenes (launch/production/meshes/*.stl).
 
-  python3 launch/production/make_meshes.py            # all of them
+  python3 launch/production/make_meshes.py            # all of them but the large (LARGE below)
   python3 launch/production/make_meshes.py NAME ...   # only these (names as in MESHES below)
+
+A mesh of several parts (a silo's hopper, side and bands) is written as NAME_PART.stl each.
 
 Binary STL in metres. Every triangle is wound counter-clockwise seen from the particles' side,
 so that its normal (b - a) x (c - a) points at the particles (docs/scene.md, [[walls]]).
@@ -149,13 +151,77 @@ def fixed_bed_tube_twin():
     return ring_disk(r, 0.0, 0.0055, up=True) + tube(r, 0.0, h, n, 5)
 
 
+def corrugated_silo(d, height, outlet, hopper_deg, pitch, depth, segments, per_pitch, hopper_rings,
+                    bands=0):
+    """Seed Sec. 4.1, Fig. 19: a silo of diameter d whose cylindrical side wall is corrugated
+    horizontally (radius R + (depth/2) sin(2 pi (z - z_h) / pitch), a whole number of pitches,
+    `per_pitch` rings each), above a conical hopper of half-angle `hopper_deg` from the vertical
+    down to the outlet of diameter `outlet` at z = 0, which is open. Axis z; `segments` around.
+
+    Returns the parts as walls: "hopper" and "side"; with `bands` > 0 the side's x > 0 half is
+    cut into that many bands of equal height (whole pitches each), "band_00" from the bottom up,
+    and the rest is "side_west" (x < 0): the net force on a half band is its normal load times
+    2 R h whatever the corrugation (Janssen's wall stress, docs/production.md §4)."""
+    r, r0 = d / 2, outlet / 2
+    z_h = (r - r0) / math.tan(math.radians(hopper_deg))
+    pitches = round((height - z_h) / pitch)
+    a = depth / 2
+    rings = pitches * per_pitch
+    zs = [z_h + pitch * k / per_pitch for k in range(rings + 1)]
+    radius = lambda z: r + a * math.sin(2 * math.pi * (z - z_h) / pitch)
+    hopper = []
+    for k in range(hopper_rings):
+        f0, f1 = k / hopper_rings, (k + 1) / hopper_rings
+        hopper += band(ring(r0 + (r - r0) * f0, z_h * f0, segments), ring(r0 + (r - r0) * f1, z_h * f1, segments))
+    side = []
+    for za, zb in zip(zs, zs[1:]):
+        side.append(band(ring(radius(za), za, segments), ring(radius(zb), zb, segments)))
+    if bands <= 0:
+        return {"hopper": hopper, "side": [t for ring_tris in side for t in ring_tris]}
+    assert segments % 4 == 0 and pitches % bands == 0, "halves on segment edges, bands on whole pitches"
+    east = lambda t: sum(p[0] for p in t) > 0
+    parts = {"hopper": hopper, "side_west": [t for rt in side for t in rt if not east(t)]}
+    per_band = rings // bands
+    for b in range(bands):
+        parts[f"band_{b:02d}"] = [t for rt in side[b * per_band:(b + 1) * per_band] for t in rt if east(t)]
+    return parts
+
+
+# The seed's silo: 2.1 m across, 0.67 m outlet, 10.6 m tall. The hopper angle and the
+# corrugation are not given: a 30 degree hopper (from the vertical) and the common corrugated
+# silo sheet of 68 mm pitch and 13 mm depth, 8 rings per pitch and 68 segments, about 150 000
+# facets as the seed's model has.
+SILO = dict(d=2.1, height=10.6, outlet=0.67, hopper_deg=30.0, pitch=0.068, depth=0.013, segments=68,
+            per_pitch=8, hopper_rings=10)
+# The same silo at 1:4 (case 4b), its corrugation scaled with the grain instead (the grains are
+# 0.64 of the seed's, so 43.5 mm pitch, 8.3 mm deep), its east half in 6 bands for Janssen.
+SILO_QUARTER = dict(d=0.525, height=2.65, outlet=0.1675, hopper_deg=30.0, pitch=0.0435, depth=0.0083,
+                    segments=48, per_pitch=6, hopper_rings=8, bands=6)
+# The twin's silo: 1:10, coarser (24 segments, 4 rings per pitch), in 2 bands.
+SILO_TWIN = dict(d=0.21, height=0.53, outlet=0.067, hopper_deg=30.0, pitch=0.034, depth=0.0065,
+                 segments=24, per_pitch=4, hopper_rings=3, bands=2)
+
+
+def silo_gate(outlet):
+    """A disk closing the outlet at z = 0 from below, facing up: 10 % wider than the outlet."""
+    return ring_disk(0.55 * outlet, 0.0, outlet / 8, up=True)
+
+
 MESHES = {
     "dodecahedra_cylinder": dodecahedra_cylinder,
     "drum": drum,
     "drum_twin": drum_twin,
     "fixed_bed_tube": fixed_bed_tube,
     "fixed_bed_tube_twin": fixed_bed_tube_twin,
+    "silo": lambda: corrugated_silo(**SILO),
+    "silo_gate": lambda: silo_gate(SILO["outlet"]),
+    "silo_quarter": lambda: corrugated_silo(**SILO_QUARTER),
+    "silo_quarter_gate": lambda: silo_gate(SILO_QUARTER["outlet"]),
+    "silo_twin": lambda: corrugated_silo(**SILO_TWIN),
+    "silo_twin_gate": lambda: silo_gate(SILO_TWIN["outlet"]),
 }
+# Written only when named: 7.6 MB, regenerated on demand (`make_meshes.py silo`).
+LARGE = {"silo"}
 
 
 def write_stl(path, tris, name):
@@ -180,12 +246,15 @@ def write_stl(path, tris, name):
 def main(names):
     folder = HERE / "meshes"
     folder.mkdir(exist_ok=True)
-    for name in names or MESHES:
+    for name in names or [m for m in MESHES if m not in LARGE]:
         if name not in MESHES:
             sys.exit(f"unknown mesh {name!r}: one of {', '.join(MESHES)}")
-        tris = MESHES[name]()
-        write_stl(folder / f"{name}.stl", tris, f"polydem {name} (launch/production/make_meshes.py)")
-        print(f"{folder / name}.stl: {len(tris)} triangles")
+        made = MESHES[name]()
+        parts = made.items() if isinstance(made, dict) else [(None, made)]
+        for part, tris in parts:
+            stem = f"{name}_{part}" if part else name
+            write_stl(folder / f"{stem}.stl", tris, f"polydem {stem} (launch/production/make_meshes.py)")
+            print(f"{folder / stem}.stl: {len(tris)} triangles")
 
 
 if __name__ == "__main__":
