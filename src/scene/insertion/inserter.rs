@@ -132,6 +132,61 @@ impl Inserter {
                 self.count_done[k] = true;
                 continue;
             }
+            // Cylinder regions: the lattice's sites or the packing's particles inside, bottom
+            // up; validation checked that they hold the count.
+            if let (
+                Some(spacing),
+                Region::Cylinder {
+                    base,
+                    axis,
+                    radius,
+                    height,
+                },
+            ) = (ins.lattice, &ins.region)
+            {
+                let sites =
+                    super::cylinder_sites(base, axis, *radius, *height, &spacing, |rho, _| {
+                        rho <= *radius
+                    });
+                for &c in sites
+                    .iter()
+                    .skip(self.inserted[k] as usize)
+                    .take(n_due as usize)
+                {
+                    self.place_at(ins, particles, scene, c, next_id);
+                    self.inserted[k] += 1;
+                    report.inserted += 1;
+                }
+                self.last_insertion_time = Some(t);
+                self.count_done[k] = true;
+                continue;
+            }
+            if let (
+                Some(tiled),
+                Region::Cylinder {
+                    base,
+                    axis,
+                    radius,
+                    height,
+                },
+            ) = (&ins.packing, &ins.region)
+            {
+                let bound = scene.templates[scene.particle_types[ins.particle_type].template]
+                    .circumscribed_radius;
+                let kept = tiled.in_cylinder(base, axis, *radius, *height, bound);
+                for &(c, orientation, scale) in kept
+                    .iter()
+                    .skip(self.inserted[k] as usize)
+                    .take(n_due as usize)
+                {
+                    Self::push(ins, particles, scene, (scale, orientation), c, next_id);
+                    self.inserted[k] += 1;
+                    report.inserted += 1;
+                }
+                self.last_insertion_time = Some(t);
+                self.count_done[k] = true;
+                continue;
+            }
             if let (Some(spacing), Region::Box { min, max }) = (ins.lattice, &ins.region) {
                 // Validation checked that the lattice holds the count.
                 // The 1e-9 absorbs the rounding of a region sized as an exact multiple of the spacing.

@@ -16,6 +16,7 @@ mod placement;
 mod region;
 
 pub use region::Region;
+pub(crate) use region::{cylinder_frame, cylinder_sites};
 
 use crate::io::Packing;
 use crate::rng::Rng;
@@ -67,12 +68,16 @@ pub struct Insertion {
     /// Random positions tried per particle before it counts as not placed.
     pub max_attempts: u32,
     /// Lattice spacing: particles at the points of a simple cubic lattice filling the box
-    /// region, x fastest, then y, then z (count only). No overlap test: the spacing decides,
-    /// so a lattice can start as a dense packing in contact (benchmarks, compaction).
+    /// region, x fastest, then y, then z (count only); in a cylinder region, the sites whose
+    /// centre lies inside the cylinder, bottom up ([`cylinder_sites`]). No overlap
+    /// test: the spacing decides, so a lattice can start as a dense packing in contact
+    /// (benchmarks, compaction).
     pub lattice: Option<Vector3<f64>>,
     /// A frozen packing tiled over the box region (count only): particle `j` is particle
     /// `j mod n` of the cell in tile `j div n` (x fastest), with the cell's orientation and
-    /// scale. No overlap test and no random draw: the packing decides.
+    /// scale; in a cylinder region, the tiles' particles whose bounding sphere lies inside it,
+    /// bottom up ([`TiledPacking::in_cylinder`]). No overlap test and no random draw: the
+    /// packing decides.
     pub packing: Option<TiledPacking>,
 }
 
@@ -119,6 +124,33 @@ impl TiledPacking {
         let c =
             Vector3::from_fn(|a, _| min[a] + self.packing.cell[a] * t[a] as f64 + p.position[a]);
         (c, p.orientation, p.scale)
+    }
+
+    /// The tiling of a cylinder region: the cell repeated over the square prism around it in
+    /// its [`cylinder_frame`] (`self.tiles` copies from its corner `(−radius, −radius,
+    /// 0)`), turned into the world by that frame, keeping the particles whose bounding sphere
+    /// (radius `bound × scale`) lies inside the cylinder; tile by tile bottom up, each tile's
+    /// particles in the file's order.
+    pub fn in_cylinder(
+        &self,
+        base: &Vector3<f64>,
+        axis: &Vector3<f64>,
+        radius: f64,
+        height: f64,
+        bound: f64,
+    ) -> Vec<(Vector3<f64>, UnitQuaternion<f64>, f64)> {
+        let f = cylinder_frame(axis);
+        let q = UnitQuaternion::from_rotation_matrix(&f);
+        let corner = Vector3::new(-radius, -radius, 0.0);
+        let mut out = Vec::new();
+        for j in 0..self.count() {
+            let (l, o, s) = self.particle(j, &corner);
+            let r = bound * s;
+            if l.xy().norm() <= radius - r && l.z >= r && l.z <= height - r {
+                out.push((base + f * l, q * o, s));
+            }
+        }
+        out
     }
 }
 

@@ -88,6 +88,51 @@ impl Region {
     }
 }
 
+/// The frame of a cylinder region for lattices and packings: `(u, v, axis)` right-handed,
+/// `u` and `v` from [`perpendicular_basis`]. Lattice spacings and packing cells are given in
+/// this frame (the first two components across the axis, the third along it).
+pub fn cylinder_frame(axis: &Vector3<f64>) -> nalgebra::Rotation3<f64> {
+    let (u, v) = perpendicular_basis(axis);
+    nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_columns(&[u, v, *axis]))
+}
+
+/// The sites of a lattice of `spacing` (in the [`cylinder_frame`]) filling the square prism
+/// around a cylinder, `(c + 0.5) spacing` from its corner `(−radius, −radius, 0)`, kept where
+/// `keep(ρ, h)` accepts the site's distance ρ from the axis and height h along it; in lattice
+/// order (first frame axis fastest, the axis slowest: bottom up).
+pub fn cylinder_sites(
+    base: &Vector3<f64>,
+    axis: &Vector3<f64>,
+    radius: f64,
+    height: f64,
+    spacing: &Vector3<f64>,
+    keep: impl Fn(f64, f64) -> bool,
+) -> Vec<Vector3<f64>> {
+    let f = cylinder_frame(axis);
+    let n = |len: f64, s: f64| (len / s + 1e-9).floor().max(0.0) as u64;
+    let (nu, nv, nh) = (
+        n(2.0 * radius, spacing.x),
+        n(2.0 * radius, spacing.y),
+        n(height, spacing.z),
+    );
+    let mut out = Vec::new();
+    for k in 0..nh {
+        for j in 0..nv {
+            for i in 0..nu {
+                let l = Vector3::new(
+                    -radius + spacing.x * (i as f64 + 0.5),
+                    -radius + spacing.y * (j as f64 + 0.5),
+                    spacing.z * (k as f64 + 0.5),
+                );
+                if keep(l.xy().norm(), l.z) {
+                    out.push(base + f * l);
+                }
+            }
+        }
+    }
+    out
+}
+
 /// Two unit vectors completing the unit `a` to a right-handed orthonormal basis.
 fn perpendicular_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     // Cross with the coordinate axis least aligned with a: never near-parallel.

@@ -99,8 +99,33 @@ impl Validator<'_> {
                             );
                         }
                     }
-                    (Region::Box { .. }, _) => {}
-                    _ => self.err(&k("lattice"), "only allowed with a box region"),
+                    (
+                        Region::Cylinder {
+                            base,
+                            axis,
+                            radius,
+                            height,
+                        },
+                        InsertionMode::Count(n),
+                    ) if v.iter().all(|&x| x > 0.0 && x.is_finite()) => {
+                        // Bounded before it is counted: the sites are enumerated.
+                        let cells = (2.0 * radius / v.x) * (2.0 * radius / v.y) * (height / v.z);
+                        if cells > 1e9 {
+                            self.err(&k("lattice"), format!("{cells:.3e} lattice points around the cylinder: at most 1e9"));
+                        } else {
+                            let sites = crate::scene::insertion::cylinder_sites(
+                                base, axis, *radius, *height, &v, |rho, _| rho <= *radius,
+                            )
+                            .len();
+                            if *n as usize > sites {
+                                self.err(
+                                    &k("count"),
+                                    format!("{n} particles do not fit on the lattice: it has {sites} points in the cylinder"),
+                                );
+                            }
+                        }
+                    }
+                    _ => {}
                 }
                 v
             });
@@ -157,9 +182,53 @@ impl Validator<'_> {
                 return None;
             }
         };
+        if let Region::Cylinder {
+            base,
+            axis,
+            radius,
+            height,
+        } = region
+        {
+            // Tiles over the square prism around the cylinder, in its frame; the particles whose
+            // bounding sphere lies inside are kept, and must hold the count.
+            let c = packing.cell;
+            let n = [2.0 * radius / c[0], 2.0 * radius / c[1], height / c[2]];
+            let total =
+                n.iter().map(|x| x.ceil()).product::<f64>() * packing.particles.len() as f64;
+            if total > 1e9 {
+                self.err(
+                    &k("region"),
+                    format!("{total:.3e} packing particles around the cylinder: at most 1e9"),
+                );
+                return None;
+            }
+            let tiled = TiledPacking {
+                file: path,
+                packing: std::sync::Arc::new(packing),
+                tiles: n.map(|x| x.ceil() as u64),
+            };
+            let bound = scene
+                .particle_types
+                .get(particle_type)
+                .and_then(|t| scene.templates.get(t.template))
+                .map_or(0.0, |t| t.circumscribed_radius);
+            let kept = tiled.in_cylinder(base, axis, *radius, *height, bound).len() as u64;
+            match mode {
+                InsertionMode::Count(n) if *n <= kept => {}
+                InsertionMode::Count(n) => self.err(
+                    &k("count"),
+                    format!("{n} particles do not fit: the packing tiled over the cylinder has {kept} whose bounding sphere lies inside it"),
+                ),
+                _ => self.err(
+                    &k("packing"),
+                    "only allowed with count (a packing is placed at the start)",
+                ),
+            }
+            self.packing_scales(i, s, &tiled, scene, particle_type);
+            return Some(tiled);
+        }
         let Region::Box { min, max } = region else {
-            self.err(&k("packing"), "only allowed with a box region");
-            return None;
+            unreachable!("regions are boxes or cylinders")
         };
         let mut tiles = [0u64; 3];
         for a in 0..3 {
@@ -202,6 +271,20 @@ impl Validator<'_> {
                 "only allowed with count (a packing is placed at the start)",
             ),
         }
+        self.packing_scales(i, s, &tiled, scene, particle_type);
+        Some(tiled)
+    }
+
+    /// A packing's scales must all be the particle type's fixed scale.
+    fn packing_scales(
+        &mut self,
+        i: usize,
+        s: &schema::InsertionSection,
+        tiled: &TiledPacking,
+        scene: &Scene,
+        particle_type: usize,
+    ) {
+        let k = |f: &str| format!("insertions[{i}].{f}");
         if let Some(dist) = scene.scale_distributions.get(particle_type) {
             let scales = tiled.packing.particles.iter().map(|p| p.scale);
             match dist {
@@ -219,7 +302,6 @@ impl Validator<'_> {
                 }
             }
         }
-        Some(tiled)
     }
 
     /// Refuses count insertions whose particles, all placed at the start, cannot fit in this
