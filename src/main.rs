@@ -173,6 +173,24 @@ enum AnalyzeWhat {
         #[arg(long)]
         spacing: Option<f64>,
     },
+    /// The top surface of a fill in a vertical cylinder by distance from the axis, and the
+    /// angle of the cone fitted to it: a heap's angle of repose (negative for a crater).
+    Heap {
+        #[command(flatten)]
+        at: AnalyzedCylinder,
+        /// Floor height (m).
+        #[arg(long, default_value_t = 0.0)]
+        floor: f64,
+        /// Rings of equal width from the axis to the wall.
+        #[arg(long, default_value_t = 20)]
+        rings: usize,
+        /// Fitted range of distances from the axis, as fractions of the radius.
+        #[arg(long, value_delimiter = ',', default_values_t = [0.2, 0.8])]
+        fit: Vec<f64>,
+        /// Spacing of the points sampled on each ring (m; default radius / 200).
+        #[arg(long)]
+        spacing: Option<f64>,
+    },
     /// The flow of a quasi-2D drum turning about the y axis, averaged over frames: velocity
     /// field, dynamic angle of repose and flowing layer depth (docs/production.md §2).
     Drum {
@@ -472,6 +490,34 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                     };
                     serde_json::to_value(analysis::radial_porosity(
                         &solids, &tube, annuli, spacing,
+                    ))?
+                }
+                AnalyzeWhat::Heap {
+                    at,
+                    floor,
+                    rings,
+                    fit,
+                    spacing,
+                } => {
+                    let r = positive("radius", at.radius)?;
+                    let spacing = positive("spacing", spacing.unwrap_or(r / 200.0))?;
+                    let fit = match fit.as_slice() {
+                        [a, b] if (0.0..1.0).contains(a) && b > a && *b <= 1.0 => [*a, *b],
+                        v => anyhow::bail!(
+                            "--fit {v:?}: two fractions of the radius A,B with 0 ≤ A < B ≤ 1"
+                        ),
+                    };
+                    if rings < 2 {
+                        anyhow::bail!("--rings {rings}: at least 2");
+                    }
+                    let (solids, centre, radius) = open(&at)?;
+                    let disk = analysis::Disk {
+                        centre,
+                        radius,
+                        floor,
+                    };
+                    serde_json::to_value(analysis::heap_profile(
+                        &solids, &disk, rings, spacing, fit,
                     ))?
                 }
                 AnalyzeWhat::Drum {

@@ -11,6 +11,7 @@ the drum's three speeds as three drums, each with its own walls and insertion; t
 not touch (their walls are closed and 2 cm or more apart), so each is the experiment alone,
 with its own random placements. `polydem analyze` takes one copy at a time (`--centre`, `--y`).
 """
+import math
 import pathlib
 import sys
 
@@ -175,9 +176,275 @@ series_interval = 0.01
     return "".join(out)
 
 
+# --- case 4: the silo ---------------------------------------------------------------------------
+
+GRAIN = "../../meshes/particles/mineral_grain.stl"   # 18 vertices, 32 faces, d_c = 2.152 mm
+GRAIN_DC = 2 * 0.0010760251611716461                  # circumscribed diameter at scale 1 (m)
+GRAIN_V = 1.0128777552160202e-09                      # volume at scale 1 (m³)
+BENCH_PACKING = HERE.parent / "bench" / "packings" / "mineral_grains.packing"
+
+
+def scaled_packing(factor, out):
+    """The benchmarks' settled packing of 4000 mineral grains (launch/bench/packings/, 7
+    contacts per particle, solid fraction 0.559) enlarged `factor` times: positions, cell and
+    scale, the same packing at another size."""
+    lines = BENCH_PACKING.read_text().splitlines()
+    res = [lines[0], f"# the packing of {BENCH_PACKING.relative_to(HERE.parent.parent)} enlarged {factor!r} times "
+           "(launch/production/make_scenes.py)"]
+    for line in lines[1:]:
+        if line.startswith("#") or line.startswith("particles"):
+            res.append(line)
+        elif line.startswith("cell"):
+            res.append("cell " + " ".join(repr(float(x) * factor) for x in line.split()[1:]))
+        else:
+            v = [float(x) for x in line.split()]
+            res.append(" ".join([repr(x * factor) for x in v[:3]] + line.split()[3:7] + [repr(v[7] * factor)]))
+    (HERE / "packings").mkdir(exist_ok=True)
+    path = HERE / "packings" / out
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text("\n".join(res) + "\n")
+    tmp.replace(path)
+    return path
+
+
+GRAIN_MATERIALS = """[[materials]]
+name = "ore"                         # a mineral ore; the seed gives no material for its silo
+youngs_modulus = {e}
+poisson_ratio = 0.3
+density = 2500.0
+
+[[materials]]
+name = "steel"
+youngs_modulus = 2.0e11
+poisson_ratio = 0.3
+density = 7800.0
+
+[[material_pairs]]
+materials = ["ore", "ore"]
+restitution = 0.5
+friction = 0.5
+
+[[material_pairs]]
+materials = ["ore", "steel"]
+restitution = 0.5
+friction = 0.3
+"""
+
+
+def silo_walls(prefix, bands, up=""):
+    names = ["hopper"] + (["side"] if bands == 0 else ["side_west"] + [f"band_{b:02d}" for b in range(bands)])
+    out = []
+    for n in names:
+        out.append(f"""
+[[walls]]
+name = "{n}"
+mesh = "{up}meshes/{prefix}_{n}.stl"
+material = "steel"
+""")
+    return "".join(out)
+
+
+def kept_in_cylinder(packing, radius, height, bound):
+    """How many particles of `packing` tiled over the square prism around a cylinder have their
+    bounding sphere (radius `bound`) inside it: the count `[[insertions]] packing` keeps in a
+    cylinder region (docs/scene.md). Distances from the axis do not depend on the frame's
+    turn about it, so this needs only the cell and the positions."""
+    cell, pts = None, []
+    for line in packing.read_text().splitlines():
+        if line.startswith("cell"):
+            cell = [float(x) for x in line.split()[1:]]
+        elif line and not line.startswith(("#", "particles")):
+            pts.append([float(x) for x in line.split()[:3]])
+    tiles = [math.ceil(2 * radius / cell[0]), math.ceil(2 * radius / cell[1]), math.ceil(height / cell[2])]
+    n = 0
+    for k in range(tiles[2]):
+        for j in range(tiles[1]):
+            for i in range(tiles[0]):
+                ox, oy, oz = -radius + i * cell[0], -radius + j * cell[1], k * cell[2]
+                for x, y, z in pts:
+                    lx, ly, lz = ox + x, oy + y, oz + z
+                    if math.hypot(lx, ly) <= radius - bound and bound <= lz <= height - bound:
+                        n += 1
+    return n
+
+
+def hopper_steps(r, r0, z_h, steps, margin, bound):
+    """Cylinders stacked inside the cone (radius r0 at z = 0 to r at z_h), each as wide as the
+    cone at its bottom less `margin`, `steps` of them: regions that fill the hopper without
+    touching it. Returns (base z, radius, height) per step; steps narrower than a grain are
+    left out."""
+    out = []
+    for k in range(steps):
+        z0, z1 = z_h * k / steps, z_h * (k + 1) / steps
+        rad = r0 + (r - r0) * z0 / z_h - margin
+        if rad > 1.5 * bound:
+            out.append((z0, rad, z1 - z0))
+    return out
+
+
+SILO_SCALE = 23.0       # d_c = 49.5 mm: 1e6 grains fill the seed's silo to about 7 m
+SILO_GRAINS = 1_000_000
+
+
+def silo_filled():
+    """Case 4a: the seed's silo (make_meshes.py silo, 151 504 facets) holding 1e6 grains from
+    the start: the scaled settled packing tiled in the hopper (stacked cylinders) and the
+    cylinder above it, then a short settle. For measuring the filled state, not for its
+    physics."""
+    packing = scaled_packing(SILO_SCALE, "mineral_grains_silo.packing")
+    r, r0, a = 1.05, 0.335, 0.0065
+    z_h = (r - r0) / math.tan(math.radians(30.0))
+    bound = GRAIN_DC / 2 * SILO_SCALE
+    steps = hopper_steps(r, r0, z_h, 8, 0.01, bound)
+    out = [f"""# Case 4a (docs/production.md §4): the seed's silo (Sec. 4.1, Fig. 19-20; 2.1 m across, 10.6 m,
+# 0.67 m outlet, corrugated side, 151 504 facets) filled with 1e6 of its mineral grains (18
+# vertices, 32 faces) of 49.5 mm circumscribed diameter, for measuring what a filled silo costs
+# on one GPU. Built without a fill: the settled packing of the benchmarks, enlarged to this
+# grain (packings/mineral_grains_silo.packing), tiled in {len(steps)} stacked cylinders inside the hopper
+# and in the cylinder above it up to the count; {SILO_GRAINS} grains. Written by make_scenes.py.
+# The side wall's mesh is not committed (7.5 MB): first run
+#   python3 launch/production/make_meshes.py silo
+
+gravity = [0.0, 0.0, -9.81]
+
+[simulation]
+dt_fraction = 0.05
+end_time = 0.05                      # s: a short settle; the bench is the point
+seed = 0
+
+[domain]
+min = [-1.1, -1.1, -0.05]
+max = [1.1, 1.1, 10.65]
+on_leaving = "error"
+
+{GRAIN_MATERIALS.format(e="1.0e7")}
+[[particle_types]]
+name = "grain"
+material = "ore"
+mesh = "{GRAIN}"
+scale = {SILO_SCALE!r}
+"""]
+    # The hopper's steps, then the cylinder: fill counts are checked by `polydem check`.
+    rest = SILO_GRAINS
+    for z0, rad, h in steps:
+        n = kept_in_cylinder(packing, rad, h, bound)
+        out.append(f"""
+[[insertions]]                       # hopper step at z = {z0:.3f} m
+type = "grain"
+region = {{ kind = "cylinder", base = [0.0, 0.0, {z0!r}], axis = [0.0, 0.0, 1.0], radius = {rad!r}, height = {h!r} }}
+packing = "packings/mineral_grains_silo.packing"
+count = {n}
+""")
+        rest -= n
+    if rest > kept_in_cylinder(packing, r - a - 0.005, 8.0, bound):
+        sys.exit("silo_filled: the cylinder cannot hold the rest of the grains")
+    out.append(f"""
+[[insertions]]                       # the cylinder above the hopper
+type = "grain"
+region = {{ kind = "cylinder", base = [0.0, 0.0, {z_h!r}], axis = [0.0, 0.0, 1.0], radius = {r - a - 0.005!r}, height = 8.0 }}
+packing = "packings/mineral_grains_silo.packing"
+count = {rest}
+""")
+    out.append(silo_walls("silo", 0))
+    out.append("""
+[[walls]]
+name = "gate"
+mesh = "meshes/silo_gate.stl"        # closes the outlet from below
+material = "steel"
+
+[output]
+dir = "out/silo_filled"
+checkpoint_interval = 0.05
+series_interval = 0.005
+""")
+    return "".join(out)
+
+
+QUARTER_SCALE = 15.0    # d_c = 32.3 mm, d_eq = 18.7 mm: the 1:4 silo is 16 grains across
+QUARTER_GRAINS = 40_000 # about 1.1 m of bed above the hopper
+
+
+def silo_fill(name, prefix, d, height, outlet, scale, grains, rate, e, bands, end, inlet, doc, up=""):
+    """A silo filled from a central inlet at its top (case 4b and its twin): grains placed at
+    random in a cylinder of radius `inlet` d/2 just below the rim, thrown down at 2 m/s so the
+    inlet clears quickly, onto a gate closing the outlet. The side's east half is cut into
+    `bands` walls for the wall stress."""
+    r = d / 2
+    bound = GRAIN_DC / 2 * scale
+    top = height - 2.5 * bound
+    feed_h = 6 * bound
+    return f"""{doc}
+gravity = [0.0, 0.0, -9.81]
+
+[simulation]
+dt_fraction = 0.05
+end_time = {end!r}
+seed = 0
+
+[domain]
+min = [{-r - 0.02!r}, {-r - 0.02!r}, -0.05]
+max = [{r + 0.02!r}, {r + 0.02!r}, {height + 0.05!r}]
+on_leaving = "error"
+
+{GRAIN_MATERIALS.format(e=e)}
+[[particle_types]]
+name = "grain"
+material = "ore"
+mesh = "{up}{GRAIN}"
+scale = {scale!r}
+
+[[insertions]]                       # the inlet: a central stream from the top
+type = "grain"
+region = {{ kind = "cylinder", base = [0.0, 0.0, {top - feed_h!r}], axis = [0.0, 0.0, 1.0], radius = {inlet * r!r}, height = {feed_h!r} }}
+rate = {rate!r}
+total = {grains}
+velocity = [0.0, 0.0, -2.0]
+orientation = "random"
+{silo_walls(prefix, bands, up)}
+[[walls]]
+name = "gate"
+mesh = "{up}meshes/{prefix}_gate.stl"
+material = "steel"
+
+[output]
+dir = "out/{name}"
+frame_interval = 0.25
+formats = ["vtu"]
+fields = ["id", "type", "velocity", "orientation"]
+checkpoint_interval = 0.5
+series_interval = 0.005
+"""
+
+
+def silo_quarter_fill():
+    return silo_fill(
+        "silo_quarter_fill", "silo_quarter", 0.525, 2.65, 0.1675, QUARTER_SCALE, QUARTER_GRAINS,
+        8000.0, "3.0e6", 6, 6.5, 0.6,
+        f"""# Case 4b (docs/production.md §4): the seed's silo at 1:4 (make_meshes.py silo_quarter: 0.525 m
+# across, 2.65 m, 0.1675 m outlet, 30 degree hopper, corrugated side whose east half is six
+# height bands for the wall stress) filled to completion from a central inlet at the top with
+# {QUARTER_GRAINS} mineral grains of 32.3 mm (circumscribed; 18.7 mm volume-equivalent), onto a gate
+# closing the outlet: 8000 per second for 5 s, then 1.5 s to settle; E softened to 3 MPa (the
+# bed's wall stress saturates near 14 kPa, a strain of 0.5 %). Compared with Janssen's law
+# (the bands' forces in series.csv), its packing fraction and the heap's angle of repose
+# (`polydem analyze porosity` and `heap`). Written by make_scenes.py.""")
+
+
+def silo_twin():
+    return silo_fill(
+        "silo_twin", "silo_twin", 0.10, 0.45, 0.04, 11.6, 160, 2000.0, "1.0e6", 2, 0.7, 0.7,
+        """# Twin of ../silo_quarter_fill.toml for `make test` (tests/production.rs): a narrow silo
+# (make_meshes.py silo_twin: 0.10 m across, 0.45 m, a flat 60 degree hopper, two wall bands)
+# fed from the central inlet with 160 grains of 25 mm (circumscribed), E = 1 MPa, settled by
+# 0.7 s: a bed about one diameter deep, where the wall already carries part of the weight. Written by make_scenes.py.""", up="../")
+
+
 SCENES = {
     "dodecahedra_cylinder_x10": dodecahedra_cylinder_x10,
     "drum_speeds": drum_speeds,
+    "silo_filled": silo_filled,
+    "silo_quarter_fill": silo_quarter_fill,
+    "twins/silo": silo_twin,
 }
 
 

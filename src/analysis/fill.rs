@@ -69,3 +69,79 @@ pub fn fill_height(solids: &PackedSolids, disk: &Disk, spacing: f64) -> FillHeig
         samples: lines.len(),
     }
 }
+
+/// The top surface of a fill as a function of the distance from the container's axis, and the
+/// cone that fits it: a heap poured on the axis (or a crater drained through it).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeapProfile {
+    /// Distances from the axis of the rings sampled, m.
+    pub radii: Vec<f64>,
+    /// Mean height of the top surface above the floor on each ring, m.
+    pub heights: Vec<f64>,
+    /// The least-squares line `h = h0 − ρ tan α` over the rings from `fit[0]` to `fit[1]`:
+    /// `[h0, tan α]`.
+    pub line: [f64; 2],
+    /// The angle α of the fitted cone to the horizontal, degrees: positive for a heap
+    /// (highest on the axis), negative for a crater.
+    pub angle_deg: f64,
+    /// The range of distances fitted, m.
+    pub fit: [f64; 2],
+}
+
+/// The top surface of `solids` in the container of cross-section `disk` on `rings` rings of
+/// equal width (the middle of each), each sampled at points `spacing` apart, and the cone
+/// fitted to the rings between `fit[0]` and `fit[1]` (fractions of the radius): the angle of
+/// repose of a heap (the region near the axis, where the feed lands, and the region near the
+/// wall, which holds the grains up, are usually left out).
+pub fn heap_profile(
+    solids: &PackedSolids,
+    disk: &Disk,
+    rings: usize,
+    spacing: f64,
+    fit: [f64; 2],
+) -> HeapProfile {
+    let width = disk.radius / rings as f64;
+    let radii: Vec<f64> = (0..rings).map(|k| (k as f64 + 0.5) * width).collect();
+    let heights: Vec<f64> = radii
+        .par_iter()
+        .map(|&rho| {
+            let n = ((std::f64::consts::TAU * rho / spacing).ceil() as usize).max(8);
+            // Summed in order: the same result at any thread count.
+            (0..n)
+                .map(|j| {
+                    let phi = std::f64::consts::TAU * j as f64 / n as f64;
+                    let (x, y) = (
+                        disk.centre[0] + rho * phi.cos(),
+                        disk.centre[1] + rho * phi.sin(),
+                    );
+                    solids
+                        .top_at(x, y)
+                        .map_or(0.0, |z| (z - disk.floor).max(0.0))
+                })
+                .sum::<f64>()
+                / n as f64
+        })
+        .collect();
+    let (lo, hi) = (fit[0] * disk.radius, fit[1] * disk.radius);
+    let pts: Vec<(f64, f64)> = radii
+        .iter()
+        .zip(&heights)
+        .filter(|(r, _)| **r >= lo && **r <= hi)
+        .map(|(r, h)| (*r, *h))
+        .collect();
+    let m = pts.len().max(1) as f64;
+    let (mr, mh) = pts
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (r, h)| (a + r / m, b + h / m));
+    let (srr, srh) = pts.iter().fold((0.0, 0.0), |(a, b), (r, h)| {
+        (a + (r - mr) * (r - mr), b + (r - mr) * (h - mh))
+    });
+    let slope = if srr > 0.0 { srh / srr } else { 0.0 };
+    HeapProfile {
+        radii,
+        heights,
+        line: [mh - slope * mr, -slope],
+        angle_deg: (-slope).atan().to_degrees(),
+        fit: [lo, hi],
+    }
+}

@@ -12,7 +12,7 @@ pub mod porosity;
 pub mod solids;
 
 pub use drum::{DrumFlow, DrumSamples, DrumSection, FieldCell};
-pub use fill::{Disk, FillHeight, fill_height};
+pub use fill::{Disk, FillHeight, HeapProfile, fill_height, heap_profile};
 pub use porosity::{RadialPorosity, Tube, radial_porosity};
 pub use solids::PackedSolids;
 
@@ -227,6 +227,56 @@ mod tests {
                 "{centre:?}: {f:?}"
             );
         }
+    }
+
+    #[test]
+    fn a_sphere_cap_heap_has_the_slope_of_its_tangent_cone() {
+        // A ball of radius a centred on the axis at height c: its top at distance ρ is
+        // c + √(a² − ρ²), so a ring's mean height is exact, and the least-squares line through
+        // the rings' heights is the closed form's, computed here from the same rings.
+        let (a, c) = (0.05, 0.01);
+        let s = one(
+            sphere(a),
+            Vector3::new(0.0, 0.0, c),
+            UnitQuaternion::identity(),
+        );
+        let disk = Disk {
+            centre: [0.0, 0.0],
+            radius: 0.04,
+            floor: 0.0,
+        };
+        let h = heap_profile(&s, &disk, 8, 1e-4, [0.2, 0.8]);
+        let exact: Vec<f64> = h.radii.iter().map(|r| c + (a * a - r * r).sqrt()).collect();
+        for (got, want) in h.heights.iter().zip(&exact) {
+            assert!(
+                (got - want).abs() < 1e-12,
+                "ring height {got} against {want}"
+            );
+        }
+        let pts: Vec<(f64, f64)> = h
+            .radii
+            .iter()
+            .zip(&exact)
+            .filter(|(r, _)| **r >= 0.008 - 1e-12 && **r <= 0.032 + 1e-12)
+            .map(|(r, z)| (*r, *z))
+            .collect();
+        assert_eq!(
+            pts.len(),
+            4,
+            "rings at 2.5 … 37.5 mm: the four from 12.5 to 27.5 mm"
+        );
+        let m = pts.len() as f64;
+        let (mr, mz) = pts
+            .iter()
+            .fold((0.0, 0.0), |(p, q), (r, z)| (p + r / m, q + z / m));
+        let slope = pts.iter().map(|(r, z)| (r - mr) * (z - mz)).sum::<f64>()
+            / pts.iter().map(|(r, _)| (r - mr) * (r - mr)).sum::<f64>();
+        assert!((h.angle_deg - (-slope).atan().to_degrees()).abs() < 1e-9);
+        assert!(
+            h.angle_deg > 5.0 && h.angle_deg < 45.0,
+            "a cap sloping down: {}",
+            h.angle_deg
+        );
     }
 
     #[test]
