@@ -1,0 +1,75 @@
+#!/usr/bin/env bash
+# Runs production scenes of launch/production/ side by side on one GPU under the CUDA
+# Multi-Process Service, each continuing from its last checkpoint, for at most LIMIT seconds,
+# then analyses those that reached their end (docs/production.md: "GPU cost of small scenes").
+#
+#   LIMIT=540 OUT=results bash launch/production/run_on_gpu.sh dodecahedra_cylinder_x10 drum_speeds fixed_bed
+#
+# Run it again to continue: a run stopped by the limit writes checkpoints/latest.ckpt (SIGINT)
+# and the next call restarts from it. POLYDEM (default target/release/polydem) is the binary;
+# PRECISION (default mixed) the GPU precision; THREADS the host threads per run (default: the
+# cores shared out). Results (summaries, analyses, plots) go to OUT (default
+# launch/production/out/results).
+set -uo pipefail
+here=$(cd "$(dirname "$0")" && pwd)
+bin=${POLYDEM:-$here/../../target/release/polydem}
+out=${OUT:-$here/out/results}
+limit=${LIMIT:-540}
+scenes=("$@")
+[ ${#scenes[@]} -gt 0 ] || { echo "usage: $0 SCENE ... (names of launch/production/*.toml)" >&2; exit 2; }
+mkdir -p "$out"
+export RAYON_NUM_THREADS=${THREADS:-$(( ($(nproc) + ${#scenes[@]} - 1) / ${#scenes[@]} ))}
+mps=0
+if command -v nvidia-cuda-mps-control > /dev/null && [ ${#scenes[@]} -gt 1 ]; then
+  nvidia-cuda-mps-control -d && mps=1
+fi
+for s in "${scenes[@]}"; do
+  (
+    dir=$here/out/$s
+    if [ -f "$dir/summary.json" ] && grep -q '"interrupted": false' "$dir/summary.json"; then
+      echo "$s: finished before"; exit 0
+    fi
+    if [ -f "$dir/checkpoints/latest.ckpt" ]; then args=(--restart "$dir/checkpoints/latest.ckpt"); else args=(--overwrite); fi
+    start=$(date +%s)
+    timeout -s INT "$limit" "$bin" run "$here/$s.toml" --backend cuda --gpu-precision "${PRECISION:-mixed}" \
+      "${args[@]}" >> "$out/$s.log" 2>&1
+    echo "$s: rc $? after $(( $(date +%s) - start )) s (${args[*]})"
+  ) &
+done
+wait
+[ $mps = 1 ] && echo quit | nvidia-cuda-mps-control
+# The analyses of the runs that reached their end.
+done_() { [ -f "$here/out/$1/summary.json" ] && grep -q '"interrupted": false' "$here/out/$1/summary.json"; }
+last_ckpt() { ls "$here/out/$1/checkpoints/"step_*.ckpt 2>/dev/null | sort | tail -1; }
+for s in "${scenes[@]}"; do
+  done_ "$s" || continue
+  cp "$here/out/$s/summary.json" "$out/$s.summary.json"
+  case $s in
+    dodecahedra_cylinder_x10)
+      ck=$(last_ckpt "$s")
+      for k in 0 1 2 3 4 5 6 7 8 9; do
+        x=$(python3 -c "print(0.12 * ($k % 5))"); y=$(python3 -c "print(0.12 * ($k // 5))")
+        "$bin" analyze fill-height "$here/$s.toml" "$ck" --radius 0.05 --centre "$x,$y" > "$out/pour_$k.json"
+      done ;;
+    drum_speeds)
+      for k in 0 1 2; do
+        y=$(python3 -c "print(0.03 * ($k - 1))")
+        "$bin" analyze drum "$here/out/$s/particles" --radius 0.15 --centre 0,0 \
+          --y "$(python3 -c "print($y - 0.0055)"),$(python3 -c "print($y + 0.0055)")" --from 2 --cell 0.005 \
+          --field "$out/drum_$k.csv" > "$out/drum_$k.json"
+      done
+      python3 "$here/drum_field.py" "$out/drum_speeds.svg" "30 rpm:$out/drum_0.csv:$out/drum_0.json" \
+        "45 rpm:$out/drum_1.csv:$out/drum_1.json" "60 rpm:$out/drum_2.csv:$out/drum_2.json" ;;
+    fixed_bed)
+      ck=$(last_ckpt "$s")
+      "$bin" analyze fill-height "$here/$s.toml" "$ck" --radius 0.0125 > "$out/fixed_bed_fill.json"
+      top=$(python3 -c "import json; print(json.load(open('$out/fixed_bed_fill.json'))['mean_surface'] - 0.0055)")
+      "$bin" analyze porosity "$here/$s.toml" "$ck" --radius 0.0125 --z "0.0055,$top" --annuli 50 \
+        > "$out/fixed_bed_porosity.json" ;;
+    silo_quarter_fill)
+      ck=$(last_ckpt "$s")
+      "$bin" analyze fill-height "$here/$s.toml" "$ck" --radius 0.25 > "$out/silo_fill.json"
+      "$bin" analyze heap "$here/$s.toml" "$ck" --radius 0.25 > "$out/silo_heap.json" ;;
+  esac
+done
+ls -la "$out"
