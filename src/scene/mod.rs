@@ -17,8 +17,8 @@ mod walls;
 
 pub use error::{KeyError, SceneError};
 pub use insertion::{
-    DEFAULT_MAX_ATTEMPTS, InsertReport, Inserter, InserterState, Insertion, InsertionMode,
-    OrientationMode, Region, TiledPacking,
+    DEFAULT_MAX_ATTEMPTS, ImportedBody, ImportedState, InsertReport, Inserter, InserterState,
+    Insertion, InsertionMode, OrientationMode, Region, TiledPacking,
 };
 pub use report::check_report;
 pub use settings::{

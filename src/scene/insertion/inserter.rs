@@ -132,6 +132,32 @@ impl Inserter {
                 self.count_done[k] = true;
                 continue;
             }
+            if let Some(state) = &ins.state {
+                // Validation checked that the state holds the count.
+                for b in state
+                    .bodies
+                    .iter()
+                    .skip(self.inserted[k] as usize)
+                    .take(n_due as usize)
+                {
+                    Self::push(
+                        ins,
+                        particles,
+                        scene,
+                        (b.scale, b.orientation),
+                        b.position,
+                        next_id,
+                    );
+                    let i = particles.len() - 1;
+                    particles.velocity[i] = b.velocity;
+                    particles.angular_velocity[i] = b.angular_velocity;
+                    self.inserted[k] += 1;
+                    report.inserted += 1;
+                }
+                self.last_insertion_time = Some(t);
+                self.count_done[k] = true;
+                continue;
+            }
             // Cylinder regions: the lattice's sites or the packing's particles inside, bottom
             // up; validation checked that they hold the count.
             if let (

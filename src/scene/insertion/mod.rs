@@ -79,6 +79,68 @@ pub struct Insertion {
     /// bottom up ([`TiledPacking::in_cylinder`]). No overlap test and no random draw: the
     /// packing decides.
     pub packing: Option<TiledPacking>,
+    /// Particles of another run's checkpoint, those with their centre inside the region,
+    /// placed as they were (count only): a state filled once and reused, e.g. a silo filled
+    /// and then discharged through outlets of several sizes.
+    pub state: Option<ImportedState>,
+}
+
+/// One particle of an [`ImportedState`] as the checkpoint holds it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImportedBody {
+    pub position: Vector3<f64>,
+    pub orientation: UnitQuaternion<f64>,
+    pub velocity: Vector3<f64>,
+    pub angular_velocity: Vector3<f64>,
+    pub scale: f64,
+}
+
+/// The particles an insertion takes from a checkpoint (`[[insertions]] state`).
+#[derive(Clone, PartialEq)]
+pub struct ImportedState {
+    /// The checkpoint it was read from.
+    pub file: std::path::PathBuf,
+    /// Its particles inside the region, in the checkpoint's order.
+    pub bodies: std::sync::Arc<Vec<ImportedBody>>,
+}
+
+/// The particles' count and a hash of every value, not the path: the restart fingerprint
+/// hashes this text, so a changed checkpoint is another scene while a moved one is not.
+impl std::fmt::Debug for ImportedState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // FNV-1a over the bits of every value, in order.
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |x: f64| {
+            for b in x.to_bits().to_le_bytes() {
+                h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
+            }
+        };
+        for b in self.bodies.iter() {
+            let q = b.orientation.quaternion();
+            for x in [
+                b.position.x,
+                b.position.y,
+                b.position.z,
+                q.w,
+                q.i,
+                q.j,
+                q.k,
+                b.velocity.x,
+                b.velocity.y,
+                b.velocity.z,
+                b.angular_velocity.x,
+                b.angular_velocity.y,
+                b.angular_velocity.z,
+                b.scale,
+            ] {
+                eat(x);
+            }
+        }
+        f.debug_struct("ImportedState")
+            .field("bodies", &self.bodies.len())
+            .field("hash", &h)
+            .finish()
+    }
 }
 
 /// A [`Packing`] and how many times its cell repeats along x, y and z to fill a box region.

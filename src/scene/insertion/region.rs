@@ -43,6 +43,23 @@ impl Region {
         }
     }
 
+    /// Whether the point `x` lies inside (boundary included).
+    pub fn contains(&self, x: &Vector3<f64>) -> bool {
+        match self {
+            Region::Box { min, max } => (0..3).all(|a| x[a] >= min[a] && x[a] <= max[a]),
+            Region::Cylinder {
+                base,
+                axis,
+                radius,
+                height,
+            } => {
+                let d = x - base;
+                let h = d.dot(axis);
+                h >= 0.0 && h <= *height && (d - axis * h).norm() <= *radius
+            }
+        }
+    }
+
     /// Volume (m³).
     pub fn volume(&self) -> f64 {
         match self {

@@ -69,6 +69,9 @@ pub struct InsertionSection {
     /// A packing file (`polydem pack`) whose periodic cell is tiled over the box region
     /// (count only; orientations and scales from the file).
     pub packing: Option<String>,
+    /// A checkpoint of another run whose particles with their centre inside the region are
+    /// placed as they were (count only: positions, orientations, velocities and scales).
+    pub state: Option<String>,
 }
 /// Kinds of insertion region.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]

@@ -133,6 +133,10 @@ impl Validator<'_> {
                 .packing
                 .as_deref()
                 .and_then(|file| self.packing(i, file, s, &region, &mode, scene, particle_type));
+            let state = s
+                .state
+                .as_deref()
+                .and_then(|file| self.state(i, file, s, &region, &mode, scene, particle_type));
             out.push(Insertion {
                 particle_type,
                 region,
@@ -143,6 +147,7 @@ impl Validator<'_> {
                 max_attempts,
                 lattice,
                 packing,
+                state,
             });
         }
         self.start_memory(&out);
@@ -273,6 +278,97 @@ impl Validator<'_> {
         }
         self.packing_scales(i, s, &tiled, scene, particle_type);
         Some(tiled)
+    }
+
+    /// `insertions[i].state`: the checkpoint read and checked, its particles inside the region
+    /// taken, each with the insertion type's mass at its scale (the same template and
+    /// material), and their number the count; `None` (with errors recorded) otherwise.
+    #[allow(clippy::too_many_arguments)]
+    fn state(
+        &mut self,
+        i: usize,
+        file: &str,
+        s: &schema::InsertionSection,
+        region: &Region,
+        mode: &InsertionMode,
+        scene: &Scene,
+        particle_type: usize,
+    ) -> Option<ImportedState> {
+        let k = |f: &str| format!("insertions[{i}].{f}");
+        for (name, set) in [
+            ("lattice", s.lattice.is_some()),
+            ("packing", s.packing.is_some()),
+            ("orientation", s.orientation.is_some()),
+            ("velocity", s.velocity.is_some()),
+            ("angular_velocity", s.angular_velocity.is_some()),
+        ] {
+            if set {
+                self.err(
+                    &k(name),
+                    "not allowed with state (the checkpoint gives every position, orientation and velocity)",
+                );
+            }
+        }
+        let path = self.resolve(file);
+        let c = match crate::io::read_checkpoint(&path) {
+            Ok(c) => c,
+            Err(e) => {
+                self.err(&k("state"), e.to_string());
+                return None;
+            }
+        };
+        let ptype = scene.particle_types.get(particle_type)?;
+        let density = scene
+            .materials
+            .get(ptype.material)
+            .map_or(0.0, |m| m.density);
+        let t = scene.templates.get(ptype.template)?;
+        let p = &c.particles;
+        let mut bodies = Vec::new();
+        for j in 0..p.len() {
+            if !region.contains(&p.position[j]) {
+                continue;
+            }
+            let mass = density * t.volume * p.scale[j].powi(3);
+            if (p.mass[j] - mass).abs() > 1e-12 * mass {
+                self.err(
+                    &k("state"),
+                    format!(
+                        "{}: particle {j} (id {}) has mass {} at scale {}; particle type \"{}\" has {mass} there (another shape or material)",
+                        path.display(),
+                        p.id[j],
+                        p.mass[j],
+                        p.scale[j],
+                        ptype.name
+                    ),
+                );
+                return None;
+            }
+            bodies.push(ImportedBody {
+                position: p.position[j],
+                orientation: p.orientation[j],
+                velocity: p.velocity[j],
+                angular_velocity: p.angular_velocity[j],
+                scale: p.scale[j],
+            });
+        }
+        match mode {
+            InsertionMode::Count(n) if *n == bodies.len() as u64 => {}
+            InsertionMode::Count(n) => self.err(
+                &k("count"),
+                format!(
+                    "{n} does not match the state: {} of the {} particles of {} have their centre in the region",
+                    bodies.len(),
+                    p.len(),
+                    path.display()
+                ),
+            ),
+            _ => self.err(&k("state"), "only allowed with count (a state is placed at the start)"),
+        }
+        Some(ImportedState {
+            file: path,
+            bodies: std::sync::Arc::new(bodies),
+        })
     }
 
     /// A packing's scales must all be the particle type's fixed scale.
