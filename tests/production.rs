@@ -259,8 +259,45 @@ fn check_silo(
     );
 }
 
+/// An orifice plate (`make_meshes.py orifice_plate`): facing up at z = 0, open within the
+/// hole's circle (to its inscribed polygon, 1 % of the radius) and closed from just outside it
+/// to 1.1 times the hopper's outlet.
+fn check_orifice(file: &str, outlet: f64, hole: f64) {
+    let plate = triangles(file);
+    let covered = |p: Vector3<f64>| plate.iter().any(|t| inside(t, &p));
+    for t in &plate {
+        assert!(
+            normal(t).z > 0.999_999 && centroid(t).z.abs() < 1e-9,
+            "{file}: flat, facing up"
+        );
+    }
+    for j in 0..720 {
+        let phi = 2.0 * PI * j as f64 / 720.0;
+        let at = |r: f64| Vector3::new(r * phi.cos(), r * phi.sin(), 0.0);
+        assert!(
+            !covered(at(0.99 * hole / 2.0)),
+            "{file}: the hole is covered at angle {phi}"
+        );
+        for r in [
+            1.01 * hole / 2.0,
+            0.5 * (hole / 2.0 + 0.55 * outlet),
+            0.55 * outlet * (1.0 - 1e-6),
+        ] {
+            assert!(covered(at(r)), "{file}: open at radius {r}, angle {phi}");
+        }
+    }
+}
+
 #[test]
 fn silo_meshes_are_what_make_meshes_py_states() {
+    for k in [4.0, 5.0, 6.0, 7.0, 8.0] {
+        let hole = (k * 0.0187f64 * 1e4).round() / 1e4;
+        check_orifice(
+            &format!("silo_quarter_orifice_{}mm.stl", (1000.0 * hole).round()),
+            0.1675,
+            hole,
+        );
+    }
     check_silo(
         "silo_quarter",
         0.525,

@@ -45,6 +45,50 @@ def ring_counts(r, size):
     return [max(6, round(2 * math.pi * r * k / m / size)) for k in range(1, m + 1)]
 
 
+def join_rings(inner, outer):
+    """Triangles between two concentric rings of any point counts, walking both by angle and
+    always closing the triangle whose new point comes first (winding fixed by the caller)."""
+    a, b = len(inner), len(outer)
+    i = j = 0
+    tris = []
+    while i < a or j < b:
+        if j == b or (i < a and (i + 1) / a < (j + 1) / b):
+            tris.append((inner[i], inner[(i + 1) % a], outer[j % b]))
+            i += 1
+        else:
+            tris.append((inner[i % a], outer[(j + 1) % b], outer[j]))
+            j += 1
+    return tris
+
+
+def facing(tris, up):
+    """The triangles wound so that their normals point up (+z) if `up`, else down."""
+    out = []
+    for t in tris:
+        u = [t[1][k] - t[0][k] for k in range(3)]
+        v = [t[2][k] - t[0][k] for k in range(3)]
+        nz = u[0] * v[1] - u[1] * v[0]
+        out.append(t if (nz > 0) == up else (t[0], t[2], t[1]))
+    return out
+
+
+def orifice_plate(outlet, hole, size):
+    """An annular plate at z = 0, facing up, closing a hopper's outlet (diameter `outlet`; its
+    outer polygon circumscribes 1.1 times the outlet's circle) but for a central hole of
+    diameter `hole` (an inscribed polygon of chords about `size`: its area is within 1 % of
+    the circle's), cut into triangles of about `size` by concentric rings."""
+    r_in, r_out = hole / 2, 0.55 * outlet
+    m = max(1, math.ceil((r_out - r_in) / size))
+    radii = [r_in + (r_out - r_in) * k / m for k in range(m + 1)]
+    counts = [max(24, round(2 * math.pi * rk / size)) for rk in radii]
+    radii[-1] = radii[-1] / math.cos(math.pi / counts[-1]) * (1 + 1e-6)
+    rings = [ring(rk, 0.0, n) for rk, n in zip(radii, counts)]
+    tris = []
+    for inner, outer in zip(rings, rings[1:]):
+        tris += join_rings(inner, outer)
+    return facing(tris, True)
+
+
 def ring_disk(r, z, size, up=True):
     """A disk covering the circle of radius r at height z, cut into triangles of about `size`
     by concentric rings; the outermost ring's polygon circumscribes the circle, so the disk
@@ -61,23 +105,8 @@ def ring_disk(r, z, size, up=True):
     centre = (0.0, 0.0, z)
     tris = [(centre, rings[0][j], rings[0][(j + 1) % counts[0]]) for j in range(counts[0])]
     for inner, outer in zip(rings, rings[1:]):
-        a, b = len(inner), len(outer)
-        i = j = 0
-        # Walk both rings by angle, always closing the triangle whose new point comes first.
-        while i < a or j < b:
-            if j == b or (i < a and (i + 1) / a < (j + 1) / b):
-                tris.append((inner[i], inner[(i + 1) % a], outer[j % b]))
-                i += 1
-            else:
-                tris.append((inner[i % a], outer[(j + 1) % b], outer[j]))
-                j += 1
-    out = []
-    for t in tris:
-        u = [t[1][k] - t[0][k] for k in range(3)]
-        v = [t[2][k] - t[0][k] for k in range(3)]
-        nz = u[0] * v[1] - u[1] * v[0]
-        out.append(t if (nz > 0) == up else (t[0], t[2], t[1]))
-    return out
+        tris += join_rings(inner, outer)
+    return facing(tris, up)
 
 
 def tube(r, z0, z1, segments, rings):
@@ -204,6 +233,11 @@ SILO_TWIN = dict(d=0.10, height=0.45, outlet=0.04, hopper_deg=60.0, pitch=0.02, 
                  segments=24, per_pitch=4, hopper_rings=2, bands=2)
 
 
+# Case 5: orifice plates under the 1:4 silo's hopper (outlet 0.1675 m) with holes of 4 ... 8
+# volume-equivalent grain diameters (18.7 mm): Beverloo's law over outlet sizes.
+DISCHARGE_HOLES = [round(k * 0.0187, 4) for k in (4, 5, 6, 7, 8)]
+
+
 def silo_gate(outlet):
     """A disk closing the outlet at z = 0 from below, facing up: 10 % wider than the outlet."""
     return ring_disk(0.55 * outlet, 0.0, outlet / 8, up=True)
@@ -221,6 +255,8 @@ MESHES = {
     "silo_quarter_gate": lambda: silo_gate(SILO_QUARTER["outlet"]),
     "silo_twin": lambda: corrugated_silo(**SILO_TWIN),
     "silo_twin_gate": lambda: silo_gate(SILO_TWIN["outlet"]),
+    "silo_quarter_orifice": lambda: {f"{round(1000 * h)}mm": orifice_plate(SILO_QUARTER["outlet"], h, 0.01)
+                                     for h in DISCHARGE_HOLES},
 }
 # Written only when named: 7.6 MB, regenerated on demand (`make_meshes.py silo`).
 LARGE = {"silo"}

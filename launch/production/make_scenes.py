@@ -439,12 +439,68 @@ def silo_twin():
 # 0.7 s: a bed about one diameter deep, where the wall already carries part of the weight. Written by make_scenes.py.""", up="../")
 
 
+DISCHARGE_HOLES = [round(k * 0.0187, 4) for k in (4, 5, 6, 7, 8)]   # as make_meshes.py
+
+
+def silo_discharge(hole):
+    """Case 5: the filled 1:4 silo (case 4b's final state) discharged through an orifice plate
+    of `hole` under its hopper, from t = 0."""
+    mm = round(1000 * hole)
+    walls = silo_walls("silo_quarter", 6)
+    return f"""# Case 5 (docs/production.md §5): the 1:4 silo filled by silo_quarter_fill.toml discharged
+# through an orifice of {mm} mm ({hole / 0.0187:.0f} volume-equivalent grain diameters) in a plate under
+# its hopper. The grains are the fill's final state (`state`: run_on_gpu.sh copies the fill's
+# last checkpoint to out/silo_quarter_fill/final.ckpt), the gate is gone, the plate's hole is
+# open from t = 0, and grains that fall below the domain are removed; particle tables every
+# 0.1 s count the grains left (silo_discharge.py: mass against time and Beverloo's law).
+# Written by make_scenes.py.
+
+gravity = [0.0, 0.0, -9.81]
+
+[simulation]
+dt_fraction = 0.05
+end_time = 3.0
+seed = 0
+
+[domain]
+min = [-0.2825, -0.2825, -0.3]
+max = [0.2825, 0.2825, 2.7]
+on_leaving = "remove"
+
+{GRAIN_MATERIALS.format(e="3.0e6")}
+[[particle_types]]
+name = "grain"
+material = "ore"
+mesh = "{GRAIN}"
+scale = {QUARTER_SCALE!r}
+
+[[insertions]]
+type = "grain"
+region = {{ kind = "cylinder", base = [0.0, 0.0, -0.01], axis = [0.0, 0.0, 1.0], radius = 0.28, height = 2.7 }}
+state = "out/silo_quarter_fill/final.ckpt"
+count = {QUARTER_GRAINS}
+{walls}
+[[walls]]
+name = "orifice"
+mesh = "meshes/silo_quarter_orifice_{mm}mm.stl"
+material = "steel"
+
+[output]
+dir = "out/silo_discharge_{mm}mm"
+frame_interval = 0.1
+formats = ["csv"]
+checkpoint_interval = 1.0
+series_interval = 0.01
+"""
+
+
 SCENES = {
     "dodecahedra_cylinder_x10": dodecahedra_cylinder_x10,
     "drum_speeds": drum_speeds,
     "silo_filled": silo_filled,
     "silo_quarter_fill": silo_quarter_fill,
     "twins/silo": silo_twin,
+    **{f"silo_discharge_{round(1000 * h)}mm": (lambda h=h: silo_discharge(h)) for h in DISCHARGE_HOLES},
 }
 
 

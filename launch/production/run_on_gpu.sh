@@ -68,8 +68,31 @@ for s in "${scenes[@]}"; do
         > "$out/fixed_bed_porosity.json" ;;
     silo_quarter_fill)
       ck=$(last_ckpt "$s")
+      # The discharge scenes start from this state.
+      cp "$ck" "$here/out/$s/final.ckpt"
       "$bin" analyze fill-height "$here/$s.toml" "$ck" --radius 0.25 > "$out/silo_fill.json"
-      "$bin" analyze heap "$here/$s.toml" "$ck" --radius 0.25 > "$out/silo_heap.json" ;;
+      "$bin" analyze heap "$here/$s.toml" "$ck" --radius 0.25 > "$out/silo_heap.json"
+      # Hopper top 0.3096 m; the side's bands are 9 pitches of 43.5 mm; the packing fraction
+      # from the porosity of the cylinder between the hopper and a grain below the surface.
+      top=$(python3 -c "import json; print(json.load(open('$out/silo_fill.json'))['mean_surface'])")
+      "$bin" analyze porosity "$here/$s.toml" "$ck" --radius 0.254 --z "0.35,$(python3 -c "print($top - 0.033)")" \
+        --annuli 20 > "$out/silo_porosity.json"
+      rho_b=$(python3 -c "import json; print(2500 * (1 - json.load(open('$out/silo_porosity.json'))['mean']))")
+      python3 "$here/silo_janssen.py" "$here/out/$s/series.csv" "$out/silo_janssen.svg" --radius 0.2625 \
+        --hopper-top 0.3096 --band-height 0.3915 --fill-top "$top" --bulk-density "$rho_b" \
+        --from "$(python3 -c "import json; print(json.load(open('$here/out/$s/summary.json'))['simulated_time'] - 0.5)")" \
+        > "$out/silo_janssen.txt" ;;
   esac
 done
+# Case 5: every discharge that reached its end, against Beverloo's law (grain 3.42e-6 m³ of
+# 2500 kg/m³, d = 18.7 mm volume-equivalent).
+runs=()
+for d in 75 94 112 131 150; do
+  done_ "silo_discharge_${d}mm" && runs+=("$(python3 -c "print($d / 1000)"):$here/out/silo_discharge_${d}mm/particles")
+done
+if [ ${#runs[@]} -ge 2 ] && [ -f "$out/silo_porosity.json" ]; then
+  rho_b=$(python3 -c "import json; print(2500 * (1 - json.load(open('$out/silo_porosity.json'))['mean']))")
+  python3 "$here/silo_discharge.py" "$out/silo_discharge.svg" "${runs[@]}" --grain-mass 8.546e-3 \
+    --bulk-density "$rho_b" --d 0.0187 > "$out/silo_discharge.txt"
+fi
 ls -la "$out"

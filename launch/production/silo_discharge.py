@@ -1,0 +1,130 @@
+#!/usr/bin/env python3
+"""Case 5 (docs/production.md §5): silo discharge through orifices of several sizes, mass
+against time and Beverloo's law.
+
+  python3 launch/production/silo_discharge.py OUT.svg D0:FRAMES ... --grain-mass M
+      --bulk-density RHO_B --d D [--window T0,T1]
+
+Each FRAMES is a run's particle tables (`<output.dir>/particles`, step_<step>[_r<rank>].csv);
+the grains left at each frame are its rows. The discharge rate W (kg/s) of each orifice D0 (m)
+is the least-squares slope of the mass left over the window (default 0.5 s to the last frame:
+the start-up transient left out). Beverloo's law
+
+  W = C rho_b sqrt(g) (D0 - k d)^(5/2)
+
+is fitted as the straight line W^(2/5) = (C rho_b sqrt(g))^(2/5) (D0 - k d): C from its slope
+and k from where it crosses zero. Prints the table and the fit, and plots the mass against time
+and W against D0 with the fitted law.
+"""
+import argparse
+import collections
+import math
+import os
+import sys
+
+G = 9.81
+
+
+def counts(frames):
+    """(time, grains) per frame, in time order: rows of every rank's table of a step."""
+    by_step = collections.defaultdict(list)
+    for name in os.listdir(frames):
+        if name.startswith("step_") and name.endswith(".csv"):
+            by_step[name[5:-4].split("_r")[0]].append(os.path.join(frames, name))
+    out = []
+    for step, files in by_step.items():
+        n, t = 0, None
+        for f in files:
+            with open(f) as fh:
+                next(fh)
+                for line in fh:
+                    if line.strip():
+                        n += 1
+                        if t is None:
+                            t = float(line.split(",", 1)[0])
+        if t is not None:
+            out.append((t, n))
+    return sorted(out)
+
+
+def slope(xs, ys):
+    mx, my = sum(xs) / len(xs), sum(ys) / len(ys)
+    sxx = sum((x - mx) ** 2 for x in xs)
+    return sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx, my - mx * sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("svg")
+    ap.add_argument("runs", nargs="+", help="D0:FRAMES")
+    ap.add_argument("--grain-mass", type=float, required=True)
+    ap.add_argument("--bulk-density", type=float, required=True)
+    ap.add_argument("--d", type=float, required=True, help="grain diameter of the law (m)")
+    ap.add_argument("--window", default="0.5,1e9")
+    a = ap.parse_args()
+    t0, t1 = (float(x) for x in a.window.split(","))
+    rows = []
+    for spec in a.runs:
+        d0, frames = spec.split(":", 1)
+        series = counts(frames)
+        if not series:
+            sys.exit(f"{frames}: no particle tables")
+        win = [(t, n * a.grain_mass) for t, n in series if t0 <= t <= t1]
+        if len(win) < 3:
+            sys.exit(f"{frames}: fewer than 3 frames in the window {t0} … {t1} s")
+        w = -slope([t for t, _ in win], [m for _, m in win])[0]
+        rows.append(dict(d0=float(d0), w=w, series=series))
+    print("| D0 (m) | D0 / d | W (kg/s) |")
+    print("|---|---|---|")
+    for r in rows:
+        print(f"| {r['d0']:.4f} | {r['d0'] / a.d:.2f} | {r['w']:.3f} |")
+    fit = None
+    if len(rows) >= 2 and all(r["w"] > 0 for r in rows):
+        s, b = slope([r["d0"] for r in rows], [r["w"] ** 0.4 for r in rows])
+        c = s ** 2.5 / (a.bulk_density * math.sqrt(G))
+        k = -b / s / a.d
+        fit = (c, k)
+        print(f"Beverloo: C = {c:.3f}, k = {k:.2f} (d = {a.d} m, rho_b = {a.bulk_density} kg/m3)")
+    # Two panels: mass left against time; W against D0 with the law.
+    w, h = 900, 380
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">',
+             '<rect width="100%" height="100%" fill="white"/>']
+    colours = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"]
+    x0, y0, pw, ph = 70, 30, 340, 290
+    tmax = max(t for r in rows for t, _ in r["series"])
+    mmax = max(n for r in rows for _, n in r["series"]) * a.grain_mass
+    parts.append(f'<rect x="{x0}" y="{y0}" width="{pw}" height="{ph}" fill="none" stroke="black"/>')
+    parts.append(f'<text x="{x0 + pw / 2}" y="{y0 + ph + 30}" text-anchor="middle">time (s)</text>')
+    parts.append(f'<text x="{x0}" y="20">mass left in the silo (kg, 0 … {mmax:.0f})</text>')
+    for i, r in enumerate(rows):
+        pts = " ".join(f"{x0 + t / tmax * pw:.1f},{y0 + ph - n * a.grain_mass / mmax * ph:.1f}" for t, n in r["series"])
+        parts.append(f'<polyline points="{pts}" fill="none" stroke="{colours[i % 6]}" stroke-width="1.5"/>')
+        parts.append(f'<text x="{x0 + pw - 4}" y="{y0 + 16 + 14 * i}" text-anchor="end" fill="{colours[i % 6]}">D0 = {1000 * r["d0"]:.0f} mm</text>')
+    for j in range(5):
+        parts.append(f'<text x="{x0 + pw * j / 4:.0f}" y="{y0 + ph + 14}" text-anchor="middle">{tmax * j / 4:.1f}</text>')
+    x1 = x0 + pw + 90
+    dmax = max(r["d0"] for r in rows) * 1.1
+    wmax = max(r["w"] for r in rows) * 1.2
+    parts.append(f'<rect x="{x1}" y="{y0}" width="{pw}" height="{ph}" fill="none" stroke="black"/>')
+    parts.append(f'<text x="{x1 + pw / 2}" y="{y0 + ph + 30}" text-anchor="middle">outlet D0 (m)</text>')
+    parts.append(f'<text x="{x1}" y="20">discharge rate W (kg/s, 0 … {wmax:.1f})</text>')
+    for j in range(5):
+        parts.append(f'<text x="{x1 + pw * j / 4:.0f}" y="{y0 + ph + 14}" text-anchor="middle">{dmax * j / 4:.3f}</text>')
+    if fit:
+        c, k = fit
+        curve = []
+        for j in range(101):
+            d0 = dmax * j / 100
+            wv = c * a.bulk_density * math.sqrt(G) * max(d0 - k * a.d, 0.0) ** 2.5
+            curve.append(f"{x1 + d0 / dmax * pw:.1f},{y0 + ph - min(wv, wmax) / wmax * ph:.1f}")
+        parts.append(f'<polyline points="{" ".join(curve)}" fill="none" stroke="#1f77b4" stroke-width="2"/>')
+        parts.append(f'<text x="{x1 + 8}" y="{y0 + 16}" fill="#1f77b4">Beverloo: C = {c:.2f}, k = {k:.2f}</text>')
+    for r in rows:
+        parts.append(f'<circle cx="{x1 + r["d0"] / dmax * pw:.1f}" cy="{y0 + ph - r["w"] / wmax * ph:.1f}" r="4" fill="#d62728"/>')
+    parts.append("</svg>")
+    with open(a.svg, "w") as f:
+        f.write("\n".join(parts) + "\n")
+
+
+if __name__ == "__main__":
+    main()
