@@ -18,7 +18,8 @@ mod walls;
 pub use error::{KeyError, SceneError};
 pub use insertion::{
     DEFAULT_MAX_ATTEMPTS, ImportedBody, ImportedState, InsertReport, Inserter, InserterState,
-    Insertion, InsertionMode, OrientationMode, Region, TiledPacking,
+    Insertion, InsertionMode, OrientationMode, Region, TiledPacking, cylinder_frame,
+    cylinder_sites,
 };
 pub use report::check_report;
 pub use settings::{

@@ -15,8 +15,7 @@ mod inserter;
 mod placement;
 mod region;
 
-pub use region::Region;
-pub(crate) use region::{cylinder_frame, cylinder_sites};
+pub use region::{Region, cylinder_frame, cylinder_sites};
 
 use crate::io::Packing;
 use crate::rng::Rng;

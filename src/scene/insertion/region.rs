@@ -106,8 +106,9 @@ impl Region {
 }
 
 /// The frame of a cylinder region for lattices and packings: `(u, v, axis)` right-handed,
-/// `u` and `v` from [`perpendicular_basis`]. Lattice spacings and packing cells are given in
-/// this frame (the first two components across the axis, the third along it).
+/// `u = axis × e` with `e` the coordinate axis least aligned with the axis, `v = axis × u`.
+/// Lattice spacings and packing cells are given in this frame (the first two components across
+/// the axis, the third along it).
 pub fn cylinder_frame(axis: &Vector3<f64>) -> nalgebra::Rotation3<f64> {
     let (u, v) = perpendicular_basis(axis);
     nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_columns(&[u, v, *axis]))
