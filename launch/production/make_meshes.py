@@ -226,10 +226,10 @@ SILO = dict(d=2.1, height=10.6, outlet=0.67, hopper_deg=30.0, pitch=0.068, depth
 # 0.64 of the seed's, so 43.5 mm pitch, 8.3 mm deep), its east half in 6 bands for Janssen.
 SILO_QUARTER = dict(d=0.525, height=2.65, outlet=0.1675, hopper_deg=30.0, pitch=0.0435, depth=0.0083,
                     segments=48, per_pitch=6, hopper_rings=8, bands=6)
-# The twin's silo: a narrow column (0.10 m, four grains across) on a flat 60 degree hopper,
-# 0.45 m tall, corrugated at the twin grain's scale, its east half in 2 bands; small enough for
+# The twin's silo: a narrow column (0.10 m, four grains across) on a flat 60 degree hopper
+# with a 60 mm outlet (4 volume-equivalent grain diameters, so that it discharges), 0.45 m tall, corrugated at the twin grain's scale, its east half in 2 bands; small enough for
 # a few hundred grains to stand 1.5 diameters deep, where the wall already carries weight.
-SILO_TWIN = dict(d=0.10, height=0.45, outlet=0.04, hopper_deg=60.0, pitch=0.02, depth=0.004,
+SILO_TWIN = dict(d=0.10, height=0.45, outlet=0.06, hopper_deg=60.0, pitch=0.02, depth=0.004,
                  segments=24, per_pitch=4, hopper_rings=2, bands=2)
 
 

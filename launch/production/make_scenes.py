@@ -432,11 +432,46 @@ def silo_quarter_fill():
 
 def silo_twin():
     return silo_fill(
-        "silo_twin", "silo_twin", 0.10, 0.45, 0.04, 11.6, 160, 2000.0, "1.0e6", 2, 0.7, 0.7,
+        "silo_twin", "silo_twin", 0.10, 0.45, 0.06, 11.6, 160, 2000.0, "1.0e6", 2, 0.7, 0.7,
         """# Twin of ../silo_quarter_fill.toml for `make test` (tests/production.rs): a narrow silo
 # (make_meshes.py silo_twin: 0.10 m across, 0.45 m, a flat 60 degree hopper, two wall bands)
 # fed from the central inlet with 160 grains of 25 mm (circumscribed), E = 1 MPa, settled by
 # 0.7 s: a bed about one diameter deep, where the wall already carries part of the weight. Written by make_scenes.py.""", up="../")
+
+
+def silo_twin_discharge():
+    """Case 5's twin: the silo twin's settled state (committed as twins/silo_filled.ckpt, the
+    end of twins/silo.toml) discharged through its hopper's own 60 mm outlet."""
+    return f"""# Twin of the discharge scenes for `make test` (tests/production.rs): the silo twin's settled
+# bed of 160 grains (silo_filled.ckpt: twins/silo.toml run to its end on the CPU) without its
+# gate, discharging through the 60 mm outlet (4.1 volume-equivalent grain diameters of
+# 14.5 mm) for 0.4 s. Written by make_scenes.py.
+
+gravity = [0.0, 0.0, -9.81]
+
+[simulation]
+dt_fraction = 0.05
+end_time = 0.4
+seed = 0
+
+[domain]
+min = [-0.07, -0.07, -0.1]
+max = [0.07, 0.07, 0.5]
+on_leaving = "remove"
+
+{GRAIN_MATERIALS.format(e="1.0e6")}
+[[particle_types]]
+name = "grain"
+material = "ore"
+mesh = "../{GRAIN}"
+scale = 11.6
+
+[[insertions]]
+type = "grain"
+region = {{ kind = "cylinder", base = [0.0, 0.0, -0.01], axis = [0.0, 0.0, 1.0], radius = 0.06, height = 0.46 }}
+state = "silo_filled.ckpt"
+count = 160
+{silo_walls("silo_twin", 2, "../")}"""
 
 
 DISCHARGE_HOLES = [round(k * 0.0187, 4) for k in (4, 5, 6, 7, 8)]   # as make_meshes.py
@@ -500,6 +535,7 @@ SCENES = {
     "silo_filled": silo_filled,
     "silo_quarter_fill": silo_quarter_fill,
     "twins/silo": silo_twin,
+    "twins/silo_discharge": silo_twin_discharge,
     **{f"silo_discharge_{round(1000 * h)}mm": (lambda h=h: silo_discharge(h)) for h in DISCHARGE_HOLES},
 }
 
