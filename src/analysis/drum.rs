@@ -218,16 +218,7 @@ impl DrumSamples {
         if points.len() < 3 {
             return flow;
         }
-        let m = points.len() as f64;
-        let (sx, sz) = points
-            .iter()
-            .fold((0.0, 0.0), |(a, b), p| (a + p[0], b + p[1]));
-        let (mx, mz) = (sx / m, sz / m);
-        let (sxx, sxz) = points.iter().fold((0.0, 0.0), |(a, b), p| {
-            (a + (p[0] - mx).powi(2), b + (p[0] - mx) * (p[1] - mz))
-        });
-        let b = sxz / sxx;
-        let a = mz - b * mx;
+        let [a, b] = super::fit_line(&points);
         flow.surface_line = Some([a, b]);
         flow.angle_of_repose_deg = Some(b.abs().atan().to_degrees());
         // Down the slope (t_z ≤ 0) and into the bed (n_z < 0).

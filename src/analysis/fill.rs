@@ -123,24 +123,17 @@ pub fn heap_profile(
         })
         .collect();
     let (lo, hi) = (fit[0] * disk.radius, fit[1] * disk.radius);
-    let pts: Vec<(f64, f64)> = radii
+    let pts: Vec<[f64; 2]> = radii
         .iter()
         .zip(&heights)
         .filter(|(r, _)| **r >= lo && **r <= hi)
-        .map(|(r, h)| (*r, *h))
+        .map(|(r, h)| [*r, *h])
         .collect();
-    let m = pts.len().max(1) as f64;
-    let (mr, mh) = pts
-        .iter()
-        .fold((0.0, 0.0), |(a, b), (r, h)| (a + r / m, b + h / m));
-    let (srr, srh) = pts.iter().fold((0.0, 0.0), |(a, b), (r, h)| {
-        (a + (r - mr) * (r - mr), b + (r - mr) * (h - mh))
-    });
-    let slope = if srr > 0.0 { srh / srr } else { 0.0 };
+    let [h0, slope] = super::fit_line(&pts);
     HeapProfile {
         radii,
         heights,
-        line: [mh - slope * mr, -slope],
+        line: [h0, -slope],
         angle_deg: (-slope).atan().to_degrees(),
         fit: [lo, hi],
     }

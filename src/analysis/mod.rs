@@ -34,6 +34,20 @@ pub fn load_state(scene: &Path, checkpoint: &Path) -> Result<(Scene, Particles)>
     Ok((s, c.particles))
 }
 
+/// The least-squares line `y = a + b x` through `points` (`[x, y]` each): `[a, b]`, with
+/// b = 0 when the x do not vary.
+pub(crate) fn fit_line(points: &[[f64; 2]]) -> [f64; 2] {
+    let m = points.len().max(1) as f64;
+    let (mx, my) = points
+        .iter()
+        .fold((0.0, 0.0), |(a, b), p| (a + p[0] / m, b + p[1] / m));
+    let (sxx, sxy) = points.iter().fold((0.0, 0.0), |(a, b), p| {
+        (a + (p[0] - mx) * (p[0] - mx), b + (p[0] - mx) * (p[1] - my))
+    });
+    let b = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+    [my - b * mx, b]
+}
+
 /// The particle tables of a run's frames (`<output>/particles/`, [`crate::io::write_particle_csv`]),
 /// grouped by frame in step order: one table per frame, or one per rank
 /// (`step_<step>_r<rank>.csv`) of a decomposed run. Files of other names are ignored.
