@@ -170,10 +170,7 @@ impl Inserter {
                 },
             ) = (ins.lattice, &ins.region)
             {
-                let sites =
-                    super::cylinder_sites(base, axis, *radius, *height, &spacing, |rho, _| {
-                        rho <= *radius
-                    });
+                let sites = super::cylinder_sites(base, axis, *radius, *height, &spacing);
                 for &c in sites
                     .iter()
                     .skip(self.inserted[k] as usize)

@@ -115,16 +115,15 @@ pub fn cylinder_frame(axis: &Vector3<f64>) -> nalgebra::Rotation3<f64> {
 }
 
 /// The sites of a lattice of `spacing` (in the [`cylinder_frame`]) filling the square prism
-/// around a cylinder, `(c + 0.5) spacing` from its corner `(−radius, −radius, 0)`, kept where
-/// `keep(ρ, h)` accepts the site's distance ρ from the axis and height h along it; in lattice
-/// order (first frame axis fastest, the axis slowest: bottom up).
+/// around a cylinder, `(c + 0.5) spacing` from its corner `(−radius, −radius, 0)`, those within
+/// `radius` of the axis; in lattice order (first frame axis fastest, the axis slowest: bottom
+/// up).
 pub fn cylinder_sites(
     base: &Vector3<f64>,
     axis: &Vector3<f64>,
     radius: f64,
     height: f64,
     spacing: &Vector3<f64>,
-    keep: impl Fn(f64, f64) -> bool,
 ) -> Vec<Vector3<f64>> {
     let f = cylinder_frame(axis);
     let n = |len: f64, s: f64| (len / s + 1e-9).floor().max(0.0) as u64;
@@ -142,7 +141,7 @@ pub fn cylinder_sites(
                     -radius + spacing.y * (j as f64 + 0.5),
                     spacing.z * (k as f64 + 0.5),
                 );
-                if keep(l.xy().norm(), l.z) {
+                if l.xy().norm() <= radius {
                     out.push(base + f * l);
                 }
             }

@@ -114,7 +114,7 @@ impl Validator<'_> {
                             self.err(&k("lattice"), format!("{cells:.3e} lattice points around the cylinder: at most 1e9"));
                         } else {
                             let sites = crate::scene::insertion::cylinder_sites(
-                                base, axis, *radius, *height, &v, |rho, _| rho <= *radius,
+                                base, axis, *radius, *height, &v,
                             )
                             .len();
                             if *n as usize > sites {
