@@ -546,6 +546,19 @@ fn the_silo_twin_discharges_at_a_beverloo_rate() {
     let mut sim = Simulation::builder(scene).build().unwrap();
     assert_eq!(sim.particles.len(), 160);
     let mass = 1.012_877_755e-9 * 11.6f64.powi(3) * 2500.0;
+    // The facets the wall stage clips: every wall contact has at least one within the
+    // grain's bounding radius, and the settled bed has grains on the hopper and the gate.
+    sim.step().unwrap();
+    let (items, near) = sim.wall_candidates();
+    println!(
+        "silo discharge twin: {items} wall facets for {near} grains, {} wall contacts",
+        sim.stats.wall_contacts
+    );
+    assert!(
+        items >= sim.stats.wall_contacts && near > 20 && near < 160,
+        "{items} facets for {near} grains, {} wall contacts",
+        sim.stats.wall_contacts
+    );
     let mut left = vec![(0.0, 160usize)];
     let mut next = 0.02;
     while sim.time < end {

@@ -111,6 +111,11 @@ impl Engine {
         self.backend.device_bytes()
     }
 
+    /// See [`Backend::wall_candidates`].
+    pub fn wall_candidates(&mut self) -> Result<(u64, u64)> {
+        self.backend.wall_candidates()
+    }
+
     /// See [`Backend::candidate_pairs`].
     pub fn candidate_pairs(&self) -> Option<usize> {
         self.backend.candidate_pairs()

@@ -54,6 +54,11 @@ pub trait Backend {
     /// from the host (`None`: see the host's list).
     fn candidate_pairs(&self) -> Option<usize>;
 
+    /// Wall facets the wall stage evaluates: (particle–facet items, particles with at least
+    /// one). The CPU counts the facets within each particle's bounding radius, which it clips
+    /// every step; the GPU its wall list, built with the skin added to the reach.
+    fn wall_candidates(&mut self) -> Result<(u64, u64)>;
+
     /// Who built the pair lists so far (`[simulation.neighbor] mode`, docs/design.md §7).
     fn neighbor_report(&self) -> NeighborReport;
 

@@ -30,6 +30,31 @@ impl Simulation {
         Ok(wall_outcomes)
     }
 
+    /// The facets stage 6 clips: (particle–facet items within each owned particle's bounding
+    /// radius, over every wall at its current pose; particles with at least one).
+    pub fn wall_candidates(&self) -> (u64, u64) {
+        let p = &self.particles;
+        let poses: Vec<Isometry3<f64>> = self
+            .scene
+            .walls
+            .iter()
+            .map(|w| w.motion.transform(self.time))
+            .collect();
+        (0..p.len())
+            .into_par_iter()
+            .map_init(Vec::new, |facets, i| {
+                let pose = Isometry3::from_parts(p.position[i].into(), p.orientation[i]);
+                let mut items = 0u64;
+                for (mesh, wall_pose) in self.walls.iter().zip(&poses) {
+                    let local = wall_pose.inverse() * pose;
+                    mesh.facets_near(&local.translation.vector, self.radius[i], facets);
+                    items += facets.len() as u64;
+                }
+                (items, u64::from(items > 0))
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+    }
+
     /// Stage 6 for every owned particle, in index order: its contacts with the walls, or the
     /// first particle whose wall geometry failed. No walls, no work.
     pub(super) fn wall_contacts(&self, dt: f64) -> Result<Vec<WallOutcome>, SimulationError> {

@@ -76,6 +76,8 @@ pub fn bench_on(opts: &BenchOptions, comm: Arc<dyn Comm>) -> Result<serde_json::
         "reduce": t.reduce - timers_before.reduce,
     });
     let neighbor = engine.neighbor_report();
+    let (wall_items, wall_particles) = engine.wall_candidates()?;
+    let wall_sums = comm.sum_u64(&[wall_items, wall_particles]);
     let (backend_name, described, bytes, pairs) = (
         engine.backend_name(),
         engine.describe(),
@@ -101,6 +103,11 @@ pub fn bench_on(opts: &BenchOptions, comm: Arc<dyn Comm>) -> Result<serde_json::
         "stage_seconds": stages,
         "contacts_per_particle": 2.0 * g.stats.contacts as f64 / n.max(1) as f64,
         "wall_contacts": g.stats.wall_contacts,
+        // Facets per particle the wall stage evaluates, over all particles and over those
+        // near a wall (Backend::wall_candidates says which reach each backend uses).
+        "wall_facets_per_particle": wall_sums[0] as f64 / n.max(1) as f64,
+        "wall_facets_per_wall_particle": wall_sums[0] as f64 / wall_sums[1].max(1) as f64,
+        "particles_near_walls": wall_sums[1],
         "candidate_pairs_per_particle": pairs.map(per_particle),
         "neighbor": neighbor,
         "device_bytes_per_particle": bytes.map(per_particle),

@@ -41,6 +41,10 @@ impl Backend for Simulation {
         None
     }
 
+    fn wall_candidates(&mut self) -> Result<(u64, u64)> {
+        Ok(Simulation::wall_candidates(self))
+    }
+
     fn neighbor_report(&self) -> NeighborReport {
         // The CPU backend builds every list itself, whatever the mode asks of a GPU run.
         NeighborReport {

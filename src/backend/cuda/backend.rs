@@ -48,6 +48,10 @@ impl Backend for CudaSimulation {
         Some(CudaSimulation::candidate_pairs(self))
     }
 
+    fn wall_candidates(&mut self) -> Result<(u64, u64)> {
+        CudaSimulation::wall_candidates(self).map_err(unwrapped)
+    }
+
     fn neighbor_report(&self) -> NeighborReport {
         CudaSimulation::neighbor_report(self)
     }

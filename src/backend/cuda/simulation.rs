@@ -200,6 +200,17 @@ impl CudaSimulation {
         self.pairs.list.as_ref().map_or(0, |p| p.n)
     }
 
+    /// The current wall list: (particle–facet items, particles with at least one); zeros
+    /// without walls or before the first list.
+    pub fn wall_candidates(&self) -> Result<(u64, u64), CudaError> {
+        let Some(list) = self.walls.as_ref().and_then(|w| w.list.as_ref()) else {
+            return Ok((0, 0));
+        };
+        let offset = self.gpu.stream.clone_dtoh(&list.offset)?;
+        let touched = offset.windows(2).filter(|w| w[1] > w[0]).count();
+        Ok((list.n_items as u64, touched as u64))
+    }
+
     /// Pair lists built so far (the first one included).
     pub fn pair_list_builds(&self) -> u64 {
         self.pairs.builds
