@@ -307,6 +307,7 @@ fn finish(
     let (rank, ranks) = (comm.rank(), comm.size());
     let dir = out.dir.clone();
     let (backend_name, device) = (engine.backend_name(), engine.device());
+    let device_bytes = engine.device_bytes();
     let neighbor = engine.neighbor_report();
     if rank == 0 {
         log_neighbor_report(&neighbor);
@@ -354,6 +355,9 @@ fn finish(
         "energy": {"kinetic_translational": kt, "kinetic_rotational": kr, "potential_gravity": pg, "elastic": g.stats.elastic_energy},
         "stage_seconds": sim.timers,
         "neighbor": neighbor,
+        // The simulation's device buffers at the end (null on the CPU); the CUDA context and
+        // the kernels come on top.
+        "device_bytes": device_bytes,
         "interrupted": stopped_by.is_some(),
         "signal": stopped_by.map(|s| s.1),
         "exit_status": stopped_by.map_or(0, |s| crate::interrupt::exit_status(s.0)),
