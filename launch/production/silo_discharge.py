@@ -5,8 +5,9 @@ against time and Beverloo's law.
   python3 launch/production/silo_discharge.py OUT.svg D0:FRAMES ... --grain-mass M
       --bulk-density RHO_B --d D [--window T0,T1]
 
-Each FRAMES is a run's particle tables (`<output.dir>/particles`, step_<step>[_r<rank>].csv);
-the grains left at each frame are its rows. The discharge rate W (kg/s) of each orifice D0 (m)
+Each FRAMES is a run's particle tables (`<output.dir>/particles`, step_<step>[_r<rank>].csv),
+the grains left at each frame being its rows, or a text file of "time grains" lines counted
+from them. The discharge rate W (kg/s) of each orifice D0 (m)
 is the least-squares slope of the mass left over the window (default 0.5 s to the last frame:
 the start-up transient left out). Beverloo's law
 
@@ -27,6 +28,9 @@ G = 9.81
 
 def counts(frames):
     """(time, grains) per frame, in time order: rows of every rank's table of a step."""
+    if os.path.isfile(frames):
+        with open(frames) as fh:
+            return sorted((float(t), int(n)) for t, n in (line.split() for line in fh if line.strip()))
     by_step = collections.defaultdict(list)
     for name in os.listdir(frames):
         if name.startswith("step_") and name.endswith(".csv"):
