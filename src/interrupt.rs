@@ -8,7 +8,12 @@
 //! checkpoint and the summary, and the process exits with `128 + signal` (130 for SIGINT, 143
 //! for SIGTERM), so that scripts can tell an interrupted run from a finished one. A second
 //! signal of the same kind while the first is being handled ends the process at once with
-//! that status, as a user pressing Ctrl-C twice expects.
+//! that status, as a user pressing Ctrl-C twice expects, unless it comes within
+//! [`DUPLICATE_WINDOW`] of the first: then it is the same request delivered twice, and is
+//! ignored. GNU `timeout` sends its signal to the command and then to the command's whole
+//! process group, and a terminal's Ctrl-C reaches `mpirun`'s ranks both directly and forwarded
+//! by `mpirun`; taking such a duplicate for a second request would end the run without its
+//! checkpoint (one `timeout -s INT` in six did so).
 //!
 //! `mpirun` (Open MPI) follows its SIGTERM with SIGKILL after `odls_base_sigkill_timeout`
 //! seconds, 1 by default: long enough for the agreement and the checkpoint of a small run, not
@@ -16,8 +21,18 @@
 //! (docs/parallel.md).
 
 use signal_hook::consts::{SIGINT, SIGTERM};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
+
+/// A second signal of a kind this soon after the first is a duplicate delivery of the same
+/// request, not a second request: tools deliver one request twice within microseconds to
+/// milliseconds, a person pressing Ctrl-C twice takes longer.
+pub const DUPLICATE_WINDOW: Duration = Duration::from_millis(500);
+
+/// When the first signal of each kind arrived in this run: nanoseconds since the handlers were
+/// installed, plus one (0: not yet).
+static FIRST_ARRIVAL: [AtomicU64; 2] = [AtomicU64::new(0), AtomicU64::new(0)];
 
 /// The signals a run stops on, in the order of [`StopSignals::received`]'s counts.
 pub const STOP_SIGNALS: [(i32, &str); 2] = [(SIGINT, "SIGINT"), (SIGTERM, "SIGTERM")];
@@ -33,11 +48,23 @@ static INSTALLED: OnceLock<Result<[Arc<AtomicBool>; 2], String>> = OnceLock::new
 
 fn install_handlers() -> Result<[Arc<AtomicBool>; 2], String> {
     let flags = [0, 1].map(|_| Arc::new(AtomicBool::new(false)));
+    let installed = Instant::now();
+    let window = DUPLICATE_WINDOW.as_nanos() as u64;
     for (k, (signal, name)) in STOP_SIGNALS.into_iter().enumerate() {
-        // Registered first, so it sees the flag as it was before this signal: a second
-        // signal exits at once with 128 + signal.
-        signal_hook::flag::register_conditional_shutdown(signal, 128 + signal, flags[k].clone())
-            .and_then(|_| signal_hook::flag::register(signal, flags[k].clone()))
+        let flag = flags[k].clone();
+        let action = move || {
+            let now = installed.elapsed().as_nanos() as u64 + 1;
+            if let Err(first) =
+                FIRST_ARRIVAL[k].compare_exchange(0, now, Ordering::SeqCst, Ordering::SeqCst)
+                && now.saturating_sub(first) > window
+            {
+                signal_hook::low_level::exit(128 + signal);
+            }
+            flag.store(true, Ordering::SeqCst);
+        };
+        // SAFETY: the action is async-signal-safe: atomics, clock_gettime(CLOCK_MONOTONIC)
+        // (Instant::elapsed) and _exit, nothing that allocates or locks.
+        unsafe { signal_hook::low_level::register(signal, action) }
             .map_err(|e| format!("cannot install a handler for {name}: {e}"))?;
     }
     Ok(flags)
@@ -47,8 +74,9 @@ impl StopSignals {
     /// Installs the handlers (the first time) and clears the flags, for a run that starts now.
     pub fn install() -> Result<Self, String> {
         let flags = INSTALLED.get_or_init(install_handlers).clone()?;
-        for f in &flags {
+        for (f, first) in flags.iter().zip(&FIRST_ARRIVAL) {
             f.store(false, Ordering::SeqCst);
+            first.store(0, Ordering::SeqCst);
         }
         Ok(StopSignals { flags })
     }
@@ -82,6 +110,9 @@ pub fn exit_status(signal: i32) -> i32 {
 mod tests {
     use super::*;
 
+    /// The flags are the process's: the tests that raise signals take turns.
+    static RAISING: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
     #[test]
     fn sigterm_wins_over_sigint_and_statuses_follow_the_shell() {
         assert_eq!(stop_signal([0, 0]), None);
@@ -94,10 +125,25 @@ mod tests {
     /// A signal raised in the process sets exactly its flag, and the next run starts clean.
     #[test]
     fn raised_signals_set_their_flags() {
+        let _turn = RAISING.lock().unwrap_or_else(|e| e.into_inner());
         let s = StopSignals::install().unwrap();
         assert_eq!(s.received(), [0, 0]);
         signal_hook::low_level::raise(SIGTERM).unwrap();
         assert_eq!(s.received(), [0, 1]);
+        let s = StopSignals::install().unwrap();
+        assert_eq!(s.received(), [0, 0]);
+    }
+
+    /// The same request delivered twice at once (`timeout` signals the command, then its
+    /// process group) stops the run once: were the second taken for a second request, this
+    /// test's own process would exit with 130.
+    #[test]
+    fn a_duplicate_delivery_is_one_request() {
+        let _turn = RAISING.lock().unwrap_or_else(|e| e.into_inner());
+        let s = StopSignals::install().unwrap();
+        signal_hook::low_level::raise(SIGINT).unwrap();
+        signal_hook::low_level::raise(SIGINT).unwrap();
+        assert_eq!(s.received(), [1, 0]);
         let s = StopSignals::install().unwrap();
         assert_eq!(s.received(), [0, 0]);
     }
