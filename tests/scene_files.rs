@@ -595,6 +595,52 @@ fn particles_are_not_placed_across_walls() {
     assert!(p.position.iter().any(|x| x.z < 0.0), "both sides used");
 }
 
+/// New particles keep clear of particles outside their region whose bounding spheres reach
+/// into it (the searches look at the particles near the region only, and must not miss
+/// these): a shell of cubes with centres half a radius outside every face of the region,
+/// spaced one radius apart, leaves the 50 new cubes a smaller box, and none touches the shell.
+#[test]
+fn insertion_avoids_particles_reaching_in_from_outside_the_region() {
+    let scene = parse(BASE).unwrap();
+    let template = &scene.templates[scene.particle_types[0].template];
+    let r = template.circumscribed_radius * 0.01;
+    let (lo, hi) = scene.insertions[0].region.aabb();
+    let mut p = Particles::default();
+    let mut id = 0;
+    let steps = |a: f64, b: f64| {
+        let n = ((b - a) / r).ceil() as usize;
+        (0..=n).map(move |k| a + (b - a) * k as f64 / n as f64)
+    };
+    for axis in 0..3 {
+        for side in [lo[axis] - 0.5 * r, hi[axis] + 0.5 * r] {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            for a in steps(lo[u], hi[u]) {
+                for b in steps(lo[v], hi[v]) {
+                    let mut x = Vector3::zeros();
+                    (x[axis], x[u], x[v]) = (side, a, b);
+                    p.push(id, 0, 0.01, x, UnitQuaternion::identity(), template, 2500.0);
+                    id += 1;
+                }
+            }
+        }
+    }
+    let shell = p.len();
+    let rep = Inserter::new(&scene)
+        .insert(0.0, &mut p, &scene, &mut id)
+        .unwrap();
+    assert_eq!(rep.inserted, 50);
+    for i in shell..p.len() {
+        for j in 0..shell {
+            let d = (p.position[i] - p.position[j]).norm();
+            assert!(
+                d >= 2.0 * r,
+                "new cube {i} overlaps shell cube {j}: {d} < {}",
+                2.0 * r
+            );
+        }
+    }
+}
+
 fn rate_scene() -> Scene {
     let text = replace(
         "count = 50",

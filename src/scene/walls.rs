@@ -246,17 +246,68 @@ pub(super) struct WallTriangles {
 type BoxedTriangle = ([Vector3<f64>; 3], Vector3<f64>, Vector3<f64>);
 
 impl WallTriangles {
-    pub(super) fn at(scene: &super::Scene, t: f64) -> Self {
-        let tris = scene
-            .walls
-            .iter()
-            .flat_map(|w| w.triangles_at(t))
-            .map(|tri| {
-                let lo = tri[0].inf(&tri[1]).inf(&tri[2]);
-                let hi = tri[0].sup(&tri[1]).sup(&tri[2]);
-                (tri, lo, hi)
-            })
-            .collect();
+    /// The walls' triangles at their poses at `t`, or those whose bounding box meets one of
+    /// the boxes `near` (a sphere inside such a box is at least its radius from the others, so
+    /// [`Self::is_free`] answers the same for it).
+    pub(super) fn at(
+        scene: &super::Scene,
+        t: f64,
+        near: Option<&[(Vector3<f64>, Vector3<f64>)]>,
+    ) -> Self {
+        let meets =
+            |lo: &Vector3<f64>, hi: &Vector3<f64>, boxes: &[(Vector3<f64>, Vector3<f64>)]| {
+                boxes
+                    .iter()
+                    .any(|(a, b)| (0..3).all(|k| lo[k] <= b[k] && hi[k] >= a[k]))
+            };
+        let bounds = |tri: &[Vector3<f64>; 3]| {
+            (
+                tri[0].inf(&tri[1]).inf(&tri[2]),
+                tri[0].sup(&tri[1]).sup(&tri[2]),
+            )
+        };
+        let mut tris = Vec::new();
+        for w in &scene.walls {
+            let pose = w.motion.transform(t);
+            // The boxes in the wall's own frame (the bounding boxes of their preimages), so
+            // that only the triangles that can meet them are moved to the pose.
+            let local: Option<Vec<(Vector3<f64>, Vector3<f64>)>> = near.map(|boxes| {
+                let inverse = pose.inverse();
+                boxes
+                    .iter()
+                    .map(|(a, b)| {
+                        let corners = (0..8).map(|c| {
+                            let x = Vector3::new(
+                                if c & 1 == 0 { a.x } else { b.x },
+                                if c & 2 == 0 { a.y } else { b.y },
+                                if c & 4 == 0 { a.z } else { b.z },
+                            );
+                            inverse.transform_point(&x.into()).coords
+                        });
+                        corners.fold(
+                            (
+                                Vector3::repeat(f64::INFINITY),
+                                Vector3::repeat(f64::NEG_INFINITY),
+                            ),
+                            |(lo, hi), x| (lo.inf(&x), hi.sup(&x)),
+                        )
+                    })
+                    .collect()
+            });
+            for tri in &w.triangles {
+                if let Some(boxes) = &local {
+                    let (lo, hi) = bounds(tri);
+                    if !meets(&lo, &hi, boxes) {
+                        continue;
+                    }
+                }
+                let tri = tri.map(|p| pose.transform_point(&p.into()).coords);
+                let (lo, hi) = bounds(&tri);
+                if near.is_none_or(|boxes| meets(&lo, &hi, boxes)) {
+                    tris.push((tri, lo, hi));
+                }
+            }
+        }
         WallTriangles { tris }
     }
 

@@ -115,8 +115,28 @@ impl Inserter {
         if due.iter().all(|&d| d == 0) {
             return Ok(report);
         }
-        let mut occupied = Occupancy::new(scene, particles);
-        let walls = WallTriangles::at(scene, t);
+        // A new particle's bounding sphere lies inside its region, so only the particles within
+        // two bounding radii of a region and the wall triangles that reach into one can stop
+        // it: the others are left out of the searches, which then give the same answers at a
+        // cost that does not grow with the whole bed and the whole silo. Periodic images could
+        // reach in from anywhere, so a periodic domain keeps everything.
+        let near = if scene.domain.periodic.iter().any(|&p| p) {
+            None
+        } else {
+            let reach = 2.0 * scene.max_bounding_radius() * (1.0 + 1e-9) + 1e-12;
+            Some(
+                scene
+                    .insertions
+                    .iter()
+                    .map(|i| {
+                        let (lo, hi) = i.region.aabb();
+                        (lo.add_scalar(-reach), hi.add_scalar(reach))
+                    })
+                    .collect::<Vec<_>>(),
+            )
+        };
+        let mut occupied = Occupancy::new(scene, particles, near.as_deref());
+        let walls = WallTriangles::at(scene, t, near.as_deref());
         for (k, &n_due) in due.iter().enumerate() {
             let ins = &scene.insertions[k];
             let is_count = matches!(ins.mode, InsertionMode::Count(_));

@@ -137,7 +137,14 @@ pub(super) struct Occupancy {
 }
 
 impl Occupancy {
-    pub(super) fn new(scene: &Scene, particles: &Particles) -> Self {
+    /// The bounding spheres of `particles`, or of those whose centre lies in one of the boxes
+    /// `near` (the regions grown by the reach of a new particle's search). The cell size comes
+    /// from all of them either way, so the searches' answers do not depend on `near`.
+    pub(super) fn new(
+        scene: &Scene,
+        particles: &Particles,
+        near: Option<&[(Vector3<f64>, Vector3<f64>)]>,
+    ) -> Self {
         let mut r_max = scene.max_bounding_radius();
         let radii: Vec<f64> = (0..particles.len())
             .map(|i| {
@@ -160,8 +167,17 @@ impl Occupancy {
             domain_min: d.min,
             domain_max: d.max,
         };
+        let inside = |p: &Vector3<f64>| {
+            near.is_none_or(|boxes| {
+                boxes
+                    .iter()
+                    .any(|(lo, hi)| (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]))
+            })
+        };
         for (p, r) in particles.position.iter().zip(radii) {
-            occ.add(*p, r);
+            if inside(p) {
+                occ.add(*p, r);
+            }
         }
         occ
     }
