@@ -675,6 +675,56 @@ fn rate_insertion_feeds_the_expected_count() {
     assert_eq!(check_report(&s2)["particles_to_insert"], 60);
 }
 
+/// A rate insertion with an `interval` places what fell due in batches at the steps that
+/// cross the interval's multiples: 200 per second from 0.1 s, 50 in all, every 0.05 s gives
+/// five batches of ten (at 0.15 … 0.35 s) and nothing between them. `interval` is for rate
+/// insertions only and must be positive.
+#[test]
+fn a_batched_rate_insertion_feeds_at_its_interval() {
+    let s = parse(&replace(
+        "count = 50",
+        "rate = 200.0\nstart = 0.1\nend = 0.4\ntotal = 50\ninterval = 0.05",
+    ))
+    .unwrap();
+    let (mut p, mut ins, mut id) = (Particles::default(), Inserter::new(&s), 0);
+    let dt = s.time_step();
+    let mut batches = Vec::new();
+    for k in 0..=50_000u64 {
+        let t = k as f64 * dt;
+        let before = p.len();
+        let crossing = (t / 0.05).floor() != ((t - dt) / 0.05).floor();
+        assert!(
+            crossing || !ins.pending(t, &s),
+            "pending between batches at {t} s"
+        );
+        ins.insert(t, &mut p, &s, &mut id).unwrap();
+        if p.len() != before {
+            assert_ne!(
+                (t / 0.05).floor(),
+                ((t - dt) / 0.05).floor(),
+                "placed between batches at {t} s"
+            );
+            batches.push((t, p.len() - before));
+        }
+    }
+    assert_eq!(batches.len(), 5, "{batches:?}");
+    for (j, (t, n)) in batches.iter().enumerate() {
+        assert!(
+            (t - 0.05 * (j + 3) as f64).abs() <= dt && *n == 10,
+            "{batches:?}"
+        );
+    }
+    assert_separated(&s, &p);
+    error_naming(
+        &replace("count = 50", "count = 50\ninterval = 0.1"),
+        "insertions[0].interval",
+    );
+    error_naming(
+        &replace("count = 50", "rate = 10.0\ninterval = 0.0"),
+        "insertions[0].interval",
+    );
+}
+
 #[test]
 fn inserter_state_round_trip_gives_identical_insertions() {
     let s = rate_scene();

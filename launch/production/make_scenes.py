@@ -364,15 +364,18 @@ QUARTER_SCALE = 15.0    # d_c = 32.3 mm, d_eq = 18.7 mm: the 1:4 silo is 16 grai
 QUARTER_GRAINS = 40_000 # about 1.1 m of bed above the hopper
 
 
-def silo_fill(name, prefix, d, height, outlet, scale, grains, rate, e, bands, end, inlet, doc, up=""):
+def silo_fill(name, prefix, d, height, outlet, scale, grains, rate, e, bands, end, inlet, doc, up="",
+              speed=2.0, feed=6, batch=None):
     """A silo filled from a central inlet at its top (case 4b and its twin): grains placed at
-    random in a cylinder of radius `inlet` d/2 just below the rim, thrown down at 2 m/s so the
-    inlet clears quickly, onto a gate closing the outlet. The side's east half is cut into
-    `bands` walls for the wall stress."""
+    random in a cylinder of radius `inlet` d/2 and `feed` grain radii tall just below the rim,
+    thrown down at `speed` so the inlet clears quickly, onto a gate closing the outlet; fed in
+    batches `batch` seconds apart when given. The side's east half is cut into `bands` walls
+    for the wall stress."""
     r = d / 2
     bound = GRAIN_DC / 2 * scale
     top = height - 2.5 * bound
-    feed_h = 6 * bound
+    feed_h = feed * bound
+    batched = f"interval = {batch!r}\n" if batch else ""
     return f"""{doc}
 gravity = [0.0, 0.0, -9.81]
 
@@ -398,7 +401,7 @@ type = "grain"
 region = {{ kind = "cylinder", base = [0.0, 0.0, {top - feed_h!r}], axis = [0.0, 0.0, 1.0], radius = {inlet * r!r}, height = {feed_h!r} }}
 rate = {rate!r}
 total = {grains}
-velocity = [0.0, 0.0, -2.0]
+{batched}velocity = [0.0, 0.0, {-speed!r}]
 orientation = "random"
 {silo_walls(prefix, bands, up)}
 [[walls]]
@@ -419,12 +422,14 @@ series_interval = 0.005
 def silo_quarter_fill():
     return silo_fill(
         "silo_quarter_fill", "silo_quarter", 0.525, 2.65, 0.1675, QUARTER_SCALE, QUARTER_GRAINS,
-        8000.0, "3.0e6", 6, 6.5, 0.6,
-        f"""# Case 4b (docs/production.md §4): the seed's silo at 1:4 (make_meshes.py silo_quarter: 0.525 m
+        8000.0, "3.0e6", 6, 7.0, 0.6, speed=4.0, feed=24, batch=0.005,
+        doc=f"""# Case 4b (docs/production.md §4): the seed's silo at 1:4 (make_meshes.py silo_quarter: 0.525 m
 # across, 2.65 m, 0.1675 m outlet, 30 degree hopper, corrugated side whose east half is six
 # height bands for the wall stress) filled to completion from a central inlet at the top with
 # {QUARTER_GRAINS} mineral grains of 32.3 mm (circumscribed; 18.7 mm volume-equivalent), onto a gate
-# closing the outlet: 8000 per second for 5 s, then 1.5 s to settle; E softened to 3 MPa (the
+# closing the outlet: 8000 per second for 5 s in batches every 5 ms (each GPU step that inserts
+# takes the state through the host), thrown down at 4 m/s from an inlet 24 grain radii tall so
+# that a batch fits while the last clears (it takes about 7000 per second), then 2 s to settle; E softened to 3 MPa (the
 # bed's wall stress saturates near 14 kPa, a strain of 0.5 %). Compared with Janssen's law
 # (the bands' forces in series.csv), its packing fraction and the heap's angle of repose
 # (`polydem analyze porosity` and `heap`). Written by make_scenes.py.""")

@@ -18,6 +18,7 @@ impl Inserter {
             inserted: vec![0; n],
             count_done: vec![false; n],
             last_insertion_time: None,
+            dt: scene.time_step(),
         }
     }
 
@@ -45,6 +46,7 @@ impl Inserter {
             inserted,
             count_done,
             last_insertion_time: state.last_insertion_time,
+            dt: scene.time_step(),
         }
     }
 
@@ -81,8 +83,21 @@ impl Inserter {
         (0..n_ins).any(|k| {
             let ins = &scene.insertions[k];
             let done = matches!(ins.mode, InsertionMode::Count(_)) && self.count_done[k];
-            !done && ins.due_by(t) > self.inserted[k]
+            !done && ins.due_by(t) > self.inserted[k] && !self.between_batches(k, t, scene)
         })
+    }
+
+    /// Whether rate insertion `k`, fed in batches (`interval`), skips the step that ends at
+    /// `t` because the step does not cross a multiple of the interval. A function of `t` and
+    /// the time step alone, so restarts, ranks and both backends batch at the same steps.
+    fn between_batches(&self, k: usize, t: f64, scene: &Scene) -> bool {
+        match scene.insertions[k].mode {
+            InsertionMode::Rate {
+                interval: Some(every),
+                ..
+            } => (t / every).floor() == ((t - self.dt) / every).floor(),
+            _ => false,
+        }
     }
 
     /// Inserts every particle due by time `t`: count insertions on the first call, rate
@@ -105,7 +120,7 @@ impl Inserter {
             .map(|k| {
                 let ins = &scene.insertions[k];
                 let done = matches!(ins.mode, InsertionMode::Count(_)) && self.count_done[k];
-                if done {
+                if done || self.between_batches(k, t, scene) {
                     0
                 } else {
                     ins.due_by(t).saturating_sub(self.inserted[k])

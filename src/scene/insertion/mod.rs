@@ -31,12 +31,15 @@ pub enum InsertionMode {
     /// This many particles, all at the first [`Inserter::insert`] call.
     Count(u64),
     /// Continuous feeding: `floor((min(t, end) − start) · per_second)` particles are due by
-    /// time t, at most `total`.
+    /// time t, at most `total`; with an `interval`, placed in batches at the steps that cross
+    /// its multiples (those due since the last batch, and any that found no place then)
+    /// rather than each in the step it falls due.
     Rate {
         per_second: f64,
         start: f64,
         end: Option<f64>,
         total: Option<u64>,
+        interval: Option<f64>,
     },
 }
 
@@ -225,6 +228,7 @@ impl Insertion {
                 start,
                 end,
                 total,
+                ..
             } => {
                 let t_end = end.map_or(t, |e| t.min(e));
                 if t.is_nan() || t_end < start {
@@ -272,4 +276,7 @@ pub struct Inserter {
     inserted: Vec<u64>,
     count_done: Vec<bool>,
     last_insertion_time: Option<f64>,
+    /// The time step (from the scene, not checkpointed): batches of a rate insertion with an
+    /// `interval` go at the steps that cross its multiples.
+    dt: f64,
 }

@@ -55,6 +55,9 @@ pub struct InsertionSection {
     pub end: Option<f64>,
     /// Most particles fed (rate only).
     pub total: Option<u64>,
+    /// Feed in batches this many seconds apart instead of each particle as it falls due
+    /// (rate only).
+    pub interval: Option<f64>,
     /// `"random"`, `"identity"` or `{ axis, angle }`; parsed by the validator.
     pub orientation: Option<toml::Value>,
     /// Initial velocity (m/s).

@@ -29,6 +29,7 @@ impl Validator<'_> {
                 ("start", s.start.is_some()),
                 ("end", s.end.is_some()),
                 ("total", s.total.is_some()),
+                ("interval", s.interval.is_some()),
             ];
             let mode = match (s.count, s.rate) {
                 (Some(n), None) => {
@@ -59,6 +60,7 @@ impl Validator<'_> {
                         start,
                         end: s.end,
                         total: s.total,
+                        interval: s.interval.map(|x| self.positive(&k("interval"), x)),
                     }
                 }
                 _ => {
