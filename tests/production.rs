@@ -645,3 +645,25 @@ fn catalyst_pellets_pack_looser_at_the_tube_wall() {
         profile.mean
     );
 }
+
+/// A key added to the scene format, left unset, keeps the fingerprint of the scenes written
+/// before it: the silo twin's committed checkpoint, written before rate insertions had an
+/// `interval`, still matches its scene (and the discharge twin starts from it); with an
+/// interval set it does not.
+#[test]
+fn checkpoints_from_before_insertion_intervals_still_match_their_scene() {
+    let twins = repo_root().join("launch/production/twins");
+    let scene = load_scene(&twins.join("silo.toml")).unwrap();
+    let c = polydem::io::read_checkpoint(&twins.join("silo_filled.ckpt")).unwrap();
+    use polydem::scene::restart::SceneFingerprint;
+    SceneFingerprint::of(&scene).check(&c, 0).unwrap();
+    let batched = std::fs::read_to_string(twins.join("silo.toml"))
+        .unwrap()
+        .replace("total = 160\n", "total = 160\ninterval = 0.01\n")
+        .replace("mesh = \"", &format!("mesh = \"{}/", twins.display()));
+    let path = temp_dir("fingerprint-interval").join("silo.toml");
+    std::fs::write(&path, batched).unwrap();
+    let other = load_scene(&path).unwrap();
+    let refused = SceneFingerprint::of(&other).check(&c, 0).unwrap_err();
+    assert!(refused.contains("insertions[0]"), "{refused}");
+}
