@@ -422,14 +422,15 @@ series_interval = 0.005
 def silo_quarter_fill():
     return silo_fill(
         "silo_quarter_fill", "silo_quarter", 0.525, 2.65, 0.1675, QUARTER_SCALE, QUARTER_GRAINS,
-        8000.0, "3.0e6", 6, 7.0, 0.6, speed=4.0, feed=24, batch=0.005,
+        8000.0, "3.0e6", 6, 8.0, 0.6, speed=4.0, feed=24, batch=0.005,
         doc=f"""# Case 4b (docs/production.md §4): the seed's silo at 1:4 (make_meshes.py silo_quarter: 0.525 m
 # across, 2.65 m, 0.1675 m outlet, 30 degree hopper, corrugated side whose east half is six
 # height bands for the wall stress) filled to completion from a central inlet at the top with
 # {QUARTER_GRAINS} mineral grains of 32.3 mm (circumscribed; 18.7 mm volume-equivalent), onto a gate
 # closing the outlet: 8000 per second for 5 s in batches every 5 ms (each GPU step that inserts
 # takes the state through the host), thrown down at 4 m/s from an inlet 24 grain radii tall so
-# that a batch fits while the last clears (it takes about 7000 per second), then 2 s to settle; E softened to 3 MPa (the
+# that a batch fits while the last clears (it takes about 6300 per second, so the last grain
+# comes at about 6.4 s), then about 1.6 s to settle; E softened to 3 MPa (the
 # bed's wall stress saturates near 14 kPa, a strain of 0.5 %). Compared with Janssen's law
 # (the bands' forces in series.csv), its packing fraction and the heap's angle of repose
 # (`polydem analyze porosity` and `heap`). Written by make_scenes.py.""")
