@@ -1,11 +1,13 @@
 #!/usr/bin/env python3
 """Case 1 (docs/production.md §1): the fill height of the dodecahedra over several pours.
 
-  python3 launch/production/fill_heights.py OUT.svg SCENE:CHECKPOINT ...
+  python3 launch/production/fill_heights.py OUT.svg SCENE:CHECKPOINT ... | RESULT.json ...
 
 Runs `polydem analyze fill-height` (target/release/polydem, or $POLYDEM) on each pour's final
-checkpoint (each with the scene file of its seed), prints the table of docs/production.md and
-draws each pour's highest point and mean top surface against the experiment's 16 cm.
+checkpoint (each with the scene file of its seed), or reads its output saved as JSON (what
+`run_on_gpu.sh` writes for the ten pours of one scene), prints the table of
+docs/production.md and draws each pour's highest point and mean top surface against the
+experiment's 16 cm.
 """
 import json
 import math
@@ -34,7 +36,7 @@ def main():
     if len(sys.argv) < 3:
         sys.exit(__doc__)
     svg, runs = sys.argv[1], sys.argv[2:]
-    rows = [analyze(*r.split(":", 1)) for r in runs]
+    rows = [json.load(open(r)) if r.endswith(".json") else analyze(*r.split(":", 1)) for r in runs]
     print("| pour | highest point (cm) | mean top surface (cm) | bulk solid fraction |")
     print("|---|---|---|---|")
     for k, r in enumerate(rows):
