@@ -4,10 +4,10 @@
 use super::super::walls::WallTriangles;
 use super::super::{Scene, SceneError};
 use super::placement::{Occupancy, type_name};
-use super::{InsertReport, Inserter, InserterState, InsertionMode, Region};
+use super::{InsertReport, Inserter, InserterState, Insertion, InsertionMode, Region};
 use crate::rng::Rng;
 use crate::state::Particles;
-use nalgebra::Vector3;
+use nalgebra::{UnitQuaternion, Vector3};
 
 impl Inserter {
     /// A fresh inserter, its generator seeded from `simulation.seed`.
@@ -100,6 +100,113 @@ impl Inserter {
         }
     }
 
+    /// The particles `first .. first + n` of an insertion whose positions are given rather
+    /// than drawn (`None` for random placement): a lattice or a packing tiled over the region
+    /// (box or cylinder, bottom up in a cylinder) or a checkpoint's state. Each comes with its
+    /// scale and orientation when those are given too (packing, state; a lattice draws them),
+    /// and with its velocity and angular velocity when the state gives them.
+    #[allow(clippy::type_complexity)]
+    fn fixed_placements(
+        ins: &Insertion,
+        scene: &Scene,
+        first: u64,
+        n: u64,
+    ) -> Option<
+        Vec<(
+            Vector3<f64>,
+            Option<(f64, UnitQuaternion<f64>)>,
+            Option<(Vector3<f64>, Vector3<f64>)>,
+        )>,
+    > {
+        let range = first as usize..(first + n) as usize;
+        // The part of a list of `len` in the range (validation checked that it holds them all).
+        let part = |len: usize| range.start.min(len)..range.end.min(len);
+        if let Some(state) = &ins.state {
+            return Some(
+                state.bodies[part(state.bodies.len())]
+                    .iter()
+                    .map(|b| {
+                        let motion = Some((b.velocity, b.angular_velocity));
+                        (b.position, Some((b.scale, b.orientation)), motion)
+                    })
+                    .collect(),
+            );
+        }
+        match (&ins.region, ins.lattice, &ins.packing) {
+            (Region::Box { min, .. }, _, Some(tiled)) => Some(
+                range
+                    .map(|j| {
+                        let (c, orientation, scale) = tiled.particle(j as u64, min);
+                        (c, Some((scale, orientation)), None)
+                    })
+                    .collect(),
+            ),
+            (Region::Box { min, max }, Some(spacing), None) => {
+                // The 1e-9 absorbs the rounding of a region sized as an exact multiple of the
+                // spacing.
+                let dims = [0, 1, 2]
+                    .map(|a| ((max[a] - min[a]) / spacing[a] + 1e-9).floor().max(1.0) as u64);
+                Some(
+                    range
+                        .map(|j| {
+                            let j = j as u64;
+                            let cell = [
+                                j % dims[0],
+                                (j / dims[0]) % dims[1],
+                                j / (dims[0] * dims[1]),
+                            ];
+                            let c = Vector3::from_fn(|a, _| {
+                                min[a] + spacing[a] * (cell[a] as f64 + 0.5)
+                            });
+                            (c, None, None)
+                        })
+                        .collect(),
+                )
+            }
+            (
+                Region::Cylinder {
+                    base,
+                    axis,
+                    radius,
+                    height,
+                },
+                Some(spacing),
+                None,
+            ) => {
+                let sites = super::cylinder_sites(base, axis, *radius, *height, &spacing);
+                let sites = sites.get(range.start.min(sites.len())..range.end.min(sites.len()));
+                Some(
+                    sites
+                        .unwrap_or(&[])
+                        .iter()
+                        .map(|&c| (c, None, None))
+                        .collect(),
+                )
+            }
+            (
+                Region::Cylinder {
+                    base,
+                    axis,
+                    radius,
+                    height,
+                },
+                _,
+                Some(tiled),
+            ) => {
+                let bound = scene.templates[scene.particle_types[ins.particle_type].template]
+                    .circumscribed_radius;
+                let kept = tiled.in_cylinder(base, axis, *radius, *height, bound);
+                Some(
+                    kept[part(kept.len())]
+                        .iter()
+                        .map(|&(c, orientation, scale)| (c, Some((scale, orientation)), None))
+                        .collect(),
+                )
+            }
+            _ => None,
+        }
+    }
+
     /// Inserts every particle due by time `t`: count insertions on the first call, rate
     /// insertions as they fall due. New particles overlap no existing or new particle and no
     /// wall (at its pose at `t`), judged by bounding spheres, and lie inside their region and
@@ -155,110 +262,18 @@ impl Inserter {
         for (k, &n_due) in due.iter().enumerate() {
             let ins = &scene.insertions[k];
             let is_count = matches!(ins.mode, InsertionMode::Count(_));
-            if let (Some(tiled), Region::Box { min, .. }) = (&ins.packing, &ins.region) {
-                // Validation checked that the count is the tiling's.
-                for _ in 0..n_due {
-                    let (c, orientation, scale) = tiled.particle(self.inserted[k], min);
-                    Self::push(ins, particles, scene, (scale, orientation), c, next_id);
-                    self.inserted[k] += 1;
-                    report.inserted += 1;
-                }
-                self.last_insertion_time = Some(t);
-                self.count_done[k] = true;
-                continue;
-            }
-            if let Some(state) = &ins.state {
-                // Validation checked that the state holds the count.
-                for b in state
-                    .bodies
-                    .iter()
-                    .skip(self.inserted[k] as usize)
-                    .take(n_due as usize)
-                {
-                    Self::push(
-                        ins,
-                        particles,
-                        scene,
-                        (b.scale, b.orientation),
-                        b.position,
-                        next_id,
-                    );
-                    let i = particles.len() - 1;
-                    particles.velocity[i] = b.velocity;
-                    particles.angular_velocity[i] = b.angular_velocity;
-                    self.inserted[k] += 1;
-                    report.inserted += 1;
-                }
-                self.last_insertion_time = Some(t);
-                self.count_done[k] = true;
-                continue;
-            }
-            // Cylinder regions: the lattice's sites or the packing's particles inside, bottom
-            // up; validation checked that they hold the count.
-            if let (
-                Some(spacing),
-                Region::Cylinder {
-                    base,
-                    axis,
-                    radius,
-                    height,
-                },
-            ) = (ins.lattice, &ins.region)
-            {
-                let sites = super::cylinder_sites(base, axis, *radius, *height, &spacing);
-                for &c in sites
-                    .iter()
-                    .skip(self.inserted[k] as usize)
-                    .take(n_due as usize)
-                {
-                    self.place_at(ins, particles, scene, c, next_id);
-                    self.inserted[k] += 1;
-                    report.inserted += 1;
-                }
-                self.last_insertion_time = Some(t);
-                self.count_done[k] = true;
-                continue;
-            }
-            if let (
-                Some(tiled),
-                Region::Cylinder {
-                    base,
-                    axis,
-                    radius,
-                    height,
-                },
-            ) = (&ins.packing, &ins.region)
-            {
-                let bound = scene.templates[scene.particle_types[ins.particle_type].template]
-                    .circumscribed_radius;
-                let kept = tiled.in_cylinder(base, axis, *radius, *height, bound);
-                for &(c, orientation, scale) in kept
-                    .iter()
-                    .skip(self.inserted[k] as usize)
-                    .take(n_due as usize)
-                {
-                    Self::push(ins, particles, scene, (scale, orientation), c, next_id);
-                    self.inserted[k] += 1;
-                    report.inserted += 1;
-                }
-                self.last_insertion_time = Some(t);
-                self.count_done[k] = true;
-                continue;
-            }
-            if let (Some(spacing), Region::Box { min, max }) = (ins.lattice, &ins.region) {
-                // Validation checked that the lattice holds the count.
-                // The 1e-9 absorbs the rounding of a region sized as an exact multiple of the spacing.
-                let dims = [0, 1, 2]
-                    .map(|a| ((max[a] - min[a]) / spacing[a] + 1e-9).floor().max(1.0) as u64);
-                for _ in 0..n_due {
-                    let j = self.inserted[k];
-                    let cell = [
-                        j % dims[0],
-                        (j / dims[0]) % dims[1],
-                        j / (dims[0] * dims[1]),
-                    ];
-                    let c = Vector3::from_fn(|a, _| min[a] + spacing[a] * (cell[a] as f64 + 0.5));
-                    self.place_at(ins, particles, scene, c, next_id);
+            if let Some(placements) = Self::fixed_placements(ins, scene, self.inserted[k], n_due) {
+                // Validation checked that the lattice, the packing or the state holds the count.
+                for (c, body, motion) in placements {
+                    match body {
+                        Some(body) => Self::push(ins, particles, scene, body, c, next_id),
+                        None => self.place_at(ins, particles, scene, c, next_id),
+                    }
+                    if let Some((v, w)) = motion {
+                        let i = particles.len() - 1;
+                        particles.velocity[i] = v;
+                        particles.angular_velocity[i] = w;
+                    }
                     self.inserted[k] += 1;
                     report.inserted += 1;
                 }
