@@ -483,5 +483,24 @@ fn moving_walls_on_the_gpu_match_the_cpu() {
             worst.1,
             worst.2
         );
+        // The wall list the bench reports: built with the skin added to each particle's
+        // reach and valid while no particle or wall has moved half the skin, so it holds
+        // every facet the CPU finds within the bounding radius now, and more.
+        let (cpu_items, cpu_particles) = cpu.wall_candidates();
+        let (gpu_items, gpu_particles) = gpu.wall_candidates().unwrap();
+        println!(
+            "{what}: wall facets within reach: CPU {cpu_items} items on {cpu_particles} \
+             particles, GPU list {gpu_items} on {gpu_particles}"
+        );
+        let n = cpu.particles.len() as u64;
+        assert!(
+            cpu_particles > 0 && cpu_items >= cpu_particles,
+            "{what}: the cubes lie on the box's facets"
+        );
+        assert!(
+            gpu_items >= cpu_items && gpu_particles >= cpu_particles && gpu_particles <= n,
+            "{what}: the GPU's wall list ({gpu_items} items, {gpu_particles} particles) misses \
+             facets the CPU finds ({cpu_items}, {cpu_particles}) or counts beyond {n} particles"
+        );
     }
 }
