@@ -362,7 +362,7 @@ series_interval = 0.005
 
 QUARTER_SCALE = 15.0    # d_c = 32.3 mm, d_eq = 18.7 mm: the 1:4 silo is 16 grains across
 QUARTER_GRAINS = 40_000 # about 1.1 m of bed above the hopper
-QUARTER_END = 3.5       # s: the fill (about 2.2 s) and its settling
+QUARTER_END = 3.8       # s: the fill (the last grain lands near 2.8 s) and its settling
 QUARTER_E = "1.0e6"     # Pa: the fill's and the discharges' grains
 
 
@@ -436,7 +436,8 @@ def silo_quarter_fill():
 # hopper to the rim: grains are placed at random free spots in it (above the heap as it rises)
 # and thrown down at 1 m/s, a stream falling onto the centre of the heap; fed at up to 24 000 per
 # second in batches every 5 ms (each GPU step that inserts takes the state through the host),
-# it takes about 20 000 per second, so the last grain comes at about 2.2 s, then settling to
+# it takes about 20 000 per second, so the last grain comes at about 2.2 s and lands by 2.8 s;
+# then settling to
 # {QUARTER_END} s. E softened to 1 MPa (the bed's wall stress saturates near 14 kPa, a strain of
 # about 1.5 %). Compared with Janssen's law (the bands' forces in series.csv), its packing
 # fraction and the heap's angle of repose (`polydem analyze porosity` and `heap`). Written by
