@@ -437,9 +437,8 @@ def silo_quarter_fill():
 # and thrown down at 1 m/s, a stream falling onto the centre of the heap; fed at up to 24 000 per
 # second in batches every 5 ms (each GPU step that inserts takes the state through the host),
 # it takes about 20 000 per second, so the last grain comes at about 2.2 s and lands by 2.8 s;
-# then settling to
-# {QUARTER_END} s. E softened to 1 MPa (the bed's wall stress saturates near 14 kPa, a strain of
-# about 1.5 %). Compared with Janssen's law (the bands' forces in series.csv), its packing
+# then settling to {QUARTER_END} s. E softened to 1 MPa (the bed's wall stress saturates near
+# 14 kPa, a strain of about 1.5 %). Compared with Janssen's law (the bands' forces in series.csv), its packing
 # fraction and the heap's angle of repose (`polydem analyze porosity` and `heap`). Written by
 # make_scenes.py.""")
 
