@@ -55,7 +55,7 @@ for s in "${scenes[@]}"; do
       for k in 0 1 2; do
         y=$(python3 -c "print(0.03 * ($k - 1))")
         "$bin" analyze drum "$here/out/$s/particles" --radius 0.15 --centre 0,0 \
-          --y "$(python3 -c "print($y - 0.0055)"),$(python3 -c "print($y + 0.0055)")" --from 2 --cell 0.005 \
+          --y="$(python3 -c "print($y - 0.0055)"),$(python3 -c "print($y + 0.0055)")" --from 2 --cell 0.005 \
           --field "$out/drum_$k.csv" > "$out/drum_$k.json"
       done
       python3 "$here/drum_field.py" "$out/drum_speeds.svg" "30 rpm:$out/drum_0.csv:$out/drum_0.json" \
