@@ -111,8 +111,13 @@ pub enum Instability {
     NonFinite { field: &'static str },
     /// `|v| + |ω| R` above the bound.
     Speed { speed: f64, bound: f64, scale: f64 },
-    /// A contact's overlap above the bound, as the GPU reports it (without the partner).
-    DeepContact { fraction: f64 },
+    /// A contact's overlap above the bound, as the GPU reports it (without the partner), with
+    /// the host's f64 evaluation of the same state: the deepest overlap of the particle with
+    /// another particle (partner, fraction of the smaller particle's volume), if any.
+    DeepContact {
+        fraction: f64,
+        host: Option<(String, f64)>,
+    },
     /// A contact's overlap volume above the bound.
     Overlap {
         partner: String,
@@ -135,11 +140,33 @@ impl std::fmt::Display for Instability {
                 "it moves at {speed:.4e} m/s (|v| + |ω| R), above the bound {bound:.4e} m/s \
                  (simulation.guard.max_speed; the scene's speed scale is {scale:.4e} m/s)"
             ),
-            Instability::DeepContact { fraction } => write!(
-                f,
-                "one of its contacts overlaps more than {fraction} of the smaller particle's \
-                 volume (simulation.guard.max_overlap)"
-            ),
+            Instability::DeepContact { fraction, host } => {
+                write!(
+                    f,
+                    "on the device one of its contacts overlaps more than {fraction} of the \
+                     smaller particle's volume (simulation.guard.max_overlap)"
+                )?;
+                match host {
+                    Some((partner, x)) => write!(
+                        f,
+                        "; evaluated in f64 on the host from the same state, its deepest contact \
+                         with a particle overlaps {partner} by {x:.3e} of the smaller volume"
+                    )?,
+                    None => write!(
+                        f,
+                        "; evaluated in f64 on the host from the same state, it overlaps no \
+                         particle"
+                    )?,
+                }
+                if host.as_ref().is_none_or(|h| h.1 <= *fraction) {
+                    write!(
+                        f,
+                        " (so the deep contact is a wall's, or the device's geometry differs \
+                         from f64: run with --gpu-precision double to tell)"
+                    )?;
+                }
+                Ok(())
+            }
             Instability::Overlap {
                 partner,
                 volume,

@@ -97,6 +97,63 @@ fn deep_overlap(device: Device) {
             && msg.contains("max_overlap"),
         "{msg}"
     );
+    if device != CPU {
+        // The device names no partner; the host's f64 evaluation of the same state does,
+        // with the lens of that step.
+        let x = lens(2.0 * v * dt * expected as f64 - gap) / (limit / 0.1);
+        assert!(
+            msg.contains(&format!(
+                "its deepest contact with a particle overlaps particle 1 by {x:.3e}"
+            )) && !msg.contains("--gpu-precision double to tell"),
+            "{msg}"
+        );
+    }
+}
+
+/// The host's f64 overlap of one particle with every other, which the GPU guard's report
+/// names: cubes of edge a face to face, overlapping by δ, share a slab of a² δ, δ/a of a
+/// cube's volume.
+#[test]
+fn the_deepest_overlap_of_a_particle_is_found_without_a_list() {
+    let a = 0.01;
+    let types = format!(
+        "[[particle_types]]\nname = \"cube\"\nmaterial = \"m\"\n\
+         generator = {{ kind = \"cube\", size = {:?} }}\n",
+        a * 3f64.sqrt()
+    );
+    let text = scene_text(&SceneSpec {
+        e_modulus: 1e6,
+        poisson: 0.3,
+        density: 2500.0,
+        restitution: 0.5,
+        friction: 0.0,
+        gravity: 0.0,
+        dt: 1e-5,
+        wall_scale: None,
+        wall_motion: None,
+        types: &types,
+    });
+    let scene = parse_scene(&text, &repo_root(), "guard.toml").unwrap();
+    let mut sim = Simulation::builder(scene).build().unwrap();
+    let (d1, d2) = (1e-3, 5e-4);
+    place(
+        &mut sim,
+        &[
+            (Vector3::zeros(), Vector3::zeros()),
+            (Vector3::new(a - d1, 0.0, 0.0), Vector3::zeros()),
+            (Vector3::new(-(a - d2), 0.0, 0.0), Vector3::zeros()),
+            (Vector3::new(0.0, 0.0, 3.0 * a), Vector3::zeros()),
+        ],
+    );
+    let found: Vec<_> = (0..4).map(|i| sim.deepest_particle_overlap(i)).collect();
+    println!("{found:?}");
+    let near = |f: Option<(u64, f64)>, id: u64, x: f64| {
+        f.is_some_and(|(j, y)| j == id && (y - x).abs() <= 1e-9 * x)
+    };
+    assert!(near(found[0], 1, d1 / a), "{found:?}");
+    assert!(near(found[1], 0, d1 / a), "{found:?}");
+    assert!(near(found[2], 0, d2 / a), "{found:?}");
+    assert_eq!(found[3], None);
 }
 
 fn speed_bound(device: Device) {

@@ -96,6 +96,56 @@ impl Simulation {
 
     /// Stages 3–7 for every candidate pair of the list, in list order (ghosts joined after the
     /// owned particles): the outcome per pair, or the first pair whose geometry failed.
+    /// The deepest overlap of owned particle `i` with any other owned particle, evaluated
+    /// now in f64 by the narrow phase of [`Self::pair_contacts`] over every particle within
+    /// reach (no list): (the partner's id, its overlap volume over the smaller particle's
+    /// volume, as the stability guard measures it). For the GPU guard's report, which names
+    /// no partner; `None` when no particle overlaps it.
+    pub fn deepest_particle_overlap(&self, i: usize) -> Option<(u64, f64)> {
+        let p = &self.particles;
+        let s = &self.scene;
+        if i >= p.len() || self.radius.len() != p.len() {
+            return None;
+        }
+        let periodic = self.bounds.periodic.iter().any(|&k| k);
+        let xa = p.position[i];
+        let ta = &s.templates[s.particle_types[p.kind[i] as usize].template];
+        let pose_a = Isometry3::from_parts(xa.into(), p.orientation[i]);
+        (0..p.len())
+            .into_par_iter()
+            .filter(|&j| j != i)
+            .filter_map(|j| {
+                let xb = if periodic {
+                    xa + self.bounds.displacement(&xa, &p.position[j])
+                } else {
+                    p.position[j]
+                };
+                let reach = self.radius[i] + self.radius[j];
+                if (xb - xa).norm_squared() >= reach * reach {
+                    return None;
+                }
+                let volume = if s.spheres_only() {
+                    sphere_lens(self.radius[i], self.radius[j], &(xb - xa)).volume
+                } else {
+                    let tb = &s.templates[s.particle_types[p.kind[j] as usize].template];
+                    let pose_b = Isometry3::from_parts(xb.into(), p.orientation[j]);
+                    let g = with_workspace(|ws| {
+                        overlap_pair(ws, (ta, p.scale[i], &pose_a), (tb, p.scale[j], &pose_b))
+                    })
+                    .ok()?;
+                    if !g.intersects {
+                        return None;
+                    }
+                    g.overlap.volume
+                };
+                (volume > 0.0).then(|| {
+                    let size = self.equivalent_volume(i).min(self.equivalent_volume(j));
+                    (p.id[j], volume / size)
+                })
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
+    }
+
     pub(super) fn pair_contacts(&self, dt: f64) -> Result<Vec<PairOutcome>, SimulationError> {
         let p = &self.particles;
         let s = &self.scene;

@@ -145,8 +145,17 @@ impl CudaSimulation {
                 }
                 .into());
             }
+            // The device names no partner: the host evaluates the particle's overlaps with
+            // the others in f64 from the same positions (those of the force evaluation; the
+            // fused kick changed only velocities), which tells a deep contact from a device
+            // geometry that differs from f64.
+            let host = self
+                .host
+                .deepest_particle_overlap(i)
+                .map(|(id, x)| (format!("particle {id}"), x));
             let problem = crate::stability::Instability::DeepContact {
                 fraction: self.host.guard.max_overlap,
+                host,
             };
             return Err(self.host.unstable(i, Some(problem)).into());
         }
