@@ -4,6 +4,7 @@
 
   python3 launch/production/make_scenes.py            # all of them
   python3 launch/production/make_scenes.py NAME ...   # only these
+  python3 launch/production/make_scenes.py --discharge-count N silo_discharge_75mm ...
 
 A small scene keeps a GPU latency-bound (docs/performance.md, speed against size): 63 dice
 step no faster than 630 do. So the ten pours of case 1 run as ten cylinders in one scene, and
@@ -488,6 +489,11 @@ count = 160
 
 
 DISCHARGE_HOLES = [round(k * 0.0187, 4) for k in (4, 5, 6, 7, 8)]   # as make_meshes.py
+DISCHARGE_TOP = 0.91    # m: the grains below (0.6 m of bed above the hopper) are discharged
+DISCHARGE_END = 1.5     # s: the rate is fitted over 0.5-1.5 s
+# Grains of the fill's final state below DISCHARGE_TOP: known once the fill has run (`polydem
+# check` on a discharge scene gives it; run_on_gpu.sh passes it as --discharge-count).
+DISCHARGE_COUNT = [QUARTER_GRAINS]
 
 
 def silo_discharge(hole):
@@ -497,17 +503,18 @@ def silo_discharge(hole):
     walls = silo_walls("silo_quarter", 6)
     return f"""# Case 5 (docs/production.md §5): the 1:4 silo filled by silo_quarter_fill.toml discharged
 # through an orifice of {mm} mm ({hole / 0.0187:.0f} volume-equivalent grain diameters) in a plate under
-# its hopper. The grains are the fill's final state (`state`: run_on_gpu.sh copies the fill's
-# last checkpoint to out/silo_quarter_fill/final.ckpt), the gate is gone, the plate's hole is
-# open from t = 0, and grains that fall below the domain are removed; particle tables every
-# 0.1 s count the grains left (silo_discharge.py: mass against time and Beverloo's law).
-# Written by make_scenes.py.
+# its hopper. The grains are the fill's final state below {DISCHARGE_TOP} m, the hopper and 0.6 m of
+# the bed above it, a head at which the rate no longer depends on the height (`state`:
+# run_on_gpu.sh copies the fill's last checkpoint to out/silo_quarter_fill/final.ckpt); the gate
+# is gone, the plate's hole is open from t = 0, and grains that fall below the domain are
+# removed; particle tables every 0.05 s count the grains left (silo_discharge.py: mass against
+# time and Beverloo's law). Written by make_scenes.py.
 
 gravity = [0.0, 0.0, -9.81]
 
 [simulation]
 dt_fraction = 0.05
-end_time = 3.0
+end_time = {DISCHARGE_END!r}
 seed = 0
 
 [domain]
@@ -524,9 +531,9 @@ scale = {QUARTER_SCALE!r}
 
 [[insertions]]
 type = "grain"
-region = {{ kind = "cylinder", base = [0.0, 0.0, -0.01], axis = [0.0, 0.0, 1.0], radius = 0.28, height = 2.7 }}
+region = {{ kind = "cylinder", base = [0.0, 0.0, -0.01], axis = [0.0, 0.0, 1.0], radius = 0.28, height = {DISCHARGE_TOP + 0.01!r} }}
 state = "out/silo_quarter_fill/final.ckpt"
-count = {QUARTER_GRAINS}
+count = {DISCHARGE_COUNT[0]}
 {walls}
 [[walls]]
 name = "orifice"
@@ -535,9 +542,9 @@ material = "steel"
 
 [output]
 dir = "out/silo_discharge_{mm}mm"
-frame_interval = 0.1
+frame_interval = 0.05
 formats = ["csv"]
-checkpoint_interval = 1.0
+checkpoint_interval = 0.5
 series_interval = 0.01
 """
 
@@ -554,6 +561,9 @@ SCENES = {
 
 
 def main(names):
+    if names[:1] == ["--discharge-count"]:
+        DISCHARGE_COUNT[0] = int(names[1])
+        names = names[2:]
     for name in names or SCENES:
         if name not in SCENES:
             sys.exit(f"unknown scene {name!r}: one of {', '.join(SCENES)}")

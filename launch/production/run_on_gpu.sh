@@ -68,8 +68,14 @@ for s in "${scenes[@]}"; do
         > "$out/fixed_bed_porosity.json" ;;
     silo_quarter_fill)
       ck=$(last_ckpt "$s")
-      # The discharge scenes start from this state.
+      # The discharge scenes start from this state: their grain count (those below the cut)
+      # is known now (the count error of `polydem check` gives it).
       cp "$ck" "$here/out/$s/final.ckpt"
+      n=$("$bin" check "$here/silo_discharge_75mm.toml" 2>&1 | grep -o '[0-9]* of the [0-9]* particles' | head -1 | cut -d' ' -f1)
+      if [ -n "$n" ]; then
+        python3 "$here/make_scenes.py" --discharge-count "$n" silo_discharge_75mm silo_discharge_94mm \
+          silo_discharge_112mm silo_discharge_131mm silo_discharge_150mm
+      fi
       "$bin" analyze fill-height "$here/$s.toml" "$ck" --radius 0.25 > "$out/silo_fill.json"
       "$bin" analyze heap "$here/$s.toml" "$ck" --radius 0.25 > "$out/silo_heap.json"
       # Hopper top 0.3096 m; the side's bands are 9 pitches of 43.5 mm; the packing fraction
