@@ -94,10 +94,8 @@ impl Simulation {
         Ok(outcomes)
     }
 
-    /// Stages 3–7 for every candidate pair of the list, in list order (ghosts joined after the
-    /// owned particles): the outcome per pair, or the first pair whose geometry failed.
     /// The deepest overlap of owned particle `i` with any other owned particle, evaluated
-    /// now in f64 by the narrow phase of [`Self::pair_contacts`] over every particle within
+    /// now in f64 by the narrow phase of stages 4–5 (`pair_contacts`) over every particle within
     /// reach (no list): (the partner's id, its overlap volume over the smaller particle's
     /// volume, as the stability guard measures it). For the GPU guard's report, which names
     /// no partner; `None` when no particle overlaps it.
@@ -146,6 +144,8 @@ impl Simulation {
             .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
     }
 
+    /// Stages 3–7 for every candidate pair of the list, in list order (ghosts joined after the
+    /// owned particles): the outcome per pair, or the first pair whose geometry failed.
     pub(super) fn pair_contacts(&self, dt: f64) -> Result<Vec<PairOutcome>, SimulationError> {
         let p = &self.particles;
         let s = &self.scene;
