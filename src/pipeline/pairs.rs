@@ -102,12 +102,15 @@ impl Simulation {
     pub fn deepest_particle_overlap(&self, i: usize) -> Option<(u64, f64)> {
         let p = &self.particles;
         let s = &self.scene;
-        if i >= p.len() || self.radius.len() != p.len() {
+        if i >= p.len() {
             return None;
         }
+        // Bounding radii from the templates: a GPU run's host copy need not hold them.
+        let template = |k: usize| &s.templates[s.particle_types[p.kind[k] as usize].template];
+        let radius = |k: usize| template(k).circumscribed_radius * p.scale[k];
         let periodic = self.bounds.periodic.iter().any(|&k| k);
         let xa = p.position[i];
-        let ta = &s.templates[s.particle_types[p.kind[i] as usize].template];
+        let ta = template(i);
         let pose_a = Isometry3::from_parts(xa.into(), p.orientation[i]);
         (0..p.len())
             .into_par_iter()
@@ -118,14 +121,14 @@ impl Simulation {
                 } else {
                     p.position[j]
                 };
-                let reach = self.radius[i] + self.radius[j];
+                let reach = radius(i) + radius(j);
                 if (xb - xa).norm_squared() >= reach * reach {
                     return None;
                 }
                 let volume = if s.spheres_only() {
-                    sphere_lens(self.radius[i], self.radius[j], &(xb - xa)).volume
+                    sphere_lens(radius(i), radius(j), &(xb - xa)).volume
                 } else {
-                    let tb = &s.templates[s.particle_types[p.kind[j] as usize].template];
+                    let tb = template(j);
                     let pose_b = Isometry3::from_parts(xb.into(), p.orientation[j]);
                     let g = with_workspace(|ws| {
                         overlap_pair(ws, (ta, p.scale[i], &pose_a), (tb, p.scale[j], &pose_b))
