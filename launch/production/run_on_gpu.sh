@@ -65,7 +65,9 @@ for s in "${scenes[@]}"; do
       "$bin" analyze fill-height "$here/$s.toml" "$ck" --radius 0.0125 > "$out/fixed_bed_fill.json"
       top=$(python3 -c "import json; print(json.load(open('$out/fixed_bed_fill.json'))['mean_surface'] - 0.0055)")
       "$bin" analyze porosity "$here/$s.toml" "$ck" --radius 0.0125 --z "0.0055,$top" --annuli 50 \
-        > "$out/fixed_bed_porosity.json" ;;
+        > "$out/fixed_bed_porosity.json"
+      python3 "$here/bed_porosity.py" "$out/fixed_bed_porosity.svg" "$out/fixed_bed_porosity.json" \
+        > "$out/fixed_bed_porosity.txt" ;;
     silo_quarter_fill)
       ck=$(last_ckpt "$s")
       # The discharge scenes start from this state: their grain count (those below the cut)
