@@ -667,3 +667,85 @@ fn checkpoints_from_before_insertion_intervals_still_match_their_scene() {
     let refused = SceneFingerprint::of(&other).check(&c, 0).unwrap_err();
     assert!(refused.contains("insertions[0]"), "{refused}");
 }
+
+/// `bed_porosity.py` (case 3's table and plot) on a synthetic profile: Benyahia and O'Neill's
+/// correlation ε = 0.373 + 1.703 / (D/d_pe + 0.611)², d_pe = (3 d² L / 2)^(1/3), at the case's
+/// D/d_pe = 3.97 and at a wider tube, and the profile's extrema where a cosine of one pellet's
+/// period puts them.
+#[test]
+fn the_bed_porosity_script_reads_the_correlation_and_the_extrema() {
+    let dir = std::env::temp_dir().join(format!("polydem_bed_porosity_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = 0.0055;
+    let n = 50;
+    // Minima (porosity 0.2) at 0.7 d and 1.7 d from the wall, maxima between.
+    let wall: Vec<f64> = (0..n)
+        .map(|k| (k as f64 + 0.5) * 0.0125 / n as f64)
+        .collect();
+    let eps: Vec<f64> = wall
+        .iter()
+        .map(|w| 0.45 - 0.25 * (2.0 * PI * (w / d - 0.7)).cos())
+        .collect();
+    let json = format!(
+        "{{\"mean\": 0.44, \"samples\": 1, \"wall_distance\": {wall:?}, \"porosity\": {eps:?}}}"
+    );
+    std::fs::write(dir.join("p.json"), json).unwrap();
+    let python = std::env::var_os("POLYDEM_PYTHON").unwrap_or_else(|| "python3".into());
+    let run = |args: &[&str]| {
+        let out = std::process::Command::new(&python)
+            .arg(repo_root().join("launch/production/bed_porosity.py"))
+            .arg(dir.join("p.svg"))
+            .arg(dir.join("p.json"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{out:?}");
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let correlation = |tube: f64, d: f64, length: f64| {
+        let ratio = tube / (1.5 * d * d * length).cbrt();
+        (0.373 + 1.703 / (ratio + 0.611).powi(2), ratio)
+    };
+    let text = run(&[]);
+    println!("{text}");
+    let (e, ratio) = correlation(0.025, d, d);
+    assert!((e - 0.4541).abs() < 1e-4, "{e}");
+    assert!(
+        text.contains(&format!(
+            "Benyahia and O'Neill: {e:.4} at D/d_pe = {ratio:.3} ({:+.1}%)",
+            100.0 * (0.44 - e) / e
+        )),
+        "{text}"
+    );
+    let minima: Vec<f64> = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("min "))
+        .map(|l| {
+            l.split(" at ")
+                .nth(1)
+                .unwrap()
+                .split(' ')
+                .next()
+                .unwrap()
+                .parse()
+                .unwrap()
+        })
+        .collect();
+    assert_eq!(minima.len(), 2, "{text}");
+    assert!(
+        (minima[0] - 0.7).abs() <= 0.05 && (minima[1] - 1.7).abs() <= 0.05,
+        "{minima:?}"
+    );
+    let svg = std::fs::read_to_string(dir.join("p.svg")).unwrap();
+    assert!(
+        svg.starts_with("<svg") && svg.contains("<polyline"),
+        "{svg}"
+    );
+    let wide = run(&["--tube", "0.1", "--d", "0.01", "--length", "0.02"]);
+    let (e, ratio) = correlation(0.1, 0.01, 0.02);
+    assert!(
+        wide.contains(&format!("O'Neill: {e:.4} at D/d_pe = {ratio:.3}")),
+        "{wide}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
