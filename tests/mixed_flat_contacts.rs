@@ -192,3 +192,66 @@ fn mixed_precision_matches_f64_on_settled_many_faced_grains() {
         );
     }
 }
+
+/// Contacts of every depth, as impacts make them: two mineral grains (32 faces, 32 mm, at the
+/// 1:4 silo's scale and place) at random orientations, approached along a random direction to
+/// 1e-9 … 1e-2 m past first touch (found by bisection in f64), in mixed precision against f64:
+/// volume, force and moment within 1 %. Measured: 45 000 contacts, worst 8.1e-4 (1.6e-3 over
+/// 180 000 with other draws).
+#[test]
+fn mixed_precision_matches_f64_at_every_depth_of_random_grain_contacts() {
+    let t =
+        ConvexTemplate::from_file(&repo_root().join("meshes/particles/mineral_grain.stl")).unwrap();
+    let s = 15.0;
+    let r = t.circumscribed_radius * s;
+    let (mut w64, mut w32) = (PairWorkspace::<f64>::boxed(), PairWorkspace::<f32>::boxed());
+    let mut wide = PairWorkspace::<f64>::boxed();
+    // xorshift64: a fixed sequence of draws in [0, 1).
+    let mut state = 12345u64;
+    let mut draw = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let base = nalgebra::Vector3::new(-0.238, -0.0709, 0.372);
+    let (mut contacts, mut worst) = (0usize, 0.0f64);
+    for _ in 0..5000 {
+        let mut angles = || (draw() * 6.3, draw() * 6.3, draw() * 6.3);
+        let (a, b) = (angles(), angles());
+        let qa = nalgebra::UnitQuaternion::from_euler_angles(a.0, a.1, a.2);
+        let qb = nalgebra::UnitQuaternion::from_euler_angles(b.0, b.1, b.2);
+        let u = nalgebra::Vector3::new(draw() - 0.5, draw() - 0.5, draw() - 0.5).normalize();
+        let pa = Isometry3::from_parts(Translation3::from(base), qa);
+        let at = |d: f64| Isometry3::from_parts(Translation3::from(base + u * d), qb);
+        let (mut lo, mut hi) = (0.0, 2.0 * r);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            let g = overlap_pair(&mut w64, (&t, s, &pa), (&t, s, &at(mid))).unwrap();
+            if g.intersects && g.overlap.volume > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        for depth in [1e-9, 1e-7, 1e-5, 1e-4, 3e-4, 1e-3, 3e-3, 6e-3, 1e-2] {
+            let pb = at(hi - depth);
+            let g64 = overlap_pair(&mut w64, (&t, s, &pa), (&t, s, &pb)).unwrap();
+            let mixed =
+                overlap_pair_mixed(&mut w32, &mut wide, (&t, s, &pa), (&t, s, &pb)).unwrap();
+            if !(g64.intersects && g64.overlap.volume > 0.0) {
+                continue;
+            }
+            let (a, b) = (&g64.overlap, &mixed.overlap);
+            let grad = a.dv_dxb.norm();
+            let e = ((a.dv_dxb - b.dv_dxb).norm() / grad)
+                .max((a.moment_b - b.moment_b).norm() / (grad * r))
+                .max((a.volume - b.volume).abs() / a.volume);
+            worst = worst.max(e);
+            contacts += 1;
+        }
+    }
+    println!("{contacts} contacts, worst {worst:.3e}");
+    assert!(contacts > 40_000, "{contacts} contacts");
+    assert!(worst <= 1e-2, "mixed precision: worst error {worst:.3e}");
+}
