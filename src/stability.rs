@@ -150,19 +150,21 @@ impl std::fmt::Display for Instability {
                     Some((partner, x)) => write!(
                         f,
                         "; evaluated in f64 on the host from the same state, its deepest contact \
-                         with a particle overlaps {partner} by {x:.3e} of the smaller volume"
+                         with a particle of this rank overlaps {partner} by {x:.3e} of the \
+                         smaller volume"
                     )?,
                     None => write!(
                         f,
                         "; evaluated in f64 on the host from the same state, it overlaps no \
-                         particle"
+                         particle of this rank"
                     )?,
                 }
                 if host.as_ref().is_none_or(|h| h.1 <= *fraction) {
                     write!(
                         f,
-                        " (so the deep contact is a wall's, or the device's geometry differs \
-                         from f64: run with --gpu-precision double to tell)"
+                        " (so the deep contact is a wall's or another rank's particle's, or the \
+                         device's geometry differs from f64: run with --gpu-precision double to \
+                         tell)"
                     )?;
                 }
                 Ok(())

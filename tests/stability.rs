@@ -103,7 +103,7 @@ fn deep_overlap(device: Device) {
         let x = lens(2.0 * v * dt * expected as f64 - gap) / (limit / 0.1);
         assert!(
             msg.contains(&format!(
-                "its deepest contact with a particle overlaps particle 1 by {x:.3e}"
+                "its deepest contact with a particle of this rank overlaps particle 1 by {x:.3e}"
             )) && !msg.contains("--gpu-precision double to tell"),
             "{msg}"
         );
