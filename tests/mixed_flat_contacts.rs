@@ -27,6 +27,32 @@ use polydem::geometry::overlap::{PairWorkspace, overlap_pair, overlap_pair_mixed
 use polydem::io::Packing;
 use polydem::shape::ConvexTemplate;
 
+/// The poses of every pair of `p`'s particles whose centres (minimum image in the periodic
+/// cell, the distance stretched by `dilation`) are closer than `reach`, as `f(pose_a, pose_b)`.
+fn close_pairs(
+    p: &Packing,
+    reach: f64,
+    dilation: f64,
+    mut f: impl FnMut(&Isometry3<f64>, &Isometry3<f64>),
+) {
+    for i in 0..p.particles.len() {
+        for j in i + 1..p.particles.len() {
+            let mut d = p.particles[j].position - p.particles[i].position;
+            for a in 0..3 {
+                d[a] -= p.cell[a] * (d[a] / p.cell[a]).round();
+            }
+            let d = d * (1.0 + dilation);
+            if d.norm() >= reach {
+                continue;
+            }
+            let xa = p.particles[i].position;
+            let pa = Isometry3::from_parts(Translation3::from(xa), p.particles[i].orientation);
+            let pb = Isometry3::from_parts(Translation3::from(xa + d), p.particles[j].orientation);
+            f(&pa, &pb);
+        }
+    }
+}
+
 /// Worst relative error (gradient, moment) over the contacts of at least `thick` f32 ulps, and
 /// how many contacts exceed `bound`, for each threshold.
 #[test]
@@ -47,44 +73,29 @@ fn f32_pair_geometry_matches_f64_on_settled_face_contacts() {
     // 1e-4): each contact's overlap thins by that fraction of the centre distance, so the
     // thinner face contacts of a packing that has relaxed are all met.
     for dilation in [0.0, 1e-5, 3e-5, 6e-5, 1e-4] {
-        for i in 0..p.particles.len() {
-            for j in i + 1..p.particles.len() {
-                let mut d = p.particles[j].position - p.particles[i].position;
-                for a in 0..3 {
-                    d[a] -= p.cell[a] * (d[a] / p.cell[a]).round();
-                }
-                let d = d * (1.0 + dilation);
-                if d.norm() >= 2.0 * r {
-                    continue;
-                }
-                let xa = p.particles[i].position;
-                let pa = Isometry3::from_parts(Translation3::from(xa), p.particles[i].orientation);
-                let pb =
-                    Isometry3::from_parts(Translation3::from(xa + d), p.particles[j].orientation);
-                let g64 = overlap_pair(&mut w64, (&t, s, &pa), (&t, s, &pb)).unwrap();
-                let mixed =
-                    overlap_pair_mixed(&mut w32, &mut wide, (&t, s, &pa), (&t, s, &pb)).unwrap();
-                let in_contact = |g: &polydem::geometry::overlap::PairGeometry| {
-                    g.intersects && g.overlap.volume > 0.0
-                };
-                if in_contact(&g64) != in_contact(&mixed) {
-                    verdicts += 1;
-                }
-                if !g64.intersects {
-                    continue;
-                }
-                let g32 = overlap_pair(&mut w32, (&t, s, &pa), (&t, s, &pb)).unwrap();
-                let a = &g64.overlap;
-                let grad = a.dv_dxb.norm();
-                let error = |b: &polydem::geometry::Overlap<f64>| {
-                    let e_grad = (a.dv_dxb - b.dv_dxb).norm() / grad;
-                    let e_moment = (a.moment_b - b.moment_b).norm() / (grad * r);
-                    e_grad.max(e_moment)
-                };
-                let thickness = 2.0 * a.volume / grad;
-                rows.push((error(&g32.overlap), thickness / ulp, error(&mixed.overlap)));
+        close_pairs(&p, 2.0 * r, dilation, |pa, pb| {
+            let g64 = overlap_pair(&mut w64, (&t, s, pa), (&t, s, pb)).unwrap();
+            let mixed = overlap_pair_mixed(&mut w32, &mut wide, (&t, s, pa), (&t, s, pb)).unwrap();
+            let in_contact = |g: &polydem::geometry::overlap::PairGeometry| {
+                g.intersects && g.overlap.volume > 0.0
+            };
+            if in_contact(&g64) != in_contact(&mixed) {
+                verdicts += 1;
             }
-        }
+            if !g64.intersects {
+                return;
+            }
+            let g32 = overlap_pair(&mut w32, (&t, s, pa), (&t, s, pb)).unwrap();
+            let a = &g64.overlap;
+            let grad = a.dv_dxb.norm();
+            let error = |b: &polydem::geometry::Overlap<f64>| {
+                let e_grad = (a.dv_dxb - b.dv_dxb).norm() / grad;
+                let e_moment = (a.moment_b - b.moment_b).norm() / (grad * r);
+                e_grad.max(e_moment)
+            };
+            let thickness = 2.0 * a.volume / grad;
+            rows.push((error(&g32.overlap), thickness / ulp, error(&mixed.overlap)));
+        });
     }
     assert!(rows.len() > 50_000, "{} contacts", rows.len());
     for thick in [0.0, 30.0, 100.0, 300.0, 1000.0, 1e4] {
@@ -142,43 +153,26 @@ fn mixed_precision_matches_f64_on_settled_many_faced_grains() {
         let mut wide = PairWorkspace::<f64>::boxed();
         let (mut contacts, mut verdicts, mut worst) = (0usize, 0usize, 0.0f64);
         for dilation in [0.0, 1e-5, 1e-4, 1e-3] {
-            for i in 0..p.particles.len() {
-                for j in i + 1..p.particles.len() {
-                    let mut d = p.particles[j].position - p.particles[i].position;
-                    for a in 0..3 {
-                        d[a] -= p.cell[a] * (d[a] / p.cell[a]).round();
-                    }
-                    let d = d * (1.0 + dilation);
-                    if d.norm() >= 2.0 * r {
-                        continue;
-                    }
-                    let xa = p.particles[i].position;
-                    let pa =
-                        Isometry3::from_parts(Translation3::from(xa), p.particles[i].orientation);
-                    let pb = Isometry3::from_parts(
-                        Translation3::from(xa + d),
-                        p.particles[j].orientation,
-                    );
-                    let g64 = overlap_pair(&mut w64, (&t, s, &pa), (&t, s, &pb)).unwrap();
-                    let mixed = overlap_pair_mixed(&mut w32, &mut wide, (&t, s, &pa), (&t, s, &pb))
-                        .unwrap();
-                    let in_contact = |g: &polydem::geometry::overlap::PairGeometry| {
-                        g.intersects && g.overlap.volume > 0.0
-                    };
-                    if in_contact(&g64) != in_contact(&mixed) {
-                        verdicts += 1;
-                    }
-                    if !g64.intersects {
-                        continue;
-                    }
-                    let (a, b) = (&g64.overlap, &mixed.overlap);
-                    let grad = a.dv_dxb.norm();
-                    let e_grad = (a.dv_dxb - b.dv_dxb).norm() / grad;
-                    let e_moment = (a.moment_b - b.moment_b).norm() / (grad * r);
-                    worst = worst.max(e_grad.max(e_moment));
-                    contacts += 1;
+            close_pairs(&p, 2.0 * r, dilation, |pa, pb| {
+                let g64 = overlap_pair(&mut w64, (&t, s, pa), (&t, s, pb)).unwrap();
+                let mixed =
+                    overlap_pair_mixed(&mut w32, &mut wide, (&t, s, pa), (&t, s, pb)).unwrap();
+                let in_contact = |g: &polydem::geometry::overlap::PairGeometry| {
+                    g.intersects && g.overlap.volume > 0.0
+                };
+                if in_contact(&g64) != in_contact(&mixed) {
+                    verdicts += 1;
                 }
-            }
+                if !g64.intersects {
+                    return;
+                }
+                let (a, b) = (&g64.overlap, &mixed.overlap);
+                let grad = a.dv_dxb.norm();
+                let e_grad = (a.dv_dxb - b.dv_dxb).norm() / grad;
+                let e_moment = (a.moment_b - b.moment_b).norm() / (grad * r);
+                worst = worst.max(e_grad.max(e_moment));
+                contacts += 1;
+            });
         }
         println!("{mesh}: {contacts} contacts, worst {worst:.3e}, verdicts differ {verdicts}");
         assert!(contacts > 40_000, "{mesh}: {contacts} contacts");
