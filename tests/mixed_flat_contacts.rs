@@ -27,6 +27,11 @@ use polydem::geometry::overlap::{PairWorkspace, overlap_pair, overlap_pair_mixed
 use polydem::io::Packing;
 use polydem::shape::ConvexTemplate;
 
+/// Whether a pair's geometry is a contact: intersecting with a positive overlap volume.
+fn in_contact(g: &polydem::geometry::overlap::PairGeometry) -> bool {
+    g.intersects && g.overlap.volume > 0.0
+}
+
 /// The poses of every pair of `p`'s particles whose centres (minimum image in the periodic
 /// cell, the distance stretched by `dilation`) are closer than `reach`, as `f(pose_a, pose_b)`.
 fn close_pairs(
@@ -76,9 +81,6 @@ fn f32_pair_geometry_matches_f64_on_settled_face_contacts() {
         close_pairs(&p, 2.0 * r, dilation, |pa, pb| {
             let g64 = overlap_pair(&mut w64, (&t, s, pa), (&t, s, pb)).unwrap();
             let mixed = overlap_pair_mixed(&mut w32, &mut wide, (&t, s, pa), (&t, s, pb)).unwrap();
-            let in_contact = |g: &polydem::geometry::overlap::PairGeometry| {
-                g.intersects && g.overlap.volume > 0.0
-            };
             if in_contact(&g64) != in_contact(&mixed) {
                 verdicts += 1;
             }
@@ -157,9 +159,6 @@ fn mixed_precision_matches_f64_on_settled_many_faced_grains() {
                 let g64 = overlap_pair(&mut w64, (&t, s, pa), (&t, s, pb)).unwrap();
                 let mixed =
                     overlap_pair_mixed(&mut w32, &mut wide, (&t, s, pa), (&t, s, pb)).unwrap();
-                let in_contact = |g: &polydem::geometry::overlap::PairGeometry| {
-                    g.intersects && g.overlap.volume > 0.0
-                };
                 if in_contact(&g64) != in_contact(&mixed) {
                     verdicts += 1;
                 }
@@ -233,7 +232,7 @@ fn mixed_precision_matches_f64_at_every_depth_of_random_grain_contacts() {
             let g64 = overlap_pair(&mut w64, (&t, s, &pa), (&t, s, &pb)).unwrap();
             let mixed =
                 overlap_pair_mixed(&mut w32, &mut wide, (&t, s, &pa), (&t, s, &pb)).unwrap();
-            if !(g64.intersects && g64.overlap.volume > 0.0) {
+            if !in_contact(&g64) {
                 continue;
             }
             let (a, b) = (&g64.overlap, &mixed.overlap);
