@@ -267,6 +267,11 @@ PD_DEVICE void evaluate_pair(const PairArgs& q, size_t k) {
     if (status == STATUS_OK && ready) {
         status = overlap_of_planes<GeomReal, true>(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes,
                                                    ws.b.n_planes, frame, &g);
+        // A hull that round-off bent (vertices outside the planes): f64 too.
+        if (status == STATUS_OK &&
+            (double)ws.overlap.hull_vertex_excess() > PD_MIXED_VERTEX_SLACK * g.overlap.depth) {
+            status = STATUS_WIDE;
+        }
     }
     if (status == STATUS_WIDE || status == STATUS_HULL_DEGENERATE || status == STATUS_HULL_TOPOLOGY ||
         status == STATUS_HULL_CAPACITY) {

@@ -89,10 +89,26 @@ template <class T> struct OverlapWorkspace {
     V3<T> vertex[PD_MAX_HULL_FACES];
     T share_b[PD_MAX_HULL_POINTS];
     V3<T> x0;
+    // Planes of the last evaluation, and whether its faces came from the dual hull.
+    int m;
+    bool by_hull;
 
     // OverlapWorkspace::face_area: area of the intersection face on plane i of the last
     // evaluation (planes of A first, then of B).
     PD_HD T face_area(int i) const { return area[i]; }
+
+    // OverlapWorkspace::hull_vertex_excess: the farthest that a vertex of the last evaluation's
+    // dual hull lies outside one of its planes (zero for the enumeration's faces); a hull that
+    // round-off bent has vertices outside by as much as the particle size.
+    PD_HD T hull_vertex_excess() const {
+        T worst = T(0);
+        if (!by_hull) return worst;
+        for (int s = 0; s < hull.n_tri; ++s) {
+            if (!hull.tri[s].alive) continue;
+            for (int u = 0; u < m; ++u) worst = max_(worst, dot(normal[u], vertex[s]) - delta[u]);
+        }
+        return worst;
+    }
 };
 
 // overlap::set_shares: share of each plane's face in S, 1 for B's planes, 0 for A's, half to
@@ -208,6 +224,8 @@ PD_HD int overlap_about_t(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, co
     if (m > PD_MAX_HULL_POINTS) return STATUS_TOO_MANY_PLANES;
     PD_CLK_START
     ws.x0 = x0;
+    ws.m = m;
+    ws.by_hull = false;
     T scale = T(0);
     T radius = Limits<T>::max();
     for (int i = 0; i < m; ++i) {
@@ -237,6 +255,7 @@ PD_HD int overlap_about_t(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, co
             for (int i = 0; i < m; ++i) ws.area[i] = T(0);
             int st = hull_faces(ws, m, na);
             if (st != STATUS_OK) return st;
+            ws.by_hull = true;
         }
     }
     PD_CLK(13)

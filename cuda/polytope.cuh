@@ -52,6 +52,11 @@ enum GeometryStatus {
 // thickness) is below this many f32 epsilons of ra + rb (geometry::overlap::MIXED_WIDE_ULPS).
 #define PD_MIXED_WIDE_ULPS 512.0
 
+// Mixed precision evaluates in f64 a pair whose f32 dual hull has a vertex outside one of the
+// planes by more than this fraction of the Chebyshev radius (geometry::overlap::
+// MIXED_VERTEX_SLACK, OverlapWorkspace::hull_vertex_excess).
+#define PD_MIXED_VERTEX_SLACK 1e-2
+
 // A convex template in its body frame, as plain arrays: kernels point it at constant or global
 // memory, the host harness at ordinary arrays. Mirrors the parts of `shape::ConvexTemplate` the
 // contact geometry reads.

@@ -21,9 +21,11 @@
 
 mod common;
 
-use common::repo_root;
-use nalgebra::{Isometry3, Translation3};
-use polydem::geometry::overlap::{PairWorkspace, overlap_pair, overlap_pair_mixed};
+use common::*;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use polydem::geometry::overlap::{
+    MIXED_VERTEX_SLACK, PairWorkspace, overlap_pair, overlap_pair_mixed,
+};
 use polydem::io::Packing;
 use polydem::shape::ConvexTemplate;
 
@@ -247,4 +249,145 @@ fn mixed_precision_matches_f64_at_every_depth_of_random_grain_contacts() {
     println!("{contacts} contacts, worst {worst:.3e}");
     assert!(contacts > 40_000, "{contacts} contacts");
     assert!(worst <= 1e-2, "mixed precision: worst error {worst:.3e}");
+}
+
+/// Two mineral grains of the 1:4 silo's fill (`launch/production/silo_quarter_fill.toml`,
+/// scale 15: 32.3 mm) as the GPU's mixed precision left them at step 39 071 (t = 0.878 s),
+/// where the stability guard stopped the run: positions and orientations (`[i, j, k, w]`)
+/// bit for bit from the checkpoint of the stop. A face of B lies on a face of A tilted by
+/// 0.1°, a slab 28 µm thick across about 7 mm, its sides cut by three of B's faces at
+/// 18–57° and by faces millimetres away: the dual points span 7e4 (the two large faces,
+/// 1/δ) down to 94 (the sides). f64 gives an overlap of 3.75e-4 of a grain's volume.
+const SILO_PAIR: [([f64; 3], [f64; 4]); 2] = [
+    (
+        [-0.2381828499268403, -0.0708569985011993, 0.3719682181734633],
+        [
+            0.14123059149077843,
+            -0.2656400404435702,
+            -0.20869476481125873,
+            -0.9305567065368325,
+        ],
+    ),
+    (
+        [
+            -0.23255243181486218,
+            -0.05894788295926525,
+            0.3782063680487013,
+        ],
+        [
+            0.11496062800472233,
+            0.3535330428395794,
+            0.3539789575045899,
+            0.8581942316709614,
+        ],
+    ),
+];
+
+fn silo_pose(k: usize) -> Isometry3<f64> {
+    let (x, q) = SILO_PAIR[k];
+    let q = UnitQuaternion::new_unchecked(Quaternion::new(q[3], q[0], q[1], q[2]));
+    Isometry3::from_parts(Translation3::new(x[0], x[1], x[2]), q)
+}
+
+/// The silo pair above in mixed precision within 1 % of f64 (volume, force, moment). Its f32
+/// dual hull is bent by round-off: the Chebyshev centre proves an overlap 7 times thicker than
+/// f32's threshold, but the hull joins a side plane's dual point to the wrong horizon, leaving
+/// vertices up to 1 cm outside the planes, and the overlap came out at 0.17 of a grain (460
+/// times f64's), which blew the pair apart in one step. Mixed precision now checks the f32
+/// hull's vertices against every plane ([`MIXED_VERTEX_SLACK`] of the Chebyshev radius) and
+/// evaluates a bent hull in f64.
+#[test]
+fn a_bent_f32_hull_is_evaluated_in_f64() {
+    let t =
+        ConvexTemplate::from_file(&repo_root().join("meshes/particles/mineral_grain.stl")).unwrap();
+    let s = 15.0;
+    let r = t.circumscribed_radius * s;
+    let grain = t.volume * s.powi(3);
+    let (pa, pb) = (silo_pose(0), silo_pose(1));
+    let (mut w64, mut w32) = (PairWorkspace::<f64>::boxed(), PairWorkspace::<f32>::boxed());
+    let mut wide = PairWorkspace::<f64>::boxed();
+    let g64 = overlap_pair(&mut w64, (&t, s, &pa), (&t, s, &pb)).unwrap();
+    let a = &g64.overlap;
+    println!("f64: V = {:.4e} of a grain", a.volume / grain);
+    assert!(in_contact(&g64) && (a.volume / grain - 3.751e-4).abs() < 1e-6);
+    // The f32 evaluation alone: its hull's vertices lie far outside the planes.
+    let g32 = overlap_pair(&mut w32, (&t, s, &pa), (&t, s, &pb)).unwrap();
+    let excess = f64::from(w32.overlap.hull_vertex_excess());
+    println!(
+        "f32 alone: V = {:.4e} of a grain, a hull vertex {excess:.2e} m outside a plane \
+         (Chebyshev radius {:.2e} m)",
+        g32.overlap.volume / grain,
+        g32.overlap.depth
+    );
+    assert!(excess > 100.0 * MIXED_VERTEX_SLACK * g32.overlap.depth);
+    let mixed = overlap_pair_mixed(&mut w32, &mut wide, (&t, s, &pa), (&t, s, &pb)).unwrap();
+    let b = &mixed.overlap;
+    let grad = a.dv_dxb.norm();
+    let e = ((a.dv_dxb - b.dv_dxb).norm() / grad)
+        .max((a.moment_b - b.moment_b).norm() / (grad * r))
+        .max((a.volume - b.volume).abs() / a.volume);
+    println!(
+        "mixed: V = {:.4e} of a grain, error {e:.2e}",
+        b.volume / grain
+    );
+    assert!(e <= 1e-2, "mixed precision: error {e:.3e}");
+}
+
+/// The same pair on the GPU in mixed precision: one step from rest, each grain's force and
+/// torque within 1e-3 of the CPU's (f64). Before the device checked its f32 hulls the force
+/// was that of an overlap 460 times too large.
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn a_bent_f32_hull_is_evaluated_in_f64_on_the_gpu() {
+    let types = format!(
+        "[[particle_types]]\nname = \"grain\"\nmaterial = \"m\"\nmesh = \"{}\"\nscale = 15.0\n",
+        repo_root()
+            .join("meshes/particles/mineral_grain.stl")
+            .display()
+    );
+    let text = scene_text(&SceneSpec {
+        e_modulus: 1e6,
+        poisson: 0.3,
+        density: 2500.0,
+        restitution: 0.5,
+        friction: 0.5,
+        gravity: 0.0,
+        dt: 2.248e-5,
+        wall_scale: None,
+        wall_motion: None,
+        types: &types,
+    });
+    let build = || {
+        let scene = polydem::scene::parse_scene(&text, &repo_root(), "silo_pair.toml").unwrap();
+        let mut sim = polydem::pipeline::Simulation::builder(scene)
+            .build()
+            .unwrap();
+        let t = sim.scene.templates[0].clone();
+        for k in 0..2 {
+            let pose = silo_pose(k);
+            let x = pose.translation.vector;
+            sim.particles
+                .push(k as u64, 0, 15.0, x, pose.rotation, &t, 2500.0);
+        }
+        sim.refresh().unwrap();
+        sim
+    };
+    let mut cpu = engine(build(), CPU);
+    let mut gpu = engine(build(), GPU_MIXED);
+    cpu.step().unwrap();
+    gpu.step().unwrap();
+    let c = cpu.synced().unwrap();
+    let (f, tq) = (c.particles.force.clone(), c.particles.torque.clone());
+    let g = gpu.synced().unwrap();
+    let fmax = f.iter().map(|v| v.norm()).fold(0.0, f64::max);
+    let tmax = tq.iter().map(|v| v.norm()).fold(0.0, f64::max);
+    for k in 0..2 {
+        let ef = (f[k] - g.particles.force[k]).norm() / fmax;
+        let et = (tq[k] - g.particles.torque[k]).norm() / tmax;
+        println!(
+            "grain {k}: CPU force {:?}, GPU {:?}: force off by {ef:.2e}, torque by {et:.2e}",
+            f[k], g.particles.force[k]
+        );
+        assert!(fmax > 0.0 && ef <= 1e-3 && et <= 1e-3);
+    }
 }

@@ -108,6 +108,10 @@ pub struct OverlapWorkspace<T: Real> {
     vertex: [Vector3<T>; MAX_HULL_FACES],
     share_b: [T; MAX_HULL_POINTS],
     x0: Vector3<T>,
+    /// Planes of the last evaluation.
+    m: usize,
+    /// The last evaluation's faces came from the dual hull (not the enumeration).
+    by_hull: bool,
 }
 
 impl<T: Real> Default for OverlapWorkspace<T> {
@@ -124,6 +128,8 @@ impl<T: Real> Default for OverlapWorkspace<T> {
             vertex: [Vector3::zeros(); MAX_HULL_FACES],
             share_b: [T::zero(); MAX_HULL_POINTS],
             x0: Vector3::zeros(),
+            m: 0,
+            by_hull: false,
         }
     }
 }
@@ -132,6 +138,29 @@ impl<T: Real> OverlapWorkspace<T> {
     /// A workspace on the heap (it is tens of kilobytes).
     pub fn boxed() -> Box<Self> {
         Box::default()
+    }
+
+    /// The farthest that a vertex of the last evaluation's intersection lies outside one of its
+    /// planes, `max over vertices v and planes u of n_u · v − δ_u` (in the frame of the planes),
+    /// when its faces came from the dual hull; zero when they came from the vertex enumeration,
+    /// whose vertices satisfy every plane by construction, or when there was no overlap.
+    ///
+    /// Every vertex of a correct hull lies on three planes and inside the others up to
+    /// round-off. A hull that round-off bent (an apex joined to the wrong horizon, as an f32
+    /// hull can be where the dual points span three orders of magnitude: the two large faces of
+    /// a face resting on a face map a thousand times farther out than its sides) has vertices
+    /// outside by as much as the particle size, and its volume is wrong by as much.
+    pub fn hull_vertex_excess(&self) -> T {
+        let mut worst = T::zero();
+        if self.by_hull {
+            for (s, _) in self.hull.triangles() {
+                let v = self.vertex[s];
+                for u in 0..self.m {
+                    worst = worst.max(self.normal[u].dot(&v) - self.delta[u]);
+                }
+            }
+        }
+        worst
     }
 
     /// Area of the intersection face lying on plane `i` of the last evaluation (planes of A
@@ -224,6 +253,8 @@ pub(crate) fn overlap_about<T: Real>(
         return Err(OverlapError::TooManyPlanes(m));
     }
     ws.x0 = x0;
+    ws.m = m;
+    ws.by_hull = false;
     let mut scale = T::zero();
     let mut radius = T::max_value().unwrap_or(T::one());
     for (i, p) in a.iter().chain(b).enumerate() {
@@ -256,6 +287,7 @@ pub(crate) fn overlap_about<T: Real>(
             ws.area[i] = T::zero();
         }
         hull_faces(ws, m, na)?;
+        ws.by_hull = true;
     }
     // The hull's traversal orientation is a global convention; make the areas positive (the
     // enumeration's are by construction).
@@ -628,10 +660,17 @@ fn overlap_in_pair_frame<T: Real>(
 /// 1000 f32 ulps of the pair's size thick (1.2e-7 m for 1 mm particles).
 pub const MIXED_WIDE_ULPS: f64 = 512.0;
 
+/// Mixed precision evaluates in f64 a pair whose f32 dual hull has a vertex outside one of
+/// the planes by more than this fraction of the Chebyshev radius (about half the overlap's
+/// thickness): [`OverlapWorkspace::hull_vertex_excess`].
+pub const MIXED_VERTEX_SLACK: f64 = 1e-2;
+
 /// The pair geometry of the GPU's mixed precision (`--gpu-precision mixed`; `evaluate_pair`
 /// and the lean passes of cuda/contact.cu take the same decisions): [`overlap_pair`] in f32
 /// where the Chebyshev centre proves an overlap at least [`MIXED_WIDE_ULPS`] f32 epsilons of
-/// the pair's size thick, in f64 otherwise, and in f64 again where the f32 dual hull fails.
+/// the pair's size thick, in f64 otherwise, and in f64 again where the f32 dual hull fails or
+/// comes out bent (a vertex outside a plane by more than [`MIXED_VERTEX_SLACK`] of the
+/// Chebyshev radius: [`OverlapWorkspace::hull_vertex_excess`]).
 ///
 /// A face resting on a face is an overlap nanometres thick across a face millimetres wide: in
 /// f32 its planes are placed to about 1e-7 of the particle size, so a slab thinner than a few
@@ -657,6 +696,12 @@ pub fn overlap_pair_mixed(
         return overlap_pair(w64, a, b);
     }
     match overlap_in_pair_frame(w32, a, b, &origin, &centre) {
+        // A hull that round-off bent: its vertices lie outside the planes.
+        Ok(overlap)
+            if w32.overlap.hull_vertex_excess().f64() > MIXED_VERTEX_SLACK * overlap.depth =>
+        {
+            overlap_pair(w64, a, b)
+        }
         Ok(overlap) => Ok(PairGeometry {
             intersects: true,
             separating_axis: None,
