@@ -29,6 +29,10 @@ for s in "${scenes[@]}"; do
     if [ -f "$dir/summary.json" ] && grep -q '"interrupted": false' "$dir/summary.json"; then
       echo "$s: finished before"; exit 0
     fi
+    # A run carried over from an earlier sitting (launch/production/restart/, README there).
+    if [ ! -f "$dir/checkpoints/latest.ckpt" ] && [ -f "$here/restart/$s.ckpt.gz" ]; then
+      mkdir -p "$dir/checkpoints" && gunzip -c "$here/restart/$s.ckpt.gz" > "$dir/checkpoints/latest.ckpt"
+    fi
     if [ -f "$dir/checkpoints/latest.ckpt" ]; then args=(--restart "$dir/checkpoints/latest.ckpt"); else args=(--overwrite); fi
     start=$(date +%s)
     timeout -s INT "$limit" "$bin" run "$here/$s.toml" --backend cuda --gpu-precision "${PRECISION:-mixed}" \
