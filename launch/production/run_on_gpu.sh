@@ -105,6 +105,6 @@ done
 if [ ${#runs[@]} -ge 2 ] && [ -f "$out/silo_porosity.json" ]; then
   rho_b=$(python3 -c "import json; print(2500 * (1 - json.load(open('$out/silo_porosity.json'))['mean']))")
   python3 "$here/silo_discharge.py" "$out/silo_discharge.svg" "${runs[@]}" --grain-mass 8.546e-3 \
-    --bulk-density "$rho_b" --d 0.0187 > "$out/silo_discharge.txt"
+    --bulk-density "$rho_b" --d 0.0187 --window 0.4,1e9 > "$out/silo_discharge.txt"
 fi
 ls -la "$out"
