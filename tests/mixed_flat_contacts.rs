@@ -188,6 +188,29 @@ fn mixed_precision_matches_f64_on_settled_many_faced_grains() {
     }
 }
 
+/// The mineral grain at the 1:4 silo's scale (15: 32.3 mm circumscribed): template, scale and
+/// circumscribed radius.
+fn silo_grain() -> (ConvexTemplate, f64, f64) {
+    let t =
+        ConvexTemplate::from_file(&repo_root().join("meshes/particles/mineral_grain.stl")).unwrap();
+    let s = 15.0;
+    let r = t.circumscribed_radius * s;
+    (t, s, r)
+}
+
+/// The worst relative error of `b` against `a`: the force (volume gradient), the moment (over
+/// the gradient times `r`) and the volume.
+fn relative_error(
+    a: &polydem::geometry::Overlap<f64>,
+    b: &polydem::geometry::Overlap<f64>,
+    r: f64,
+) -> f64 {
+    let grad = a.dv_dxb.norm();
+    ((a.dv_dxb - b.dv_dxb).norm() / grad)
+        .max((a.moment_b - b.moment_b).norm() / (grad * r))
+        .max((a.volume - b.volume).abs() / a.volume)
+}
+
 /// Contacts of every depth, as impacts make them: two mineral grains (32 faces, 32 mm, at the
 /// 1:4 silo's scale and place) at random orientations, approached along a random direction to
 /// 1e-9 … 1e-2 m past first touch (found by bisection in f64), in mixed precision against f64:
@@ -195,10 +218,7 @@ fn mixed_precision_matches_f64_on_settled_many_faced_grains() {
 /// 180 000 with other draws).
 #[test]
 fn mixed_precision_matches_f64_at_every_depth_of_random_grain_contacts() {
-    let t =
-        ConvexTemplate::from_file(&repo_root().join("meshes/particles/mineral_grain.stl")).unwrap();
-    let s = 15.0;
-    let r = t.circumscribed_radius * s;
+    let (t, s, r) = silo_grain();
     let (mut w64, mut w32) = (PairWorkspace::<f64>::boxed(), PairWorkspace::<f32>::boxed());
     let mut wide = PairWorkspace::<f64>::boxed();
     // xorshift64: a fixed sequence of draws in [0, 1).
@@ -238,10 +258,7 @@ fn mixed_precision_matches_f64_at_every_depth_of_random_grain_contacts() {
                 continue;
             }
             let (a, b) = (&g64.overlap, &mixed.overlap);
-            let grad = a.dv_dxb.norm();
-            let e = ((a.dv_dxb - b.dv_dxb).norm() / grad)
-                .max((a.moment_b - b.moment_b).norm() / (grad * r))
-                .max((a.volume - b.volume).abs() / a.volume);
+            let e = relative_error(a, b, r);
             worst = worst.max(e);
             contacts += 1;
         }
@@ -298,10 +315,7 @@ fn silo_pose(k: usize) -> Isometry3<f64> {
 /// evaluates a bent hull in f64.
 #[test]
 fn a_bent_f32_hull_is_evaluated_in_f64() {
-    let t =
-        ConvexTemplate::from_file(&repo_root().join("meshes/particles/mineral_grain.stl")).unwrap();
-    let s = 15.0;
-    let r = t.circumscribed_radius * s;
+    let (t, s, r) = silo_grain();
     let grain = t.volume * s.powi(3);
     let (pa, pb) = (silo_pose(0), silo_pose(1));
     let (mut w64, mut w32) = (PairWorkspace::<f64>::boxed(), PairWorkspace::<f32>::boxed());
@@ -322,10 +336,7 @@ fn a_bent_f32_hull_is_evaluated_in_f64() {
     assert!(excess > 100.0 * MIXED_VERTEX_SLACK * g32.overlap.depth);
     let mixed = overlap_pair_mixed(&mut w32, &mut wide, (&t, s, &pa), (&t, s, &pb)).unwrap();
     let b = &mixed.overlap;
-    let grad = a.dv_dxb.norm();
-    let e = ((a.dv_dxb - b.dv_dxb).norm() / grad)
-        .max((a.moment_b - b.moment_b).norm() / (grad * r))
-        .max((a.volume - b.volume).abs() / a.volume);
+    let e = relative_error(a, b, r);
     println!(
         "mixed: V = {:.4e} of a grain, error {e:.2e}",
         b.volume / grain
