@@ -749,3 +749,98 @@ fn the_bed_porosity_script_reads_the_correlation_and_the_extrema() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `silo_discharge.py` (case 5's table, fit and plot) on synthetic particle tables: two
+/// outlets emptied at the rates Beverloo's law W = C ρ_b √g (D₀ − k d)^{5/2} gives for C = 0.6,
+/// k = 1.8, each table also holding grains that have passed the plate (z < 0) and that
+/// `--above 0` must not count, and a start-up outside the fit window. The rates and C and k
+/// come back to the printed digits.
+#[test]
+fn the_discharge_script_recovers_beverloo_from_particle_tables() {
+    let dir = std::env::temp_dir().join(format!("polydem_discharge_{}", std::process::id()));
+    let (c, k, d, rho_b, m) = (0.6, 1.8, 0.0187, 1500.0, 8.546e-3);
+    let rate = |d0: f64| c * rho_b * 9.81f64.sqrt() * (d0 - k * d).powf(2.5);
+    let mut runs = Vec::new();
+    for d0 in [0.075, 0.15] {
+        let frames = dir.join(format!("{}mm", (d0 * 1000.0) as u32));
+        std::fs::create_dir_all(&frames).unwrap();
+        // Grains left above the plate: 5000 until 0.1 s, then falling at W/m per second; the
+        // ones gone are still in the table below the plate.
+        for step in 0..=14 {
+            let t = 0.05 * step as f64;
+            let above = 5000.0 - rate(d0) / m * (t - 0.1).max(0.0);
+            let mut table = String::from(polydem::io::csv::PARTICLE_CSV_HEADER);
+            table.push('\n');
+            for id in 0..5000 {
+                let z = if (id as f64) < above { 0.3 } else { -0.2 };
+                table.push_str(&format!("{t},{id},0,0,{z},0,0,0,0,0,0,1,0,0,0\n"));
+            }
+            std::fs::write(frames.join(format!("step_{:06}.csv", step)), table).unwrap();
+        }
+        runs.push(format!("{d0}:{}", frames.display()));
+    }
+    let python = std::env::var_os("POLYDEM_PYTHON").unwrap_or_else(|| "python3".into());
+    let out = std::process::Command::new(&python)
+        .arg(repo_root().join("launch/production/silo_discharge.py"))
+        .arg(dir.join("d.svg"))
+        .args(&runs)
+        .args([
+            "--grain-mass",
+            &m.to_string(),
+            "--bulk-density",
+            &rho_b.to_string(),
+        ])
+        .args([
+            "--d",
+            &d.to_string(),
+            "--window",
+            "0.25,1e9",
+            "--above",
+            "0",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let text = String::from_utf8(out.stdout).unwrap();
+    println!("{text}");
+    // Whole grains: the counts are floors of the exact line, so the slope is within a grain's
+    // mass over the 0.45 s window of the law's.
+    for d0 in [0.075, 0.15] {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(&format!("| {d0:.4} |")))
+            .unwrap_or_else(|| panic!("no row for {d0}: {text}"));
+        let w: f64 = line.split('|').nth(3).unwrap().trim().parse().unwrap();
+        assert!(
+            (w - rate(d0)).abs() < 0.01 * rate(d0),
+            "W {w} against {} at D0 {d0}",
+            rate(d0)
+        );
+    }
+    let fit = text.lines().find(|l| l.starts_with("Beverloo:")).unwrap();
+    let c_fit: f64 = fit.split("C = ").nth(1).unwrap()[..5].parse().unwrap();
+    let k_fit: f64 = fit.split("k = ").nth(1).unwrap()[..4].parse().unwrap();
+    assert!(
+        (c_fit - c).abs() < 0.01 && (k_fit - k).abs() < 0.03,
+        "{fit}"
+    );
+    // Without --above every grain counts: no outlet flows, and the script says so instead of
+    // fitting (or failing on) rates of zero.
+    let all = std::process::Command::new(&python)
+        .arg(repo_root().join("launch/production/silo_discharge.py"))
+        .arg(dir.join("d.svg"))
+        .args(&runs)
+        .args(["--grain-mass", "1", "--bulk-density", "1", "--d", "0.01"])
+        .args(["--window", "0.25,1e9"])
+        .output()
+        .unwrap();
+    assert!(all.status.success(), "{all:?}");
+    let all = String::from_utf8(all.stdout).unwrap();
+    assert!(
+        all.contains("D0 = 0.0750 m: no flow over the window (jammed)")
+            && all.contains("D0 = 0.1500 m: no flow")
+            && !all.contains("Beverloo:"),
+        "{all}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -494,7 +494,7 @@ DISCHARGE_HOLES = [round(k * 0.0187, 4) for k in (4, 5, 6, 7, 8)]   # as make_me
 # the height (22 347 grains in the fill's state at 2.2 s; the 0.91 m of before kept 0.2 m more
 # bed, work in every step that does not change the rate)
 DISCHARGE_TOP = 0.71
-DISCHARGE_END = 1.0     # s: the rate is fitted over 0.4-1.0 s (run_on_gpu.sh)
+DISCHARGE_END = 0.7     # s: the rate is fitted over 0.25-0.7 s (run_on_gpu.sh)
 # Grains of the fill's final state below DISCHARGE_TOP: known once the fill has run (`polydem
 # check` on a discharge scene gives it; run_on_gpu.sh passes it as --discharge-count).
 DISCHARGE_COUNT = [QUARTER_GRAINS]
@@ -511,8 +511,8 @@ def silo_discharge(hole):
 # the bed above it, a head at which the rate no longer depends on the height (`state`:
 # run_on_gpu.sh copies the fill's last checkpoint to out/silo_quarter_fill/final.ckpt); the gate
 # is gone, the plate's hole is open from t = 0, and grains that fall below the domain are
-# removed; particle tables every 0.05 s count the grains left (silo_discharge.py: mass against
-# time and Beverloo's law). Written by make_scenes.py.
+# removed; particle tables every 0.05 s count the grains left above the plate (silo_discharge.py
+# --above 0: mass against time and Beverloo's law). Written by make_scenes.py.
 
 gravity = [0.0, 0.0, -9.81]
 

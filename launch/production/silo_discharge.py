@@ -3,11 +3,12 @@
 against time and Beverloo's law.
 
   python3 launch/production/silo_discharge.py OUT.svg D0:FRAMES ... --grain-mass M
-      --bulk-density RHO_B --d D [--window T0,T1]
+      --bulk-density RHO_B --d D [--window T0,T1] [--above Z]
 
 Each FRAMES is a run's particle tables (`<output.dir>/particles`, step_<step>[_r<rank>].csv),
-the grains left at each frame being its rows, or a text file of "time grains" lines counted
-from them. The discharge rate W (kg/s) of each orifice D0 (m)
+the grains left at each frame being its rows whose centre lies above Z (default: every row; the
+orifice plate's height counts a grain out as it passes the hole, not when it falls out of the
+domain), or a text file of "time grains" lines counted from them. The discharge rate W (kg/s) of each orifice D0 (m)
 is the least-squares slope of the mass left over the window (default 0.5 s to the last frame:
 the start-up transient left out). Beverloo's law
 
@@ -26,8 +27,9 @@ import sys
 G = 9.81
 
 
-def counts(frames):
-    """(time, grains) per frame, in time order: rows of every rank's table of a step."""
+def counts(frames, above=-math.inf):
+    """(time, grains) per frame, in time order: rows of every rank's table of a step whose z
+    (the table's fifth column) exceeds `above`."""
     if os.path.isfile(frames):
         with open(frames) as fh:
             return sorted((float(t), int(n)) for t, n in (line.split() for line in fh if line.strip()))
@@ -43,9 +45,11 @@ def counts(frames):
                 next(fh)
                 for line in fh:
                     if line.strip():
-                        n += 1
+                        cols = line.split(",", 5)
+                        if float(cols[4]) > above:
+                            n += 1
                         if t is None:
-                            t = float(line.split(",", 1)[0])
+                            t = float(cols[0])
         if t is not None:
             out.append((t, n))
     return sorted(out)
@@ -65,12 +69,14 @@ def main():
     ap.add_argument("--bulk-density", type=float, required=True)
     ap.add_argument("--d", type=float, required=True, help="grain diameter of the law (m)")
     ap.add_argument("--window", default="0.5,1e9")
+    ap.add_argument("--above", type=float, default=-math.inf,
+                    help="count a grain while its centre is above this height (m)")
     a = ap.parse_args()
     t0, t1 = (float(x) for x in a.window.split(","))
     rows = []
     for spec in a.runs:
         d0, frames = spec.split(":", 1)
-        series = counts(frames)
+        series = counts(frames, a.above)
         if not series:
             sys.exit(f"{frames}: no particle tables")
         win = [(t, n * a.grain_mass) for t, n in series if t0 <= t <= t1]
@@ -83,8 +89,14 @@ def main():
     for r in rows:
         print(f"| {r['d0']:.4f} | {r['d0'] / a.d:.2f} | {r['w']:.3f} |")
     fit = None
-    if len(rows) >= 2 and all(r["w"] > 0 for r in rows):
-        s, b = slope([r["d0"] for r in rows], [r["w"] ** 0.4 for r in rows])
+    # An outlet that jammed (no grain out over the window) has no place on the law's line:
+    # the fit takes the outlets that flow, and says which it left out.
+    flowing = [r for r in rows if r["w"] > 0]
+    for r in rows:
+        if r["w"] <= 0:
+            print(f"D0 = {r['d0']:.4f} m: no flow over the window (jammed), left out of the fit")
+    if len(flowing) >= 2:
+        s, b = slope([r["d0"] for r in flowing], [r["w"] ** 0.4 for r in flowing])
         c = s ** 2.5 / (a.bulk_density * math.sqrt(G))
         k = -b / s / a.d
         fit = (c, k)
@@ -108,7 +120,7 @@ def main():
         parts.append(f'<text x="{x0 + pw * j / 4:.0f}" y="{y0 + ph + 14}" text-anchor="middle">{tmax * j / 4:.1f}</text>')
     x1 = x0 + pw + 90
     dmax = max(r["d0"] for r in rows) * 1.1
-    wmax = max(r["w"] for r in rows) * 1.2
+    wmax = max(max(r["w"] for r in rows) * 1.2, 1e-9)   # all jammed: an empty panel
     parts.append(f'<rect x="{x1}" y="{y0}" width="{pw}" height="{ph}" fill="none" stroke="black"/>')
     parts.append(f'<text x="{x1 + pw / 2}" y="{y0 + ph + 30}" text-anchor="middle">outlet D0 (m)</text>')
     parts.append(f'<text x="{x1}" y="20">discharge rate W (kg/s, 0 … {wmax:.1f})</text>')
@@ -124,7 +136,7 @@ def main():
         parts.append(f'<polyline points="{" ".join(curve)}" fill="none" stroke="#1f77b4" stroke-width="2"/>')
         parts.append(f'<text x="{x1 + 8}" y="{y0 + 16}" fill="#1f77b4">Beverloo: C = {c:.2f}, k = {k:.2f}</text>')
     for r in rows:
-        parts.append(f'<circle cx="{x1 + r["d0"] / dmax * pw:.1f}" cy="{y0 + ph - r["w"] / wmax * ph:.1f}" r="4" fill="#d62728"/>')
+        parts.append(f'<circle cx="{x1 + r["d0"] / dmax * pw:.1f}" cy="{y0 + ph - max(r["w"], 0.0) / wmax * ph:.1f}" r="4" fill="#d62728"/>')
     parts.append("</svg>")
     with open(a.svg, "w") as f:
         f.write("\n".join(parts) + "\n")
