@@ -243,6 +243,17 @@ def silo_gate(outlet):
     return ring_disk(0.55 * outlet, 0.0, outlet / 8, up=True)
 
 
+def heap_base(r, size):
+    """A round base of radius r at z = 0, facing up, for a heap poured onto it (a fixed-base
+    angle of repose: the heap grows until grains roll off the rim)."""
+    return ring_disk(r, 0.0, size, up=True)
+
+
+# m: the base of the 1:4 silo's grains' heap (make_scenes.py silo_grain_heap): 15.5
+# circumscribed grain diameters across, room for a cone about 7 grains tall at 35 degrees.
+HEAP_BASE = 0.25
+
+
 MESHES = {
     "dodecahedra_cylinder": dodecahedra_cylinder,
     "drum": drum,
@@ -255,6 +266,7 @@ MESHES = {
     "silo_quarter_gate": lambda: silo_gate(SILO_QUARTER["outlet"]),
     "silo_twin": lambda: corrugated_silo(**SILO_TWIN),
     "silo_twin_gate": lambda: silo_gate(SILO_TWIN["outlet"]),
+    "silo_grain_heap_base": lambda: heap_base(HEAP_BASE, 0.02),
     "silo_quarter_orifice": lambda: {f"{round(1000 * h)}mm": orifice_plate(SILO_QUARTER["outlet"], h, 0.01)
                                      for h in DISCHARGE_HOLES},
 }

@@ -491,7 +491,7 @@ count = 160
 DISCHARGE_HOLES = [round(k * 0.0187, 4) for k in (4, 5, 6, 7, 8)]   # as make_meshes.py
 # m: the grains below are discharged, the hopper (0.31 m) and 0.4 m of bed above it: a head
 # of 0.71 m over the orifice, 1.35 silo diameters, above which the rate no longer depends on
-# the height (22 347 grains in the fill's state at 2.2 s; the 0.91 m of before kept 0.2 m more
+# the height (22 345 grains of the fill's final state; the 0.91 m of before kept 0.2 m more
 # bed, work in every step that does not change the rate)
 DISCHARGE_TOP = 0.71
 DISCHARGE_END = 0.7     # s: the rate is fitted over 0.25-0.7 s (run_on_gpu.sh)
@@ -553,11 +553,73 @@ series_interval = 0.01
 """
 
 
+def silo_grain_heap():
+    """Case 4's angle of repose: the 1:4 silo's grains poured from a narrow inlet onto a round
+    base until the heap spills over its rim (the fixed-base method)."""
+    bound = GRAIN_DC / 2 * QUARTER_SCALE
+    r = 0.25                # as make_meshes.py HEAP_BASE
+    inlet_r, base, height = 0.065, 0.35, 0.3
+    return f"""# Case 4 (docs/production.md §4): the angle of repose of the 1:4 silo's grains (mineral grains
+# of 32.3 mm circumscribed, 18.7 mm volume-equivalent, the fill's material), which the silo's fill
+# cannot give: its feed is 60 % of the silo's radius wide and leaves the top nearly flat. Here
+# the grains are poured from an inlet of {inlet_r * 1000:.0f} mm radius (a column from {base} m to
+# {base + height:.2f} m, thrown down at 3 m/s: about 1000 grains per second, the most that a column
+# this wide passes) onto the centre of a round base of {r} m radius (make_meshes.py
+# silo_grain_heap_base) whose friction is the grains' own (a rough base), until the heap spills
+# over the rim: a fixed-base heap, whose flank's slope is the angle of repose (`polydem analyze
+# heap --radius {r} --floor 0`). Grains that roll off the rim fall out of the domain and are
+# removed. 2500 grains, then about 1 s of settling; the inlet is a quarter of the base's radius, so
+# the cone is fitted between 0.35 and 0.9 of it. Written by make_scenes.py.
+
+gravity = [0.0, 0.0, -9.81]
+
+[simulation]
+dt_fraction = 0.05
+end_time = 3.5
+seed = 0
+
+[domain]
+min = [-0.3, -0.3, -0.1]
+max = [0.3, 0.3, {base + height + 0.05!r}]
+on_leaving = "remove"
+
+{GRAIN_MATERIALS.format(e=QUARTER_E)}
+[[particle_types]]
+name = "grain"
+material = "ore"
+mesh = "{GRAIN}"
+scale = {QUARTER_SCALE!r}
+
+[[insertions]]                       # the inlet: a narrow stream onto the heap's apex
+type = "grain"
+region = {{ kind = "cylinder", base = [0.0, 0.0, {base!r}], axis = [0.0, 0.0, 1.0], radius = {inlet_r!r}, height = {height!r} }}
+rate = 2000.0
+total = 2500
+interval = 0.01
+velocity = [0.0, 0.0, -3.0]
+orientation = "random"
+
+[[walls]]
+name = "base"
+mesh = "meshes/silo_grain_heap_base.stl"
+material = "ore"                     # a rough base: the grains' friction, 0.5
+
+[output]
+dir = "out/silo_grain_heap"
+frame_interval = 0.25
+formats = ["vtu"]
+fields = ["id", "type", "velocity", "orientation"]
+checkpoint_interval = 0.5
+series_interval = 0.005
+"""
+
+
 SCENES = {
     "dodecahedra_cylinder_x10": dodecahedra_cylinder_x10,
     "drum_speeds": drum_speeds,
     "silo_filled": silo_filled,
     "silo_quarter_fill": silo_quarter_fill,
+    "silo_grain_heap": silo_grain_heap,
     "twins/silo": silo_twin,
     "twins/silo_discharge": silo_twin_discharge,
     **{f"silo_discharge_{round(1000 * h)}mm": (lambda h=h: silo_discharge(h)) for h in DISCHARGE_HOLES},

@@ -80,6 +80,9 @@ for s in "${scenes[@]}"; do
         > "$out/fixed_bed_porosity.json"
       python3 "$here/bed_porosity.py" "$out/fixed_bed_porosity.svg" "$out/fixed_bed_porosity.json" \
         > "$out/fixed_bed_porosity.txt" ;;
+    silo_grain_heap)
+      "$bin" analyze heap "$here/$s.toml" "$(last_ckpt "$s")" --radius 0.25 --floor 0 --fit 0.35,0.9 \
+        > "$out/silo_grain_heap.json" ;;
     silo_quarter_fill)
       ck=$(last_ckpt "$s")
       # The discharge scenes start from this state: their grain count (those below the cut)
