@@ -8,9 +8,10 @@ against time and Beverloo's law.
 Each FRAMES is a run's particle tables (`<output.dir>/particles`, step_<step>[_r<rank>].csv),
 the grains left at each frame being its rows whose centre lies above Z (default: every row; the
 orifice plate's height counts a grain out as it passes the hole, not when it falls out of the
-domain), or a text file of "time grains" lines counted from them. The discharge rate W (kg/s) of each orifice D0 (m)
-is the least-squares slope of the mass left over the window (default 0.5 s to the last frame:
-the start-up transient left out). Beverloo's law
+domain), or a text file of "time grains" lines already counted (Z does not apply). The
+discharge rate W (kg/s) of each orifice D0 (m) is the least-squares slope of the mass left
+over the window (default 0.5 s to the last frame: the start-up transient left out); an orifice
+with no flow over it (jammed) is reported and left out of the fit. Beverloo's law
 
   W = C rho_b sqrt(g) (D0 - k d)^(5/2)
 
