@@ -113,8 +113,11 @@ runs=()
 for d in 75 94 112 131 150; do
   done_ "silo_discharge_${d}mm" && runs+=("$(python3 -c "print($d / 1000)"):$here/out/silo_discharge_${d}mm/particles")
 done
-if [ ${#runs[@]} -ge 2 ] && [ -f "$out/silo_porosity.json" ]; then
-  rho_b=$(python3 -c "import json; print(2500 * (1 - json.load(open('$out/silo_porosity.json'))['mean']))")
+# The bulk density from the fill's porosity: this sitting's, else the fill's recorded run.
+porosity=$out/silo_porosity.json
+[ -f "$porosity" ] || porosity=$here/../../docs/data/production_silo_quarter_fill_h200.json
+if [ ${#runs[@]} -ge 2 ] && [ -f "$porosity" ]; then
+  rho_b=$(python3 -c "import json; j = json.load(open('$porosity')); j = j['porosity'] if 'fill' in j else j; print(2500 * (1 - j['mean']))")
   python3 "$here/silo_discharge.py" "$out/silo_discharge.svg" "${runs[@]}" --grain-mass 8.546e-3 \
     --bulk-density "$rho_b" --d 0.0187 --window 0.25,1e9 --above 0 > "$out/silo_discharge.txt"
 fi
