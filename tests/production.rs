@@ -137,8 +137,8 @@ fn production_meshes_are_what_make_meshes_py_states() {
     check_tube("dodecahedra_cylinder.stl", 0.05, 0.20, 96, 4, 0.03);
     check_tube("fixed_bed_tube.stl", 0.0125, 1.80, 64, 90, 0.0055);
     check_tube("fixed_bed_tube_twin.stl", 0.0125, 0.10, 24, 5, 0.0055);
-    // The heap's base: a disk of 0.25 m radius at z = 0 facing up, in triangles of about
-    // 20 mm; its rim polygon circumscribes the circle, within 0.1 % of its radius (the heap's
+    // The heap's base: a disk of 0.2 m radius at z = 0 facing up, in triangles of about
+    // 20 mm; its rim polygon circumscribes the circle, within 0.2 % of its radius (the heap's
     // size is set by where it spills over).
     let base = triangles("silo_grain_heap_base.stl");
     let widest = base
@@ -147,7 +147,7 @@ fn production_meshes_are_what_make_meshes_py_states() {
         .map(|v| v.xy().norm())
         .fold(0.0, f64::max);
     assert!(
-        (0.25..0.25 * 1.001).contains(&widest) && base.iter().flatten().all(|v| v.z == 0.0),
+        (0.2..0.2 * 1.002).contains(&widest) && base.iter().flatten().all(|v| v.z == 0.0),
         "heap base: widest point at {widest} m"
     );
     check_plate(
@@ -155,7 +155,7 @@ fn production_meshes_are_what_make_meshes_py_states() {
         &base,
         Vector3::zeros(),
         Vector3::z(),
-        0.25,
+        0.2,
         2.0 * 0.02,
     );
     // The drum: a ring of radius 0.15 m about the y axis, 11 mm deep, 192 segments, facing

@@ -249,9 +249,10 @@ def heap_base(r, size):
     return ring_disk(r, 0.0, size, up=True)
 
 
-# m: the base of the 1:4 silo's grains' heap (make_scenes.py silo_grain_heap): 15.5
-# circumscribed grain diameters across, room for a cone about 7 grains tall at 35 degrees.
-HEAP_BASE = 0.25
+# m: the base of the 1:4 silo's grains' heap (make_scenes.py silo_grain_heap): 21 volume-
+# equivalent grain diameters across; a cone of 40 degrees on it holds about 1 200 grains, so the
+# 2 500 poured fill it and spill over its rim even with a quarter lost while the base is bare.
+HEAP_BASE = 0.2
 
 
 MESHES = {

@@ -557,7 +557,7 @@ def silo_grain_heap():
     """Case 4's angle of repose: the 1:4 silo's grains poured from a narrow inlet onto a round
     base until the heap spills over its rim (the fixed-base method)."""
     bound = GRAIN_DC / 2 * QUARTER_SCALE
-    r = 0.25                # as make_meshes.py HEAP_BASE
+    r = 0.2                 # as make_meshes.py HEAP_BASE
     inlet_r, base, height = 0.065, 0.35, 0.3
     return f"""# Case 4 (docs/production.md §4): the angle of repose of the 1:4 silo's grains (mineral grains
 # of 32.3 mm circumscribed, 18.7 mm volume-equivalent, the fill's material), which the silo's fill
@@ -569,8 +569,8 @@ def silo_grain_heap():
 # grains' own (a rough base), until the heap spills over the rim: a fixed-base heap, whose
 # flank's slope is the angle of repose (`polydem analyze heap --radius {r} --floor 0`). Grains
 # that roll off the rim fall out of the domain and are removed. 2500 grains by about 3.4 s,
-# then 0.8 s of settling; the inlet is a quarter of the base's radius, so the cone is fitted
-# between 0.35 and 0.9 of it. Written by make_scenes.py.
+# then 0.8 s of settling; the inlet is a third of the base's radius, so the cone is fitted
+# between 0.4 and 0.9 of it. Written by make_scenes.py.
 
 gravity = [0.0, 0.0, -9.81]
 
@@ -580,8 +580,8 @@ end_time = 4.2
 seed = 0
 
 [domain]
-min = [-0.3, -0.3, -0.1]
-max = [0.3, 0.3, {base + height + 0.05!r}]
+min = [-0.25, -0.25, -0.1]
+max = [0.25, 0.25, {base + height + 0.05!r}]
 on_leaving = "remove"
 
 {GRAIN_MATERIALS.format(e=QUARTER_E)}

@@ -81,7 +81,7 @@ for s in "${scenes[@]}"; do
       python3 "$here/bed_porosity.py" "$out/fixed_bed_porosity.svg" "$out/fixed_bed_porosity.json" \
         > "$out/fixed_bed_porosity.txt" ;;
     silo_grain_heap)
-      "$bin" analyze heap "$here/$s.toml" "$(last_ckpt "$s")" --radius 0.25 --floor 0 --fit 0.35,0.9 \
+      "$bin" analyze heap "$here/$s.toml" "$(last_ckpt "$s")" --radius 0.2 --floor 0 --fit 0.4,0.9 \
         > "$out/silo_grain_heap.json" ;;
     silo_quarter_fill)
       ck=$(last_ckpt "$s")
