@@ -251,7 +251,7 @@ def heap_base(r, size):
 
 # m: the base of the 1:4 silo's grains' heap (make_scenes.py silo_grain_heap): 21 volume-
 # equivalent grain diameters across; a cone of 40 degrees on it holds about 1 200 grains, so the
-# 2 500 poured fill it and spill over its rim even with a quarter lost while the base is bare.
+# 1 800 poured (make_scenes.py) fill it and spill over its rim.
 HEAP_BASE = 0.2
 
 

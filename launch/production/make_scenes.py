@@ -558,19 +558,20 @@ def silo_grain_heap():
     base until the heap spills over its rim (the fixed-base method)."""
     bound = GRAIN_DC / 2 * QUARTER_SCALE
     r = 0.2                 # as make_meshes.py HEAP_BASE
-    inlet_r, base, height = 0.065, 0.35, 0.3
+    inlet_r, base, height = 0.065, 0.22, 0.3
     return f"""# Case 4 (docs/production.md §4): the angle of repose of the 1:4 silo's grains (mineral grains
 # of 32.3 mm circumscribed, 18.7 mm volume-equivalent, the fill's material), which the silo's fill
 # cannot give: its feed is 60 % of the silo's radius wide and leaves the top nearly flat. Here
 # the grains are poured from an inlet of {inlet_r * 1000:.0f} mm radius (a column from {base} m to
-# {base + height:.2f} m, thrown down at 3 m/s: the most that a column this wide passes, about 1000
-# grains per second at first, 740 averaged over the first second on the CPU) onto the centre of
-# a round base of {r} m radius (make_meshes.py silo_grain_heap_base) whose friction is the
-# grains' own (a rough base), until the heap spills over the rim: a fixed-base heap, whose
-# flank's slope is the angle of repose (`polydem analyze heap --radius {r} --floor 0`). Grains
-# that roll off the rim fall out of the domain and are removed. 2500 grains by about 3.4 s,
-# then 0.8 s of settling; the inlet is a third of the base's radius, so the cone is fitted
-# between 0.4 and 0.9 of it. Written by make_scenes.py.
+# {base + height:.2f} m, thrown down at 1 m/s: about 540 grains per second on the CPU over the
+# first 1.4 s) onto the centre of a round base of {r} m radius (make_meshes.py
+# silo_grain_heap_base) whose friction is the grains' own (a rough base), until the heap spills
+# over the rim: a fixed-base heap, whose flank's slope is the angle of repose (`polydem analyze
+# heap --radius {r} --floor 0`). The stream is slow and lands low: thrown at 3 m/s from 0.35 m
+# and more, the grains landed at 4 m/s and spread in a flat layer over the whole base, a third of
+# them bouncing off it. Grains that roll off the rim fall out of the domain and are removed.
+# 1800 grains by about 3.4 s, then 0.8 s of settling; the inlet is a third of the base's radius,
+# so the cone is fitted between 0.4 and 0.9 of it. Written by make_scenes.py.
 
 gravity = [0.0, 0.0, -9.81]
 
@@ -595,9 +596,9 @@ scale = {QUARTER_SCALE!r}
 type = "grain"
 region = {{ kind = "cylinder", base = [0.0, 0.0, {base!r}], axis = [0.0, 0.0, 1.0], radius = {inlet_r!r}, height = {height!r} }}
 rate = 2000.0
-total = 2500
+total = 1800
 interval = 0.01
-velocity = [0.0, 0.0, -3.0]
+velocity = [0.0, 0.0, -1.0]
 orientation = "random"
 
 [[walls]]
