@@ -16,8 +16,8 @@ with no flow over it (jammed) is reported and left out of the fit. Beverloo's la
   W = C rho_b sqrt(g) (D0 - k d)^(5/2)
 
 is fitted as the straight line W^(2/5) = (C rho_b sqrt(g))^(2/5) (D0 - k d): C from its slope
-and k from where it crosses zero. Prints the table and the fit, and plots the mass against time
-and W against D0 with the fitted law.
+and k from where it crosses zero. Prints the table and the fit, and plots the mass discharged
+against time and W against D0 with the fitted law.
 """
 import argparse
 import collections
@@ -102,19 +102,20 @@ def main():
         k = -b / s / a.d
         fit = (c, k)
         print(f"Beverloo: C = {c:.3f}, k = {k:.2f} (d = {a.d} m, rho_b = {a.bulk_density} kg/m3)")
-    # Two panels: mass left against time; W against D0 with the law.
+    # Two panels: mass discharged against time (a silo's few kilograms out of its whole charge
+    # would be a flat line on a scale of what is left); W against D0 with the law.
     w, h = 900, 380
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">',
              '<rect width="100%" height="100%" fill="white"/>']
     colours = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"]
     x0, y0, pw, ph = 70, 30, 340, 290
     tmax = max(t for r in rows for t, _ in r["series"])
-    mmax = max(n for r in rows for _, n in r["series"]) * a.grain_mass
+    mmax = max(max((r["series"][0][1] - n) * a.grain_mass for r in rows for _, n in r["series"]), 1e-9)
     parts.append(f'<rect x="{x0}" y="{y0}" width="{pw}" height="{ph}" fill="none" stroke="black"/>')
     parts.append(f'<text x="{x0 + pw / 2}" y="{y0 + ph + 30}" text-anchor="middle">time (s)</text>')
-    parts.append(f'<text x="{x0}" y="20">mass left in the silo (kg, 0 … {mmax:.0f})</text>')
+    parts.append(f'<text x="{x0}" y="20">mass discharged (kg, 0 … {mmax:.2g})</text>')
     for i, r in enumerate(rows):
-        pts = " ".join(f"{x0 + t / tmax * pw:.1f},{y0 + ph - n * a.grain_mass / mmax * ph:.1f}" for t, n in r["series"])
+        pts = " ".join(f"{x0 + t / tmax * pw:.1f},{y0 + ph - (r['series'][0][1] - n) * a.grain_mass / mmax * ph:.1f}" for t, n in r["series"])
         parts.append(f'<polyline points="{pts}" fill="none" stroke="{colours[i % 6]}" stroke-width="1.5"/>')
         parts.append(f'<text x="{x0 + pw - 4}" y="{y0 + 16 + 14 * i}" text-anchor="end" fill="{colours[i % 6]}">D0 = {1000 * r["d0"]:.0f} mm</text>')
     for j in range(5):
