@@ -110,12 +110,15 @@ def main():
     colours = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"]
     x0, y0, pw, ph = 70, 30, 340, 290
     tmax = max(t for r in rows for t, _ in r["series"])
-    mmax = max(max((r["series"][0][1] - n) * a.grain_mass for r in rows for _, n in r["series"]), 1e-9)
+    for r in rows:
+        n0 = r["series"][0][1]
+        r["out"] = [(t, (n0 - n) * a.grain_mass) for t, n in r["series"]]
+    mmax = max(max(m for r in rows for _, m in r["out"]), 1e-9)
     parts.append(f'<rect x="{x0}" y="{y0}" width="{pw}" height="{ph}" fill="none" stroke="black"/>')
     parts.append(f'<text x="{x0 + pw / 2}" y="{y0 + ph + 30}" text-anchor="middle">time (s)</text>')
     parts.append(f'<text x="{x0}" y="20">mass discharged (kg, 0 … {mmax:.2g})</text>')
     for i, r in enumerate(rows):
-        pts = " ".join(f"{x0 + t / tmax * pw:.1f},{y0 + ph - (r['series'][0][1] - n) * a.grain_mass / mmax * ph:.1f}" for t, n in r["series"])
+        pts = " ".join(f"{x0 + t / tmax * pw:.1f},{y0 + ph - m / mmax * ph:.1f}" for t, m in r["out"])
         parts.append(f'<polyline points="{pts}" fill="none" stroke="{colours[i % 6]}" stroke-width="1.5"/>')
         parts.append(f'<text x="{x0 + pw - 4}" y="{y0 + 16 + 14 * i}" text-anchor="end" fill="{colours[i % 6]}">D0 = {1000 * r["d0"]:.0f} mm</text>')
     for j in range(5):
