@@ -771,6 +771,68 @@ fn the_bed_porosity_script_reads_the_correlation_and_the_extrema() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `heap_profile.py` (case 4's heap table and plot) on a synthetic profile: a flat top of
+/// 0.09 m out to 0.08 m (the inlet's footprint), then a 35° cone down to the rim of a 0.2 m
+/// base. Refitted over the flank's rings (0.1–0.19 m) the angle is 35° to the printed digits
+/// (an exact line), the apex where the cone's line crosses the axis; a window holding one ring
+/// is refused with its bounds.
+#[test]
+fn the_heap_script_refits_the_flank_of_a_cone() {
+    let dir = std::env::temp_dir().join(format!("polydem_heap_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let t = 35f64.to_radians().tan();
+    let apex = 0.09 + 0.08 * t;
+    let radii: Vec<f64> = (0..20).map(|k| 0.005 + 0.01 * k as f64).collect();
+    let heights: Vec<f64> = radii
+        .iter()
+        .map(|&r| if r < 0.08 { 0.09 } else { apex - t * r })
+        .collect();
+    let write = |fit: [f64; 2]| {
+        let json = format!(
+            "{{\"angle_deg\": 35.0, \"fit\": {fit:?}, \"heights\": {heights:?}, \
+             \"line\": [{apex}, {}], \"radii\": {radii:?}}}",
+            -t
+        );
+        std::fs::write(dir.join("h.json"), json).unwrap();
+    };
+    let python = std::env::var_os("POLYDEM_PYTHON").unwrap_or_else(|| "python3".into());
+    let run = || {
+        std::process::Command::new(&python)
+            .arg(repo_root().join("launch/production/heap_profile.py"))
+            .arg(dir.join("h.svg"))
+            .arg(dir.join("h.json"))
+            .output()
+            .unwrap()
+    };
+    write([0.1, 0.19]);
+    let out = run();
+    assert!(out.status.success(), "{out:?}");
+    let text = String::from_utf8(out.stdout).unwrap();
+    println!("{text}");
+    assert!(
+        text.contains(&format!(
+            "cone fitted between 100 and 190 mm: 35.00 deg (analysis: 35.00 deg); apex of the \
+             fitted cone {:.1} mm, highest ring 90.0 mm",
+            1000.0 * apex
+        )),
+        "{text}"
+    );
+    assert_eq!(text.lines().filter(|l| l.starts_with("| ")).count(), 21);
+    let svg = std::fs::read_to_string(dir.join("h.svg")).unwrap();
+    assert!(
+        svg.starts_with("<svg") && svg.contains("<polyline") && svg.contains("fitted cone 35.0°"),
+        "{svg}"
+    );
+    write([0.1, 0.11]);
+    let out = run();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("fewer than two rings between 0.1 and 0.11 m"),
+        "{out:?}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// `silo_discharge.py` (case 5's table, fit and plot) on synthetic particle tables: two
 /// outlets emptied at the rates Beverloo's law W = C ρ_b √g (D₀ − k d)^{5/2} gives for C = 0.6,
 /// k = 1.8, each table also holding grains that have passed the plate (z < 0) and that

@@ -495,9 +495,10 @@ DISCHARGE_HOLES = [round(k * 0.0187, 4) for k in (4, 5, 6, 7, 8)]   # as make_me
 # bed, work in every step that does not change the rate)
 DISCHARGE_TOP = 0.71
 DISCHARGE_END = 0.7     # s: the rate is fitted over 0.25-0.7 s (run_on_gpu.sh)
-# Grains of the fill's final state below DISCHARGE_TOP: known once the fill has run (`polydem
-# check` on a discharge scene gives it; run_on_gpu.sh passes it as --discharge-count).
-DISCHARGE_COUNT = [QUARTER_GRAINS]
+# Grains of the fill's final state below DISCHARGE_TOP: those of the state kept in
+# restart/silo_quarter_fill.final.ckpt.gz; a new fill has its own (`polydem check` on a
+# discharge scene gives it, and run_on_gpu.sh passes it as --discharge-count).
+DISCHARGE_COUNT = [22_345]
 
 
 def silo_discharge(hole):
@@ -570,8 +571,9 @@ def silo_grain_heap():
 # heap --radius {r} --floor 0`). The stream is slow and lands low: thrown at 3 m/s from 0.35 m
 # and more, the grains landed at 4 m/s and spread in a flat layer over the whole base, a third of
 # them bouncing off it. Grains that roll off the rim fall out of the domain and are removed.
-# 1800 grains by about 3.4 s, then 0.8 s of settling; the inlet is a third of the base's radius,
-# so the cone is fitted between 0.4 and 0.9 of it. Written by make_scenes.py.
+# 1800 grains by about 3.4 s, then 0.8 s of settling. The stream lands over the inlet's width
+# and leaves a flat top out to about half the base's radius (0.09 m on the H200), so the
+# flank is fitted between 0.5 and 0.95 of it. Written by make_scenes.py.
 
 gravity = [0.0, 0.0, -9.81]
 

@@ -23,6 +23,12 @@ mps=0
 if command -v nvidia-cuda-mps-control > /dev/null && [ ${#scenes[@]} -gt 1 ]; then
   nvidia-cuda-mps-control -d && mps=1
 fi
+# The discharges start from the fill's final state, kept there once the fill has run; unpacked
+# once, here, not by each discharge: parallel unpacks into one file let a run read it half written.
+fin=$here/out/silo_quarter_fill/final.ckpt
+if [[ " ${scenes[*]}" == *" silo_discharge_"* ]] && [ ! -f "$fin" ] && [ -f "$here/restart/silo_quarter_fill.final.ckpt.gz" ]; then
+  mkdir -p "$(dirname "$fin")" && gunzip -c "$here/restart/silo_quarter_fill.final.ckpt.gz" > "$fin.part" && mv "$fin.part" "$fin"
+fi
 for s in "${scenes[@]}"; do
   (
     dir=$here/out/$s
@@ -32,11 +38,6 @@ for s in "${scenes[@]}"; do
     # A run carried over from an earlier sitting (launch/production/restart/, README there).
     if [ ! -f "$dir/checkpoints/latest.ckpt" ] && [ -f "$here/restart/$s.ckpt.gz" ]; then
       mkdir -p "$dir/checkpoints" && gunzip -c "$here/restart/$s.ckpt.gz" > "$dir/checkpoints/latest.ckpt"
-    fi
-    # The discharges start from the fill's final state, kept there once the fill has run.
-    fin=$here/out/silo_quarter_fill/final.ckpt
-    if [[ $s == silo_discharge_* ]] && [ ! -f "$fin" ] && [ -f "$here/restart/silo_quarter_fill.final.ckpt.gz" ]; then
-      mkdir -p "$(dirname "$fin")" && gunzip -c "$here/restart/silo_quarter_fill.final.ckpt.gz" > "$fin"
     fi
     if [ -f "$dir/checkpoints/latest.ckpt" ]; then args=(--restart "$dir/checkpoints/latest.ckpt"); else args=(--overwrite); fi
     # The silo's mineral grains run faster in double: mixed precision's hull check sends many of
@@ -81,8 +82,10 @@ for s in "${scenes[@]}"; do
       python3 "$here/bed_porosity.py" "$out/fixed_bed_porosity.svg" "$out/fixed_bed_porosity.json" \
         > "$out/fixed_bed_porosity.txt" ;;
     silo_grain_heap)
-      "$bin" analyze heap "$here/$s.toml" "$(last_ckpt "$s")" --radius 0.2 --floor 0 --fit 0.4,0.9 \
-        > "$out/silo_grain_heap.json" ;;
+      "$bin" analyze heap "$here/$s.toml" "$(last_ckpt "$s")" --radius 0.2 --floor 0 --fit 0.5,0.95 \
+        > "$out/silo_grain_heap.json"
+      python3 "$here/heap_profile.py" "$out/silo_grain_heap.svg" "$out/silo_grain_heap.json" \
+        > "$out/silo_grain_heap.txt" ;;
     silo_quarter_fill)
       ck=$(last_ckpt "$s")
       # The discharge scenes start from this state: their grain count (those below the cut)
