@@ -158,6 +158,20 @@ impl Particles {
         self.inertia.truncate(n);
     }
 
+    /// The local indices of the first `n` particles in global id order, or `None` when they
+    /// are in it already (one rank that inserted and removed particles, but was not restarted
+    /// from another backend's order or given migrants). Sums that must not depend on the local
+    /// order, which a list build on the GPU, a restart or a migration changes, run in this one.
+    pub fn id_order(&self, n: usize) -> Option<Vec<usize>> {
+        let ids = &self.id[..n];
+        if ids.windows(2).all(|w| w[0] < w[1]) {
+            return None;
+        }
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_unstable_by_key(|&i| ids[i]);
+        Some(order)
+    }
+
     /// Removes the particles at the (sorted) local indices `remove`, keeping the others' order.
     pub fn remove(&mut self, remove: &[usize]) {
         let mut keep = vec![true; self.len()];

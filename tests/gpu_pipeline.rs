@@ -161,7 +161,8 @@ fn three_steps_from_a_cpu_state_match_contact_by_contact() {
 /// 1000 steps of the pour (with the insertion of the fed particles on the host, list rebuilds
 /// with reordering, wall and particle contacts with friction). Double mode: bitwise equal to
 /// the CPU (the kernels follow the CPU's order of operations and the reduction is in
-/// partner-id order on both). Mixed mode (f32 pair geometry): the overlap volumes carry up to
+/// partner-id order on both), the elastic energy and the walls' forces included (summed in
+/// global id order on both). Mixed mode (f32 pair geometry): the overlap volumes carry up to
 /// 1e-4 relative error on shallow contacts (the geometry test set's bound) and a granular
 /// packing amplifies differences over hundreds of collisions, so the bound is 1e-6 of the
 /// particle size for positions and 1e-4 of the largest speed (measured on the H100: 8.6e-9
@@ -188,6 +189,24 @@ fn a_thousand_steps_of_a_dense_pour_match_the_cpu() {
         let g = gpu.sync_host().unwrap();
         assert_eq!(g.particles.len(), cpu.particles.len());
         assert!(g.particles.len() > 240, "the fed particles arrived");
+        if precision == Precision::Double {
+            // The diagnostics too: both backends sum the elastic energy and the walls' forces
+            // in global id order, whatever the device's order after its list builds.
+            let bits = |s: &Simulation| {
+                let mut v = vec![s.stats.elastic_energy.to_bits()];
+                v.extend(
+                    s.wall_forces
+                        .iter()
+                        .flat_map(|f| f.iter().map(|c| c.to_bits())),
+                );
+                (s.stats.contacts, s.stats.wall_contacts, v)
+            };
+            assert_eq!(
+                bits(g),
+                bits(&cpu),
+                "diagnostics of the GPU against the CPU"
+            );
+        }
         let (tol_x, tol_v) = match precision {
             Precision::Double => (0.0, 0.0),
             Precision::Mixed => (1e-6, 1e-4),

@@ -74,12 +74,23 @@ impl Simulation {
         // A pair across two ranks is evaluated on both; it counts where its lower-id member
         // (the pair's first) is owned, so that sums over ranks count it once.
         let counted = |k: usize| self.pairs.pairs[k][0] < owned as u32;
-        // Summed per particle in local order, each particle's pairs by partner id (the order
-        // of the force reduction above), not in pair-list order: the list's order depends on
-        // the step it was built at, which a restart changes, and the energy must not.
+        // Summed per particle in global id order, each particle's pairs by partner id (the
+        // order of the force reduction above), then each particle's walls: not in pair-list
+        // order, which depends on the step the list was built at, nor in local order, which a
+        // restart from the GPU's order or a migration changes; the GPU backend sums in this
+        // order too, so the diagnostics match across restarts and backends.
+        // (The ghosts are dropped: the particles are the owned ones, `wall_outcomes` has one
+        // per particle or none.)
         let listed = owned.min(pairs.offsets.len().saturating_sub(1));
+        let n = self.particles.len();
+        let order = self.particles.id_order(n);
+        let at = |j: usize| order.as_ref().map_or(j, |o| o[j]);
         let mut energy: f64 = 0.0;
-        for i in 0..listed {
+        for j in 0..n {
+            let i = at(j);
+            if i >= listed {
+                continue;
+            }
             for r in pairs.of(i) {
                 if !r.is_b && counted(r.pair as usize) {
                     energy += outcomes[r.pair as usize].forces.elastic_energy;
@@ -87,7 +98,10 @@ impl Simulation {
             }
         }
         let mut wall_contacts = 0;
-        for w in wall_outcomes {
+        for j in 0..n {
+            let Some(w) = wall_outcomes.get(at(j)) else {
+                continue;
+            };
             energy += w.energy;
             wall_contacts += w.states.len() as u64;
             entries.extend_from_slice(&w.states);

@@ -68,16 +68,25 @@ impl CudaSimulation {
         };
         let mut entries = Vec::new();
         let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
+        // The elastic energy and the walls' forces are summed in global id order: each pair
+        // under its first (lower-id) member by partner id, then each particle's walls, the
+        // order of the CPU's reduction when its particles are in id order. The device's order
+        // is that of the last list build, which depends on who built it (the device, or the
+        // host in `cpu`, `hybrid` and `auto` modes) and when: summed in that order, these
+        // diagnostics changed in their last bits from run to run while the trajectory did not.
+        let mut pair_energy: Vec<(u64, u64, f64)> = Vec::new();
         if let Some(pairs) = &self.pairs.list {
             let pr = st.clone_dtoh(&pairs.pairs)?;
             let contact = st.clone_dtoh(&pairs.contact)?;
             let spring = get(&pairs.spring_in)?;
             let e = get(&pairs.energy)?;
+            pair_energy.reserve(pairs.n);
             for k in 0..pairs.n {
                 let (a, b) = (pr[2 * k] as usize, pr[2 * k + 1] as usize);
                 let counted = !ghost[a];
                 if counted {
-                    energy += e[k];
+                    let (ia, ib) = (p.id[a], p.id[b]);
+                    pair_energy.push((ia.min(ib), ia.max(ib), e[k]));
                 }
                 if contact[k] != 0 {
                     contacts += u64::from(counted);
@@ -88,17 +97,20 @@ impl CudaSimulation {
                 }
             }
         }
+        pair_energy.sort_unstable_by_key(|&(a, b, _)| (a, b));
+        for (_, _, e) in &pair_energy {
+            energy += e;
+        }
         let mut wall_forces = vec![Vector3::zeros(); self.walls.as_ref().map_or(0, |w| w.n)];
         if let Some(w) = &self.walls {
             let contact = st.clone_dtoh(&w.contact)?;
             let spring = get(&w.spring_in)?;
             let e = get(&w.energy)?;
             let f = get(&w.per_wall_force)?;
-            for (i, ei) in e.iter().enumerate().take(n) {
-                if ghost[i] {
-                    continue;
-                }
-                energy += ei;
+            let mut by_id: Vec<usize> = (0..n).filter(|&i| !ghost[i]).collect();
+            by_id.sort_unstable_by_key(|&i| p.id[i]);
+            for i in by_id {
+                energy += e[i];
                 for (k, wf) in wall_forces.iter_mut().enumerate() {
                     let s = i * w.n + k;
                     if contact[s] != 0 {
