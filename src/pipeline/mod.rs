@@ -198,28 +198,24 @@ impl Simulation {
     pub fn energies(&self) -> (f64, f64, f64) {
         let p = &self.particles;
         let g = self.scene.gravity;
-        let mut terms: Vec<(u64, [f64; 3])> = (0..p.len())
+        let terms: Vec<[f64; 3]> = (0..p.len())
             .into_par_iter()
             .with_min_len(crate::par::CHEAP)
             .map(|i| {
                 let wb = p.orientation[i].inverse_transform_vector(&p.angular_velocity[i]);
-                (
-                    p.id[i],
-                    [
-                        0.5 * p.mass[i] * p.velocity[i].norm_squared(),
-                        0.5 * wb.component_mul(&p.inertia[i]).dot(&wb),
-                        -p.mass[i] * g.dot(&p.position[i]),
-                    ],
-                )
+                [
+                    0.5 * p.mass[i] * p.velocity[i].norm_squared(),
+                    0.5 * wb.component_mul(&p.inertia[i]).dot(&wb),
+                    -p.mass[i] * g.dot(&p.position[i]),
+                ]
             })
             .collect();
         // Summed one by one in id order: a parallel reduction's grouping varies with the
         // threads' work stealing, and the local order with the backend and a restart, either of
         // which would change the last bits of a value that the state alone determines.
-        if !terms.windows(2).all(|w| w[0].0 < w[1].0) {
-            terms.sort_unstable_by_key(|t| t.0);
-        }
-        terms.iter().fold((0.0, 0.0, 0.0), |a, (_, e)| {
+        let order = p.id_order(p.len());
+        (0..terms.len()).fold((0.0, 0.0, 0.0), |a, j| {
+            let e = &terms[order.as_ref().map_or(j, |o| o[j])];
             (a.0 + e[0], a.1 + e[1], a.2 + e[2])
         })
     }
