@@ -69,8 +69,8 @@ impl CudaSimulation {
         let mut entries = Vec::new();
         let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
         // The elastic energy and the walls' forces are summed in global id order: each pair
-        // under its first (lower-id) member by partner id, then each particle's walls, the
-        // order of the CPU's reduction when its particles are in id order. The device's order
+        // under its first (lower-id) member by partner id, then each particle's walls, as the
+        // CPU's reduction sums them (`Particles::id_order`). The device's order
         // is that of the last list build, which depends on who built it (the device, or the
         // host in `cpu`, `hybrid` and `auto` modes) and when: summed in that order, these
         // diagnostics changed in their last bits from run to run while the trajectory did not.
@@ -107,9 +107,12 @@ impl CudaSimulation {
             let spring = get(&w.spring_in)?;
             let e = get(&w.energy)?;
             let f = get(&w.per_wall_force)?;
-            let mut by_id: Vec<usize> = (0..n).filter(|&i| !ghost[i]).collect();
-            by_id.sort_unstable_by_key(|&i| p.id[i]);
-            for i in by_id {
+            let order = p.id_order(n);
+            for j in 0..n {
+                let i = order.as_ref().map_or(j, |o| o[j]);
+                if ghost[i] {
+                    continue;
+                }
                 energy += e[i];
                 for (k, wf) in wall_forces.iter_mut().enumerate() {
                     let s = i * w.n + k;
