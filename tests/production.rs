@@ -360,6 +360,40 @@ fn production_scenes_validate() {
     }
 }
 
+/// The scenes `make_scenes.py` writes are what it writes from its parameters: `--check`
+/// regenerates each in memory and names those that differ (a scene edited by hand, or
+/// parameters changed without rewriting it); and a scene that differs is named.
+#[test]
+fn production_scenes_are_what_make_scenes_py_writes() {
+    let python = std::env::var_os("POLYDEM_PYTHON").unwrap_or_else(|| "python3".into());
+    let script = repo_root().join("launch/production/make_scenes.py");
+    let out = std::process::Command::new(&python)
+        .arg(&script)
+        .arg("--check")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    // A copy of the script beside an edited scene: that scene is named, and only it.
+    let dir = std::env::temp_dir().join(format!("polydem_scenes_{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("twins")).unwrap();
+    std::fs::copy(&script, dir.join("make_scenes.py")).unwrap();
+    let twin = std::fs::read_to_string(repo_root().join("launch/production/twins/silo.toml"))
+        .unwrap()
+        .replace("total = 160", "total = 161");
+    std::fs::write(dir.join("twins/silo.toml"), twin).unwrap();
+    let out = std::process::Command::new(&python)
+        .arg(dir.join("make_scenes.py"))
+        .args(["--check", "twins/silo"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("twins/silo.toml") && err.lines().count() == 2,
+        "{out:?}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Case 1's twin: 16 of the seed's dodecahedra (30.8 mm) dropped into its 10 cm cylinder come
 /// to rest as a bed whose top surface is where their volume at a random packing's solid
 /// fraction puts it.

@@ -1,10 +1,13 @@
 #!/usr/bin/env python3
-"""Writes the production scenes that hold several copies of one experiment side by side
-(launch/production/*.toml listed in SCENES below).
+"""Writes the production scenes built from parameters (launch/production/*.toml and twins/
+listed in SCENES below): those that hold several copies of one experiment side by side, the
+silo's fills, discharges and heap, and their twins.
 
   python3 launch/production/make_scenes.py            # all of them
   python3 launch/production/make_scenes.py NAME ...   # only these
   python3 launch/production/make_scenes.py --discharge-count N silo_discharge_75mm ...
+  python3 launch/production/make_scenes.py --check    # writes nothing: exits 1 naming every
+                                                      # scene file that differs from its parameters
 
 A small scene keeps a GPU latency-bound (docs/performance.md, speed against size): 63 dice
 step no faster than 630 do. So the ten pours of case 1 run as ten cylinders in one scene, and
@@ -231,6 +234,32 @@ restitution = 0.5
 friction = 0.3
 """
 
+def grain_head(end, lo, hi, on_leaving, e, scale, up=""):
+    """The head of every mineral-grain scene: gravity, the step and the end time (`end`, a number
+    or the text after `end_time = `), the domain box (`lo`, `hi`: TOML arrays), what happens to
+    grains that leave it, the ore and steel materials with the grains' E (`e`, Pa, as text) and
+    the grain type at `scale` (`up`: the path from the scene's folder to launch/production/)."""
+    return f"""gravity = [0.0, 0.0, -9.81]
+
+[simulation]
+dt_fraction = 0.05
+end_time = {end if isinstance(end, str) else repr(end)}
+seed = 0
+
+[domain]
+min = {lo}
+max = {hi}
+on_leaving = "{on_leaving}"
+
+{GRAIN_MATERIALS.format(e=e)}
+[[particle_types]]
+name = "grain"
+material = "ore"
+mesh = "{up}{GRAIN}"
+scale = {scale!r}
+"""
+
+
 
 def silo_walls(prefix, bands, up=""):
     names = ["hopper"] + (["side"] if bands == 0 else ["side_west"] + [f"band_{b:02d}" for b in range(bands)])
@@ -306,25 +335,7 @@ def silo_filled():
 # The side wall's mesh is not committed (7.5 MB): first run
 #   python3 launch/production/make_meshes.py silo
 
-gravity = [0.0, 0.0, -9.81]
-
-[simulation]
-dt_fraction = 0.05
-end_time = 0.05                      # s: a short settle; the bench is the point
-seed = 0
-
-[domain]
-min = [-1.1, -1.1, -0.05]
-max = [1.1, 1.1, 10.65]
-on_leaving = "error"
-
-{GRAIN_MATERIALS.format(e="1.0e7")}
-[[particle_types]]
-name = "grain"
-material = "ore"
-mesh = "{GRAIN}"
-scale = {SILO_SCALE!r}
-"""]
+{grain_head('0.05                      # s: a short settle; the bench is the point', '[-1.1, -1.1, -0.05]', '[1.1, 1.1, 10.65]', 'error', "1.0e7", SILO_SCALE)}"""]
     # The hopper's steps, then the cylinder: fill counts are checked by `polydem check`.
     rest = SILO_GRAINS
     for z0, rad, h in steps:
@@ -380,25 +391,7 @@ def silo_fill(name, prefix, d, height, outlet, scale, grains, rate, e, bands, en
     feed_h = feed * bound
     batched = f"interval = {batch!r}\n" if batch else ""
     return f"""{doc}
-gravity = [0.0, 0.0, -9.81]
-
-[simulation]
-dt_fraction = 0.05
-end_time = {end!r}
-seed = 0
-
-[domain]
-min = [{-r - 0.02!r}, {-r - 0.02!r}, -0.05]
-max = [{r + 0.02!r}, {r + 0.02!r}, {height + 0.05!r}]
-on_leaving = "error"
-
-{GRAIN_MATERIALS.format(e=e)}
-[[particle_types]]
-name = "grain"
-material = "ore"
-mesh = "{up}{GRAIN}"
-scale = {scale!r}
-
+{grain_head(end, f"[{-r - 0.02!r}, {-r - 0.02!r}, -0.05]", f"[{r + 0.02!r}, {r + 0.02!r}, {height + 0.05!r}]", "error", e, scale, up)}
 [[insertions]]                       # the inlet: a central stream from the top
 type = "grain"
 region = {{ kind = "cylinder", base = [0.0, 0.0, {top - feed_h!r}], axis = [0.0, 0.0, 1.0], radius = {inlet * r!r}, height = {feed_h!r} }}
@@ -461,25 +454,7 @@ def silo_twin_discharge():
 # gate, discharging through the 60 mm outlet (4.1 volume-equivalent grain diameters of
 # 14.5 mm) for 0.4 s. Written by make_scenes.py.
 
-gravity = [0.0, 0.0, -9.81]
-
-[simulation]
-dt_fraction = 0.05
-end_time = 0.4
-seed = 0
-
-[domain]
-min = [-0.07, -0.07, -0.1]
-max = [0.07, 0.07, 0.5]
-on_leaving = "remove"
-
-{GRAIN_MATERIALS.format(e="1.0e6")}
-[[particle_types]]
-name = "grain"
-material = "ore"
-mesh = "../{GRAIN}"
-scale = 11.6
-
+{grain_head(0.4, '[-0.07, -0.07, -0.1]', '[0.07, 0.07, 0.5]', 'remove', "1.0e6", 11.6, up='../')}
 [[insertions]]
 type = "grain"
 region = {{ kind = "cylinder", base = [0.0, 0.0, -0.01], axis = [0.0, 0.0, 1.0], radius = 0.06, height = 0.46 }}
@@ -515,25 +490,7 @@ def silo_discharge(hole):
 # removed; particle tables every 0.05 s count the grains left above the plate (silo_discharge.py
 # --above 0: mass against time and Beverloo's law). Written by make_scenes.py.
 
-gravity = [0.0, 0.0, -9.81]
-
-[simulation]
-dt_fraction = 0.05
-end_time = {DISCHARGE_END!r}
-seed = 0
-
-[domain]
-min = [-0.2825, -0.2825, -0.3]
-max = [0.2825, 0.2825, 2.7]
-on_leaving = "remove"
-
-{GRAIN_MATERIALS.format(e=QUARTER_E)}
-[[particle_types]]
-name = "grain"
-material = "ore"
-mesh = "{GRAIN}"
-scale = {QUARTER_SCALE!r}
-
+{grain_head(DISCHARGE_END, '[-0.2825, -0.2825, -0.3]', '[0.2825, 0.2825, 2.7]', 'remove', QUARTER_E, QUARTER_SCALE)}
 [[insertions]]
 type = "grain"
 region = {{ kind = "cylinder", base = [0.0, 0.0, -0.01], axis = [0.0, 0.0, 1.0], radius = 0.28, height = {DISCHARGE_TOP + 0.01!r} }}
@@ -575,25 +532,7 @@ def silo_grain_heap():
 # and leaves a flat top out to about half the base's radius (0.09 m on the H200), so the
 # flank is fitted between 0.5 and 0.95 of it. Written by make_scenes.py.
 
-gravity = [0.0, 0.0, -9.81]
-
-[simulation]
-dt_fraction = 0.05
-end_time = 4.2
-seed = 0
-
-[domain]
-min = [-0.25, -0.25, -0.1]
-max = [0.25, 0.25, {base + height + 0.05!r}]
-on_leaving = "remove"
-
-{GRAIN_MATERIALS.format(e=QUARTER_E)}
-[[particle_types]]
-name = "grain"
-material = "ore"
-mesh = "{GRAIN}"
-scale = {QUARTER_SCALE!r}
-
+{grain_head(4.2, '[-0.25, -0.25, -0.1]', f'[0.25, 0.25, {base + height + 0.05!r}]', 'remove', QUARTER_E, QUARTER_SCALE)}
 [[insertions]]                       # the inlet: a narrow stream onto the heap's apex
 type = "grain"
 region = {{ kind = "cylinder", base = [0.0, 0.0, {base!r}], axis = [0.0, 0.0, 1.0], radius = {inlet_r!r}, height = {height!r} }}
@@ -631,17 +570,28 @@ SCENES = {
 
 
 def main(names):
+    check = names[:1] == ["--check"]
+    if check:
+        names = names[1:]
     if names[:1] == ["--discharge-count"]:
         DISCHARGE_COUNT[0] = int(names[1])
         names = names[2:]
+    stale = []
     for name in names or SCENES:
         if name not in SCENES:
             sys.exit(f"unknown scene {name!r}: one of {', '.join(SCENES)}")
         path = HERE / f"{name}.toml"
+        if check:
+            if not path.is_file() or path.read_text() != SCENES[name]():
+                stale.append(str(path))
+            continue
         tmp = path.with_suffix(".toml.tmp")
         tmp.write_text(SCENES[name]())
         tmp.replace(path)
         print(path)
+    if stale:
+        sys.exit("not what make_scenes.py writes from its parameters (run it to rewrite them):\n  "
+                 + "\n  ".join(stale))
 
 
 if __name__ == "__main__":
