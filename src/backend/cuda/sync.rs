@@ -70,10 +70,10 @@ impl CudaSimulation {
         let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
         // The elastic energy and the walls' forces are summed in global id order: each pair
         // under its first (lower-id) member by partner id, then each particle's walls, as the
-        // CPU's reduction sums them (`Particles::id_order`). The device's order
-        // is that of the last list build, which depends on who built it (the device, or the
-        // host in `cpu`, `hybrid` and `auto` modes) and when: summed in that order, these
-        // diagnostics changed in their last bits from run to run while the trajectory did not.
+        // CPU's reduction sums them (`Particles::id_order`). The device's order is that of the
+        // last list build, which depends on who built it (the device, or the host in `cpu`,
+        // `hybrid` and `auto` modes) and when: summed in that order, these diagnostics changed
+        // in their last bits from run to run while the trajectory did not.
         let mut pair_energy: Vec<(u64, u64, f64)> = Vec::new();
         if let Some(pairs) = &self.pairs.list {
             let pr = st.clone_dtoh(&pairs.pairs)?;
