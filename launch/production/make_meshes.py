@@ -234,8 +234,27 @@ SILO_TWIN = dict(d=0.10, height=0.45, outlet=0.06, hopper_deg=60.0, pitch=0.02, 
 
 
 # Case 5: orifice plates under the 1:4 silo's hopper (outlet 0.1675 m) with holes of 4 ... 8
-# volume-equivalent grain diameters (18.7 mm): Beverloo's law over outlet sizes.
+# volume-equivalent grain diameters (18.7 mm): Beverloo's law over outlet sizes. The hopper's
+# own outlet is 9.0 d (open, no plate), and 10 d is the same hopper cut where it is that wide.
 DISCHARGE_HOLES = [round(k * 0.0187, 4) for k in (4, 5, 6, 7, 8)]
+DISCHARGE_CUT = round(10 * 0.0187, 4)
+
+
+def cut_hopper(d, outlet, hopper_deg, segments, hopper_rings, cut, **_):
+    """The conical hopper of `corrugated_silo` (same arguments) cut where it is `cut` wide: the
+    same rings above that height, below it a first band from the cut up to the next ring. The
+    silo's outlet widened without changing the cone the grains rest on (case 5's 10 d outlet)."""
+    r, r0, rc = d / 2, outlet / 2, cut / 2
+    assert r0 < rc < r, "the cut lies on the cone"
+    t = math.tan(math.radians(hopper_deg))
+    z_h = (r - r0) / t
+    levels = [(rc, (rc - r0) / t)]
+    levels += [(r0 + (r - r0) * k / hopper_rings, z_h * k / hopper_rings) for k in range(1, hopper_rings + 1)
+               if z_h * k / hopper_rings > levels[0][1] + 1e-9]
+    tris = []
+    for (ra, za), (rb, zb) in zip(levels, levels[1:]):
+        tris += band(ring(ra, za, segments), ring(rb, zb, segments))
+    return tris
 
 
 def silo_gate(outlet):
@@ -270,6 +289,7 @@ MESHES = {
     "silo_grain_heap_base": lambda: heap_base(HEAP_BASE, 0.02),
     "silo_quarter_orifice": lambda: {f"{round(1000 * h)}mm": orifice_plate(SILO_QUARTER["outlet"], h, 0.01)
                                      for h in DISCHARGE_HOLES},
+    "silo_quarter_hopper": lambda: {f"{round(1000 * DISCHARGE_CUT)}mm": cut_hopper(cut=DISCHARGE_CUT, **SILO_QUARTER)},
 }
 # Written only when named: 7.6 MB, regenerated on demand (`make_meshes.py silo`).
 LARGE = {"silo"}

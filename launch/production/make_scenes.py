@@ -464,6 +464,8 @@ count = 160
 
 
 DISCHARGE_HOLES = [round(k * 0.0187, 4) for k in (4, 5, 6, 7, 8)]   # as make_meshes.py
+DISCHARGE_OUTLET = 0.1675   # m: the hopper's own outlet, 9.0 d, discharged open (no plate)
+DISCHARGE_CUT = round(10 * 0.0187, 4)   # m: 10 d, the hopper cut where it is that wide (as make_meshes.py)
 # m: the grains below are discharged, the hopper (0.31 m) and 0.4 m of bed above it: a head
 # of 0.71 m over the orifice, 1.35 silo diameters, above which the rate no longer depends on
 # the height (22 345 grains of the fill's final state; the 0.91 m of before kept 0.2 m more
@@ -477,18 +479,42 @@ DISCHARGE_COUNT = [22_345]
 
 
 def silo_discharge(hole):
-    """Case 5: the filled 1:4 silo (case 4b's final state) discharged through an orifice plate
-    of `hole` under its hopper, from t = 0."""
+    """Case 5: the filled 1:4 silo (case 4b's final state) discharged from t = 0 through an
+    orifice plate of `hole` under its hopper; through the hopper's own outlet when `hole` is
+    that outlet (no plate); through the hopper cut where it is `hole` wide when wider."""
     mm = round(1000 * hole)
     walls = silo_walls("silo_quarter", 6)
+    d = f"{hole / 0.0187:.{1 if hole == DISCHARGE_OUTLET else 0}f}"
+    if hole < DISCHARGE_OUTLET:
+        what = f"""through an orifice of {mm} mm ({d} volume-equivalent grain diameters) in a plate under
+# its hopper"""
+        opened = "the plate's hole is open"
+        counted = "the plate (silo_discharge.py\n# --above 0"
+        walls += f"""
+[[walls]]
+name = "orifice"
+mesh = "meshes/silo_quarter_orifice_{mm}mm.stl"
+material = "steel"
+"""
+    elif hole == DISCHARGE_OUTLET:
+        what = f"""through its hopper's own outlet, {mm} mm ({d} volume-equivalent grain diameters),
+# with no plate"""
+        opened = "the outlet is open"
+        counted = "the outlet (silo_discharge.py\n# --above 0"
+    else:
+        z = (hole - DISCHARGE_OUTLET) / 2 / math.tan(math.radians(30.0))
+        what = f"""through an outlet of {mm} mm ({d} volume-equivalent grain diameters),
+# its hopper cut {1000 * z:.1f} mm above its own outlet, where the cone is that wide
+# (make_meshes.py silo_quarter_hopper)"""
+        opened = "the outlet is open"
+        counted = f"the cut (silo_discharge.py\n# {hole}@{z:.4f}"
+        walls = walls.replace("meshes/silo_quarter_hopper.stl", f"meshes/silo_quarter_hopper_{mm}mm.stl")
     return f"""# Case 5 (docs/production.md §5): the 1:4 silo filled by silo_quarter_fill.toml discharged
-# through an orifice of {mm} mm ({hole / 0.0187:.0f} volume-equivalent grain diameters) in a plate under
-# its hopper. The grains are the fill's final state below {DISCHARGE_TOP} m, the hopper and {DISCHARGE_TOP - 0.31:.1f} m of
+# {what}. The grains are the fill's final state below {DISCHARGE_TOP} m, the hopper and {DISCHARGE_TOP - 0.31:.1f} m of
 # the bed above it, a head at which the rate no longer depends on the height (`state`:
 # run_on_gpu.sh copies the fill's last checkpoint to out/silo_quarter_fill/final.ckpt); the gate
-# is gone, the plate's hole is open from t = 0, and grains that fall below the domain are
-# removed; particle tables every 0.05 s count the grains left above the plate (silo_discharge.py
-# --above 0: mass against time and Beverloo's law). Written by make_scenes.py.
+# is gone, {opened} from t = 0, and grains that fall below the domain are
+# removed; particle tables every 0.05 s count the grains left above {counted}: mass against time and Beverloo's law). Written by make_scenes.py.
 
 {grain_head(DISCHARGE_END, '[-0.2825, -0.2825, -0.3]', '[0.2825, 0.2825, 2.7]', 'remove', QUARTER_E, QUARTER_SCALE)}
 [[insertions]]
@@ -497,11 +523,6 @@ region = {{ kind = "cylinder", base = [0.0, 0.0, -0.01], axis = [0.0, 0.0, 1.0],
 state = "out/silo_quarter_fill/final.ckpt"
 count = {DISCHARGE_COUNT[0]}
 {walls}
-[[walls]]
-name = "orifice"
-mesh = "meshes/silo_quarter_orifice_{mm}mm.stl"
-material = "steel"
-
 [output]
 dir = "out/silo_discharge_{mm}mm"
 frame_interval = 0.05
@@ -565,7 +586,8 @@ SCENES = {
     "silo_grain_heap": silo_grain_heap,
     "twins/silo": silo_twin,
     "twins/silo_discharge": silo_twin_discharge,
-    **{f"silo_discharge_{round(1000 * h)}mm": (lambda h=h: silo_discharge(h)) for h in DISCHARGE_HOLES},
+    **{f"silo_discharge_{round(1000 * h)}mm": (lambda h=h: silo_discharge(h))
+       for h in DISCHARGE_HOLES + [DISCHARGE_OUTLET, DISCHARGE_CUT]},
 }
 
 

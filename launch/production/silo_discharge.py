@@ -2,16 +2,17 @@
 """Case 5 (docs/production.md §5): silo discharge through orifices of several sizes, mass
 against time and Beverloo's law.
 
-  python3 launch/production/silo_discharge.py OUT.svg D0:FRAMES ... --grain-mass M
-      --bulk-density RHO_B --d D [--window T0,T1] [--above Z]
+  python3 launch/production/silo_discharge.py OUT.svg D0[@Z]:FRAMES ... --grain-mass M
+      --bulk-density RHO_B --d D [--window T0,T1] [--above Z] [--fit-max D0]
 
 Each FRAMES is a run's particle tables (`<output.dir>/particles`, step_<step>[_r<rank>].csv),
 the grains left at each frame being its rows whose centre lies above Z (default: every row; the
 orifice plate's height counts a grain out as it passes the hole, not when it falls out of the
-domain), or a text file of "time grains" lines already counted (Z does not apply). The
+domain; `D0@Z` sets that run's own Z, for an outlet at another height), or a text file of "time grains" lines already counted (Z does not apply). The
 discharge rate W (kg/s) of each orifice D0 (m) is the least-squares slope of the mass left
 over the window (default 0.5 s to the last frame: the start-up transient left out); an orifice
-with no flow over it (jammed) is reported and left out of the fit. Beverloo's law
+with no flow over it (jammed) is reported and left out of the fit, and so are those wider than
+--fit-max (tabled against the law fitted to the others). Beverloo's law
 
   W = C rho_b sqrt(g) (D0 - k d)^(5/2)
 
@@ -65,19 +66,22 @@ def slope(xs, ys):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("svg")
-    ap.add_argument("runs", nargs="+", help="D0:FRAMES")
+    ap.add_argument("runs", nargs="+", help="D0[@Z]:FRAMES")
     ap.add_argument("--grain-mass", type=float, required=True)
     ap.add_argument("--bulk-density", type=float, required=True)
     ap.add_argument("--d", type=float, required=True, help="grain diameter of the law (m)")
     ap.add_argument("--window", default="0.5,1e9")
     ap.add_argument("--above", type=float, default=-math.inf,
                     help="count a grain while its centre is above this height (m)")
+    ap.add_argument("--fit-max", type=float, default=math.inf,
+                    help="fit the law to the outlets up to this D0 (m) only")
     a = ap.parse_args()
     t0, t1 = (float(x) for x in a.window.split(","))
     rows = []
     for spec in a.runs:
         d0, frames = spec.split(":", 1)
-        series = counts(frames, a.above)
+        d0, _, z = d0.partition("@")
+        series = counts(frames, float(z) if z else a.above)
         if not series:
             sys.exit(f"{frames}: no particle tables")
         win = [(t, n * a.grain_mass) for t, n in series if t0 <= t <= t1]
@@ -92,22 +96,28 @@ def main():
     fit = None
     # An outlet that jammed (no grain out over the window) has no place on the law's line:
     # the fit takes the outlets that flow, and says which it left out.
-    flowing = [r for r in rows if r["w"] > 0]
+    flowing = [r for r in rows if r["w"] > 0 and r["d0"] <= a.fit_max]
     for r in rows:
         if r["w"] <= 0:
             print(f"D0 = {r['d0']:.4f} m: no flow over the window (jammed), left out of the fit")
+        elif r["d0"] > a.fit_max:
+            print(f"D0 = {r['d0']:.4f} m: wider than --fit-max, left out of the fit")
     if len(flowing) >= 2:
         s, b = slope([r["d0"] for r in flowing], [r["w"] ** 0.4 for r in flowing])
         c = s ** 2.5 / (a.bulk_density * math.sqrt(G))
         k = -b / s / a.d
         fit = (c, k)
         print(f"Beverloo: C = {c:.3f}, k = {k:.2f} (d = {a.d} m, rho_b = {a.bulk_density} kg/m3)")
+        for r in rows:
+            law = c * a.bulk_density * math.sqrt(G) * max(r["d0"] - k * a.d, 0.0) ** 2.5
+            if law > 0:
+                print(f"D0 = {r['d0']:.4f} m: W {r['w']:.3f} kg/s, the law {law:.3f} ({r['w'] / law - 1:+.0%})")
     # Two panels: mass discharged against time (a silo's few kilograms out of its whole charge
     # would be a flat line on a scale of what is left); W against D0 with the law.
     w, h = 900, 380
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">',
              '<rect width="100%" height="100%" fill="white"/>']
-    colours = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"]
+    colours = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
     x0, y0, pw, ph = 70, 30, 340, 290
     tmax = max(t for r in rows for t, _ in r["series"])
     for r in rows:
@@ -119,8 +129,8 @@ def main():
     parts.append(f'<text x="{x0}" y="20">mass discharged (kg, 0 … {mmax:.2g})</text>')
     for i, r in enumerate(rows):
         pts = " ".join(f"{x0 + t / tmax * pw:.1f},{y0 + ph - m / mmax * ph:.1f}" for t, m in r["out"])
-        parts.append(f'<polyline points="{pts}" fill="none" stroke="{colours[i % 6]}" stroke-width="1.5"/>')
-        parts.append(f'<text x="{x0 + pw - 4}" y="{y0 + 16 + 14 * i}" text-anchor="end" fill="{colours[i % 6]}">D0 = {1000 * r["d0"]:.0f} mm</text>')
+        parts.append(f'<polyline points="{pts}" fill="none" stroke="{colours[i % len(colours)]}" stroke-width="1.5"/>')
+        parts.append(f'<text x="{x0 + pw - 4}" y="{y0 + 16 + 14 * i}" text-anchor="end" fill="{colours[i % len(colours)]}">D0 = {1000 * r["d0"]:.0f} mm</text>')
     for j in range(5):
         parts.append(f'<text x="{x0 + pw * j / 4:.0f}" y="{y0 + ph + 14}" text-anchor="middle">{tmax * j / 4:.1f}</text>')
     x1 = x0 + pw + 90
