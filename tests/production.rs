@@ -1034,6 +1034,20 @@ fn the_discharge_script_recovers_beverloo_from_particle_tables() {
             && text.contains("(+100%)"),
         "{text}"
     );
+    // The two fitted outlets lie on their own law: within half a percent, printed +0%, never
+    // -0%.
+    assert!(
+        text.matches("(+0%)").count() == 2 && !text.contains("-0%"),
+        "{text}"
+    );
+    // The plot fills the fitted outlets' markers and leaves the wide one hollow, and says so.
+    let svg = std::fs::read_to_string(dir.join("d.svg")).unwrap();
+    assert!(
+        svg.matches("<circle").count() == 3
+            && svg.matches(r##"fill="white" stroke="#d62728""##).count() == 1
+            && svg.contains("hollow: D0 &gt; 0.16 m, not fitted"),
+        "{svg}"
+    );
     let fit = text.lines().find(|l| l.starts_with("Beverloo:")).unwrap();
     let c_fit: f64 = fit.split("C = ").nth(1).unwrap()[..5].parse().unwrap();
     let k_fit: f64 = fit.split("k = ").nth(1).unwrap()[..4].parse().unwrap();

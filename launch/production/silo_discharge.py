@@ -111,7 +111,9 @@ def main():
         for r in rows:
             law = c * a.bulk_density * math.sqrt(G) * max(r["d0"] - k * a.d, 0.0) ** 2.5
             if law > 0:
-                print(f"D0 = {r['d0']:.4f} m: W {r['w']:.3f} kg/s, the law {law:.3f} ({r['w'] / law - 1:+.0%})")
+                # Rounded first: a deviation below half a percent prints as +0%, never -0%.
+                dev = round(r["w"] / law - 1, 2) + 0.0
+                print(f"D0 = {r['d0']:.4f} m: W {r['w']:.3f} kg/s, the law {law:.3f} ({dev:+.0%})")
     # Two panels: mass discharged against time (a silo's few kilograms out of its whole charge
     # would be a flat line on a scale of what is left); W against D0 with the law.
     w, h = 900, 380
@@ -150,8 +152,12 @@ def main():
             curve.append(f"{x1 + d0 / dmax * pw:.1f},{y0 + ph - min(wv, wmax) / wmax * ph:.1f}")
         parts.append(f'<polyline points="{" ".join(curve)}" fill="none" stroke="#1f77b4" stroke-width="2"/>')
         parts.append(f'<text x="{x1 + 8}" y="{y0 + 16}" fill="#1f77b4">Beverloo: C = {c:.2f}, k = {k:.2f}</text>')
+    # Filled: the outlets the law was fitted to; hollow: those left out (wider than --fit-max).
     for r in rows:
-        parts.append(f'<circle cx="{x1 + r["d0"] / dmax * pw:.1f}" cy="{y0 + ph - max(r["w"], 0.0) / wmax * ph:.1f}" r="4" fill="#d62728"/>')
+        fill = "#d62728" if r["d0"] <= a.fit_max else "white"
+        parts.append(f'<circle cx="{x1 + r["d0"] / dmax * pw:.1f}" cy="{y0 + ph - max(r["w"], 0.0) / wmax * ph:.1f}" r="4" fill="{fill}" stroke="#d62728" stroke-width="1.5"/>')
+    if any(r["d0"] > a.fit_max for r in rows):
+        parts.append(f'<text x="{x1 + 8}" y="{y0 + 32}" fill="#d62728">hollow: D0 &gt; {a.fit_max:g} m, not fitted</text>')
     parts.append("</svg>")
     with open(a.svg, "w") as f:
         f.write("\n".join(parts) + "\n")
