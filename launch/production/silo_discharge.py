@@ -88,7 +88,7 @@ def main():
         if len(win) < 3:
             sys.exit(f"{frames}: fewer than 3 frames in the window {t0} … {t1} s")
         w = -slope([t for t, _ in win], [m for _, m in win])[0]
-        rows.append(dict(d0=float(d0), w=w, series=series))
+        rows.append(dict(d0=float(d0), w=w, series=series, fitted=w > 0 and float(d0) <= a.fit_max))
     print("| D0 (m) | D0 / d | W (kg/s) |")
     print("|---|---|---|")
     for r in rows:
@@ -96,7 +96,7 @@ def main():
     fit = None
     # An outlet that jammed (no grain out over the window) has no place on the law's line:
     # the fit takes the outlets that flow, and says which it left out.
-    flowing = [r for r in rows if r["w"] > 0 and r["d0"] <= a.fit_max]
+    flowing = [r for r in rows if r["fitted"]]
     for r in rows:
         if r["w"] <= 0:
             print(f"D0 = {r['d0']:.4f} m: no flow over the window (jammed), left out of the fit")
@@ -106,10 +106,10 @@ def main():
         s, b = slope([r["d0"] for r in flowing], [r["w"] ** 0.4 for r in flowing])
         c = s ** 2.5 / (a.bulk_density * math.sqrt(G))
         k = -b / s / a.d
-        fit = (c, k)
+        fit = lambda d0: c * a.bulk_density * math.sqrt(G) * max(d0 - k * a.d, 0.0) ** 2.5
         print(f"Beverloo: C = {c:.3f}, k = {k:.2f} (d = {a.d} m, rho_b = {a.bulk_density} kg/m3)")
         for r in rows:
-            law = c * a.bulk_density * math.sqrt(G) * max(r["d0"] - k * a.d, 0.0) ** 2.5
+            law = fit(r["d0"])
             if law > 0:
                 # Rounded first: a deviation below half a percent prints as +0%, never -0%.
                 dev = round(r["w"] / law - 1, 2) + 0.0
@@ -144,11 +144,10 @@ def main():
     for j in range(5):
         parts.append(f'<text x="{x1 + pw * j / 4:.0f}" y="{y0 + ph + 14}" text-anchor="middle">{dmax * j / 4:.3f}</text>')
     if fit:
-        c, k = fit
         curve = []
         for j in range(101):
             d0 = dmax * j / 100
-            wv = c * a.bulk_density * math.sqrt(G) * max(d0 - k * a.d, 0.0) ** 2.5
+            wv = fit(d0)
             curve.append(f"{x1 + d0 / dmax * pw:.1f},{y0 + ph - min(wv, wmax) / wmax * ph:.1f}")
         parts.append(f'<polyline points="{" ".join(curve)}" fill="none" stroke="#1f77b4" stroke-width="2"/>')
         parts.append(f'<text x="{x1 + 8}" y="{y0 + 16}" fill="#1f77b4">Beverloo: C = {c:.2f}, k = {k:.2f}</text>')
