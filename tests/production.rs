@@ -948,6 +948,75 @@ fn the_heap_script_refits_the_flank_of_a_cone() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `make_scenes.py --discharge-outlets`, which `run_on_gpu.sh` fits case 5 from: every line
+/// names a discharge scene that exists, with the outlet its walls have (the plate's hole, the
+/// hopper's own outlet, or the cut hopper's lowest ring) and the height of that outlet, where its
+/// grains are counted out.
+#[test]
+fn the_discharge_outlets_are_the_scenes_walls() {
+    let python = std::env::var_os("POLYDEM_PYTHON").unwrap_or_else(|| "python3".into());
+    let out = std::process::Command::new(&python)
+        .arg(repo_root().join("launch/production/make_scenes.py"))
+        .arg("--discharge-outlets")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let text = String::from_utf8(out.stdout).unwrap();
+    let mut seen = 0;
+    for line in text.lines() {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        assert_eq!(f.len(), 3, "{line}");
+        let (name, d0, z): (&str, f64, f64) = (f[0], f[1].parse().unwrap(), f[2].parse().unwrap());
+        let scene =
+            std::fs::read_to_string(repo_root().join(format!("launch/production/{name}.toml")))
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+        // The outlet's rim: the plate's innermost vertices, else the hopper's lowest ring.
+        let meshes: Vec<&str> = scene
+            .lines()
+            .filter_map(|l| l.strip_prefix("mesh = \"meshes/")?.strip_suffix('"'))
+            .collect();
+        let mesh = meshes
+            .iter()
+            .find(|m| m.contains("orifice"))
+            .or_else(|| meshes.iter().find(|m| m.contains("hopper")))
+            .unwrap_or_else(|| panic!("{name}: no plate or hopper"));
+        let verts: Vec<Vector3<f64>> = triangles(mesh).into_iter().flatten().collect();
+        let (rim, at) = if mesh.contains("orifice") {
+            let r = verts
+                .iter()
+                .map(|v| v.xy().norm())
+                .fold(f64::INFINITY, f64::min);
+            (
+                r,
+                verts
+                    .iter()
+                    .filter(|v| (v.xy().norm() - r).abs() < 1e-6)
+                    .map(|v| v.z)
+                    .fold(f64::INFINITY, f64::min),
+            )
+        } else {
+            let zl = verts.iter().map(|v| v.z).fold(f64::INFINITY, f64::min);
+            let r = verts
+                .iter()
+                .filter(|v| (v.z - zl).abs() < 1e-6)
+                .map(|v| v.xy().norm())
+                .fold(0.0, f64::max);
+            (r, zl)
+        };
+        assert!(
+            (2.0 * rim - d0).abs() < 1e-4,
+            "{name}: rim {} against D0 {d0}",
+            2.0 * rim
+        );
+        assert!(
+            (at - z).abs() < 1e-4,
+            "{name}: outlet at z = {at}, counted at {z}"
+        );
+        seen += 1;
+    }
+    assert_eq!(seen, 7, "{text}");
+}
+
 /// `silo_discharge.py` (case 5's table, fit and plot) on synthetic particle tables: two
 /// outlets emptied at the rates Beverloo's law W = C ρ_b √g (D₀ − k d)^{5/2} gives for C = 0.6,
 /// k = 1.8, each table also holding grains that have passed the plate (z < 0) and that

@@ -6,6 +6,7 @@ silo's fills, discharges and heap, and their twins.
   python3 launch/production/make_scenes.py            # all of them
   python3 launch/production/make_scenes.py NAME ...   # only these
   python3 launch/production/make_scenes.py --discharge-count N silo_discharge_75mm ...
+  python3 launch/production/make_scenes.py --discharge-outlets   # prints "NAME D0 Z" per outlet
   python3 launch/production/make_scenes.py --check    # writes nothing: exits 1 naming every
                                                       # scene file that differs from its parameters
 
@@ -478,6 +479,15 @@ DISCHARGE_END = 0.7     # s: the rate is fitted over 0.25-0.7 s (run_on_gpu.sh)
 DISCHARGE_COUNT = [22_345]
 
 
+def outlet_height(hole):
+    """Where case 5 counts a grain out (m): the plate and the hopper's own outlet lie at z = 0;
+    an outlet wider than the hopper's is the cone cut where it is that wide, higher up."""
+    return max(hole - DISCHARGE_OUTLET, 0.0) / 2 / math.tan(math.radians(30.0))
+
+
+DISCHARGES = DISCHARGE_HOLES + [DISCHARGE_OUTLET, DISCHARGE_CUT]
+
+
 def silo_discharge(hole):
     """Case 5: the filled 1:4 silo (case 4b's final state) discharged from t = 0 through an
     orifice plate of `hole` under its hopper; through the hopper's own outlet when `hole` is
@@ -502,7 +512,7 @@ material = "steel"
         opened = "the outlet is open"
         counted = "the outlet (silo_discharge.py\n# --above 0"
     else:
-        z = (hole - DISCHARGE_OUTLET) / 2 / math.tan(math.radians(30.0))
+        z = outlet_height(hole)
         what = f"""through an outlet of {mm} mm ({d} volume-equivalent grain diameters),
 # its hopper cut {1000 * z:.1f} mm above its own outlet, where the cone is that wide
 # (make_meshes.py silo_quarter_hopper)"""
@@ -587,7 +597,7 @@ SCENES = {
     "twins/silo": silo_twin,
     "twins/silo_discharge": silo_twin_discharge,
     **{f"silo_discharge_{round(1000 * h)}mm": (lambda h=h: silo_discharge(h))
-       for h in DISCHARGE_HOLES + [DISCHARGE_OUTLET, DISCHARGE_CUT]},
+       for h in DISCHARGES},
 }
 
 
@@ -595,6 +605,11 @@ def main(names):
     check = names[:1] == ["--check"]
     if check:
         names = names[1:]
+    if names == ["--discharge-outlets"]:
+        # For run_on_gpu.sh: each discharge scene, its outlet and the height it counts at.
+        for h in DISCHARGES:
+            print(f"silo_discharge_{round(1000 * h)}mm {h} {outlet_height(h):.4f}")
+        return
     if names[:1] == ["--discharge-count"]:
         DISCHARGE_COUNT[0] = int(names[1])
         names = names[2:]

@@ -93,8 +93,8 @@ for s in "${scenes[@]}"; do
       cp "$ck" "$here/out/$s/final.ckpt"
       n=$("$bin" check "$here/silo_discharge_75mm.toml" 2>&1 | grep -o '[0-9]* of the [0-9]* particles' | head -1 | cut -d' ' -f1)
       if [ -n "$n" ]; then
-        python3 "$here/make_scenes.py" --discharge-count "$n" silo_discharge_75mm silo_discharge_94mm \
-          silo_discharge_112mm silo_discharge_131mm silo_discharge_150mm silo_discharge_168mm silo_discharge_187mm
+        python3 "$here/make_scenes.py" --discharge-count "$n" \
+          $(python3 "$here/make_scenes.py" --discharge-outlets | cut -d' ' -f1)
       fi
       "$bin" analyze fill-height "$here/$s.toml" "$ck" --radius 0.25 > "$out/silo_fill.json"
       "$bin" analyze heap "$here/$s.toml" "$ck" --radius 0.25 > "$out/silo_heap.json"
@@ -111,20 +111,18 @@ for s in "${scenes[@]}"; do
   esac
 done
 # Case 5: every discharge that reached its end, against Beverloo's law (grain 3.42e-6 m³ of
-# 2500 kg/m³, d = 18.7 mm volume-equivalent). The 187 mm outlet is the hopper cut 16.9 mm up:
-# its grains are counted above the cut.
+# 2500 kg/m³, d = 18.7 mm volume-equivalent). Each outlet's diameter and the height its grains
+# are counted out at (above the cut for the cut hopper) come from make_scenes.py, which wrote
+# the scenes.
 runs=()
-for d in 75 94 112 131 150 168 187; do
-  at=""; [ $d = 187 ] && at="@0.0169"
-  d0=$(python3 -c "print($d / 1000)"); [ $d = 168 ] && d0=0.1675
-  done_ "silo_discharge_${d}mm" || continue
-  runs+=("$d0$at:$here/out/silo_discharge_${d}mm/particles")
+while read -r s d0 z; do
+  done_ "$s" || continue
+  runs+=("$d0@$z:$here/out/$s/particles")
   # The counts alone ("time grains" lines), which silo_discharge.py also reads: they join runs
   # of other sittings, whose particle tables are gone, in one fit.
-  z=${at#@}; python3 -c "import sys; sys.path.insert(0, '$here'); import silo_discharge as s
-for t, n in s.counts('$here/out/silo_discharge_${d}mm/particles', ${z:-0}): print(t, n)" \
-    > "$out/silo_discharge_${d}mm.counts"
-done
+  python3 -c "import sys; sys.path.insert(0, '$here'); import silo_discharge as s
+for t, n in s.counts('$here/out/$s/particles', $z): print(t, n)" > "$out/$s.counts"
+done < <(python3 "$here/make_scenes.py" --discharge-outlets)
 # The bulk density from the fill's porosity: this sitting's, else the fill's recorded run.
 porosity=$out/silo_porosity.json
 [ -f "$porosity" ] || porosity=$here/../../docs/data/production_silo_quarter_fill_h200.json
@@ -134,7 +132,7 @@ if [ ${#runs[@]} -ge 2 ] && [ -f "$porosity" ]; then
   # open outlets (9 and 10 d) set against it; and fitted to all.
   for fit in 0.16:plates inf:all; do
     python3 "$here/silo_discharge.py" "$out/silo_discharge_${fit#*:}.svg" "${runs[@]}" --grain-mass 8.546e-3 \
-      --bulk-density "$rho_b" --d 0.0187 --window 0.25,1e9 --above 0 --fit-max "${fit%%:*}" \
+      --bulk-density "$rho_b" --d 0.0187 --window 0.25,1e9 --fit-max "${fit%%:*}" \
       > "$out/silo_discharge_${fit#*:}.txt"
   done
 fi
