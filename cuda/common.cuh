@@ -95,6 +95,60 @@ PD_HD double portable_cbrt(double x) {
     for (int i = 0; i < 6; ++i) y -= (y * y * y - m) / (3.0 * y * y);
     return sign * bits_double((pd_u64)((pd_i64)double_bits(y) + (k + adjust) * ((pd_i64)1 << 52)));
 }
+// ln 2 in two parts (Rust geometry::real::LN2_HI / LN2_LO).
+#define PD_LN2_HI 6.931471803691238e-1
+#define PD_LN2_LO 1.9082149292705877e-10
+
+// The natural logarithm from + − × ÷ and bit operations only (Rust geometry::real::portable_ln,
+// whose docs give the method): NaN for x <= 0 or non-finite x.
+PD_HD double portable_ln(double x) {
+    if (!(x > 0.0 && x - x == 0.0)) return bits_double(0x7ff8000000000000ULL); // NaN
+    pd_u64 bits = double_bits(x);
+    pd_i64 e = 0;
+    if ((bits >> 52) == 0) {
+        bits = double_bits(x * 18014398509481984.0); // 2^54
+        e = -54;
+    }
+    e += (pd_i64)((bits >> 52) & 0x7ff) - 1023;
+    double m = bits_double((bits & 0x000fffffffffffffULL) | (((pd_u64)1023) << 52));
+    if (m > 1.4142135623730951) { // SQRT_2
+        m *= 0.5;
+        e += 1;
+    }
+    double f = (m - 1.0) / (m + 1.0);
+    double z = f * f;
+    double series = 1.0 / 21.0;
+    for (int k = 9; k >= 0; --k) series = 1.0 / (double)(2 * k + 1) + z * series;
+    double ed = (double)e;
+    return ed * PD_LN2_HI + (2.0 * f * series + ed * PD_LN2_LO);
+}
+
+// e^y from + − × ÷, floor and bit operations only (Rust geometry::real::portable_exp).
+PD_HD double portable_exp(double y) {
+    if (y != y) return y;
+    if (y > 710.0) return bits_double(0x7ff0000000000000ULL); // infinity
+    if (y < -746.0) return 0.0;
+    double n = floor(y * 1.4426950408889634 + 0.5); // LOG2_E
+    double r = (y - n * PD_LN2_HI) - n * PD_LN2_LO;
+    double p = 1.0 / 87178291200.0; // 1/14!
+    double fact = 87178291200.0;
+    for (int k = 13; k >= 0; --k) {
+        fact /= (double)(k + 1);
+        p = 1.0 / fact + r * p;
+    }
+    pd_i64 ni = (pd_i64)n;
+    pd_i64 half = ni / 2;
+    double a = bits_double(((pd_u64)(1023 + half)) << 52);
+    double b = bits_double(((pd_u64)(1023 + (ni - half))) << 52);
+    return p * a * b;
+}
+
+// x^p for x >= 0 as exp(p ln x) (Rust geometry::real::portable_pow): 0 for x = 0, p > 0.
+PD_HD double portable_pow(double x, double p) {
+    if (x == 0.0 && p > 0.0) return 0.0;
+    return portable_exp(p * portable_ln(x));
+}
+
 PD_HD int max_(int a, int b) { return a > b ? a : b; }
 
 // sin and cos from + − × ÷ and floor only (Rust geometry::real::portable_sin_cos, whose docs

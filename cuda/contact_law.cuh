@@ -113,6 +113,45 @@ PD_HD double mean_pressure(double c, double lo, double hi) {
     return 0.75 * c * (x + y) * (x * x + y * y) / (x * x + x * y + y * y);
 }
 
+// The overlap's local power law V(δ) = V (δ/h)^k about its depth h (law.rs `LocalPowerLaw`).
+struct LocalPowerLaw {
+    double volume, depth, exponent;
+};
+
+PD_HD LocalPowerLaw local_power_law(double volume, double area, double thickness) {
+    LocalPowerLaw out;
+    out.volume = volume;
+    out.depth = thickness > 0.0 && thickness - thickness == 0.0 ? thickness : volume / area;
+    out.exponent = min_(max_(area * out.depth / volume, 1.0), 3.0);
+    return out;
+}
+
+// LocalPowerLaw::volume_at: the volume after the bodies approach by d more (0 once apart).
+PD_HD double local_volume_at(const LocalPowerLaw& l, double d) {
+    double ratio = 1.0 + d / l.depth;
+    return ratio > 0.0 ? l.volume * portable_pow(ratio, l.exponent) : 0.0;
+}
+
+// The normal force of a contact for a pressure (law.rs `contact_forces`' `normal` closure):
+// elastic, the Hunt–Crossley coefficient, and the capped total that never pulls.
+struct NormalForce {
+    double f_elastic, c_n, f_normal;
+};
+
+PD_HD NormalForce normal_force(const ContactParameters& params, const ContactKinematics& kin, double pressure,
+                               double area, double v_ref, double vn, double dt) {
+    NormalForce out;
+    out.f_elastic = pressure * area;
+    out.c_n = params.damping * out.f_elastic / v_ref;
+    double f_damp = -out.c_n * vn;
+    if (dt > 0.0) {
+        double limit = kin.effective_mass * abs_(vn) / dt;
+        f_damp = min_(max_(f_damp, -limit), limit);
+    }
+    out.f_normal = max_(out.f_elastic + f_damp, 0.0);
+    return out;
+}
+
 // V^{2/3}, the area scale of an overlap of volume V (law.rs `volume_area_scale`).
 PD_HD double volume_area_scale(double volume) {
     double r = portable_cbrt(volume);
@@ -179,28 +218,35 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     bool first_touch = state->approach_speed == 0.0;
 
     double stiffness = params.normal_stiffness;
-    double sweep = 0.5 * abs_(vn) * dt * area;
-    double pressure = sweep > 0.5 * volume ? mean_pressure(stiffness, volume - sweep, volume + sweep)
-                                           : stiffness * portable_cbrt(volume); // law.rs WINDOW_FRACTION
-    if (first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0) {
+    double travel = 0.5 * abs_(vn) * dt;
+    double sweep = travel * area;
+    LocalPowerLaw local = local_power_law(volume, area, o.thickness);
+    bool windowed = local.exponent < 1.5; // law.rs SINGULAR_EXPONENT
+    double pressure = windowed && sweep > 0.5 * volume
+                          ? mean_pressure(stiffness, volume - sweep, volume + sweep)
+                          : stiffness * portable_cbrt(volume); // law.rs WINDOW_FRACTION
+    if (windowed && first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0) {
         pressure += contact_potential(stiffness, volume - sweep) / (2.0 * sweep);
     }
-    double f_elastic = pressure * area;
-    V3<double> torque_b_el = (-(o.moment_b + cross(c - kin.x_b, s_vec))) * pressure;
-    V3<double> torque_a_el = (-((-o.moment_b) + cross(c - kin.x_a, -s_vec))) * pressure;
-
     if (first_touch) {
         state->approach_speed = max_(abs_(vn), 2.2250738585072014e-308);
     }
     double energy = contact_potential(stiffness, volume);
     double v_ref = max_(state->approach_speed, sqrt_(2.0 * energy / kin.effective_mass));
-    double c_n = params.damping * f_elastic / v_ref;
-    double f_damp = -c_n * vn;
-    if (dt > 0.0) {
-        double limit = kin.effective_mass * abs_(vn) / dt;
-        f_damp = min_(max_(f_damp, -limit), limit);
+    NormalForce nf = normal_force(params, kin, pressure, area, v_ref, vn, dt);
+    // The exit (law.rs): a separating contact that the coming drift carries apart.
+    if (windowed && vn > 0.0 && dt > 0.0) {
+        double exit = 0.5 * (vn + nf.f_normal * dt / kin.effective_mass) * dt;
+        if (local.depth - 2.0 * exit <= 0.0 && local.depth - exit > 0.0) {
+            pressure += contact_potential(stiffness, local_volume_at(local, -exit)) / (2.0 * exit * area);
+            nf = normal_force(params, kin, pressure, area, v_ref, vn, dt);
+        }
     }
-    double f_normal = max_(f_elastic + f_damp, 0.0);
+    double f_elastic = nf.f_elastic;
+    double c_n = nf.c_n;
+    double f_normal = nf.f_normal;
+    V3<double> torque_b_el = (-(o.moment_b + cross(c - kin.x_b, s_vec))) * pressure;
+    V3<double> torque_a_el = (-((-o.moment_b) + cross(c - kin.x_a, -s_vec))) * pressure;
 
     V3<double> v_t = v_rel - n * vn;
     double k_t = params.tangential_stiffness * area;

@@ -97,6 +97,27 @@ template <class T> struct OverlapWorkspace {
     // evaluation (planes of A first, then of B).
     PD_HD T face_area(int i) const { return area[i]; }
 
+    // OverlapWorkspace::extent_along: the spread of the last evaluation's vertices along the unit
+    // vector n (a facet overlap's penetration behind its facet).
+    PD_HD T extent_along(V3<T> n) const {
+        T lo = Limits<T>::max(), hi = -Limits<T>::max();
+        if (by_hull) {
+            for (int s = 0; s < hull.n_tri; ++s) {
+                if (!hull.tri[s].alive) continue;
+                T h = dot(n, vertex[s]);
+                lo = min_(lo, h);
+                hi = max_(hi, h);
+            }
+        } else {
+            for (int v = 0; v < faces.n_vertices; ++v) {
+                T h = dot(n, faces.vertex[v]);
+                lo = min_(lo, h);
+                hi = max_(hi, h);
+            }
+        }
+        return max_(hi - lo, T(0));
+    }
+
     // OverlapWorkspace::hull_vertex_excess: the farthest that a vertex of the last evaluation's
     // dual hull lies outside one of its planes (zero for the enumeration's faces); a hull that
     // round-off bent has vertices outside by as much as the particle size.

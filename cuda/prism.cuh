@@ -39,6 +39,14 @@ template <class T> PD_HD int facet_prism(const V3<T> tri[3], Plane<T> prism[4]) 
     return STATUS_OK;
 }
 
+// clip::facet_thickness: a facet overlap's thickness is its penetration behind the facet, along
+// the facet's normal, not along its own −S/|S| (which leans on the prism's side planes where a
+// contact straddles facets).
+template <class T>
+PD_HD void facet_thickness(const OverlapWorkspace<T>& ws, const Plane<T>& facet, int status, Overlap<T>* out) {
+    if (status == STATUS_OK && out->volume > T(0)) out->thickness = ws.extent_along(facet.normal);
+}
+
 // clip::prism_overlap: overlap of `body` with a facet's prism [facet plane, side planes…]
 // (planes of B): the penetrating volume, its centroid, S (so dV/dx_body = −S) and the moment of
 // the prism's part of the surface, in the frame of `body` and `prism`. A prism plane with every
@@ -60,7 +68,9 @@ PD_HD int prism_overlap(OverlapWorkspace<T>& ws, const PosedPolytope<T>& body, c
         if (all_outside) return STATUS_OK;
     }
     V3<T> start = body.centre - facet.normal * plane_distance(facet, body.centre);
-    return overlap_volume(ws, body.planes, body.n_planes, prism, 4, start, out);
+    int status = overlap_volume(ws, body.planes, body.n_planes, prism, 4, start, out);
+    facet_thickness(ws, facet, status, out);
+    return status;
 }
 
 // clip::prism_overlap_culled: prism_overlap on the planes that can bound it. `body` was placed
@@ -111,11 +121,15 @@ PD_HD int prism_overlap_culled(OverlapWorkspace<T>& ws, PosedPolytope<T>& body, 
     for (int j = 0; j < body.n_aside && proven; ++j) {
         proven = plane_distance(body.aside[j], centre.point) < -tol;
     }
+    int status;
     if (proven) {
-        return overlap_about(ws, body.planes, body.n_planes, kept, n_kept, centre.point, out);
+        status = overlap_about(ws, body.planes, body.n_planes, kept, n_kept, centre.point, out);
+    } else {
+        restore_aside(body);
+        status = overlap_volume(ws, body.planes, body.n_planes, kept, n_kept, start, out);
     }
-    restore_aside(body);
-    return overlap_volume(ws, body.planes, body.n_planes, kept, n_kept, start, out);
+    facet_thickness(ws, facet, status, out);
+    return status;
 }
 
 } // namespace pd

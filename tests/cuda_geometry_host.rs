@@ -1075,7 +1075,9 @@ fn rand3(rng: &mut Rng, lo: f64, hi: f64) -> Vector3<f64> {
 #[test]
 fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
     use polydem::contact::{ContactKinematics, ContactParameters, ContactState, contact_forces};
-    use polydem::geometry::{portable_cbrt, portable_sin_cos};
+    use polydem::geometry::{
+        portable_cbrt, portable_exp, portable_ln, portable_pow, portable_sin_cos,
+    };
     let mut rng = Rng::new(47);
     let mut text = String::new();
     let mut want = Vec::new();
@@ -1104,8 +1106,29 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         hex(&mut l, portable_cbrt(x));
         want.push(l);
     }
+    writeln!(text, "pow {n}").unwrap();
+    for i in 0..n {
+        // The law's range (ratios in [0, 2], exponents in [1, 3]) and beyond.
+        let (x, y) = if i % 2 == 0 {
+            (rng.range(0.0, 2.0), rng.range(1.0, 3.0))
+        } else {
+            (
+                10f64.powf(rng.range(-300.0, 300.0)),
+                rng.range(-700.0, 700.0),
+            )
+        };
+        hex(&mut text, x);
+        hex(&mut text, y);
+        text.push('\n');
+        let mut l = format!("P {i}");
+        hex(&mut l, portable_ln(x));
+        hex(&mut l, portable_exp(y));
+        hex(&mut l, portable_pow(x, y));
+        want.push(l);
+    }
     writeln!(text, "law {n}").unwrap();
-    let mut branches = [0usize; 6]; // window, first-touch share, inside, sliding, twist cap, sphere
+    // window, first-touch share, inside, sliding, twist cap, sphere, exit
+    let mut branches = [0usize; 7];
     for i in 0..n {
         let sphere = i % 4 == 3;
         let e = if i % 5 == 0 {
@@ -1146,7 +1169,13 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             dv_dxb: -normal * s_len,
             moment_b: rand3(&mut rng, -1.0, 1.0) * (s_len * size * 0.1),
             depth: size * 0.1,
-            thickness: size * 0.2,
+            // Local exponents k = |S| h / V from faces (k ≤ 1.5, the kick window) to vertices,
+            // and a geometry without a thickness.
+            thickness: if i % 23 == 0 {
+                0.0
+            } else {
+                volume / s_len * [0.7, 1.0, 1.0, 1.2, 1.45, 2.0, 3.5][i % 7]
+            },
         };
         let speed = 10f64.powf(rng.range(-3.0, 0.5));
         let kin = ContactKinematics {
@@ -1235,9 +1264,21 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         let f = contact_forces(&params, &overlap, &kin, &mut after, dt);
         // Which branches the case took (recomputed as the law does).
         let area = overlap.area();
-        let sweep = 0.5 * (kin.v_b - kin.v_a).dot(&normal).abs() * dt * area;
-        branches[0] += usize::from(sweep > 0.5 * volume);
-        branches[1] += usize::from(first && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0);
+        let vn = (kin.v_b - kin.v_a).dot(&normal);
+        let sweep = 0.5 * vn.abs() * dt * area;
+        let depth = if overlap.thickness > 0.0 {
+            overlap.thickness
+        } else {
+            volume / area
+        };
+        let windowed = !inside && area * depth / volume < 1.5;
+        branches[0] += usize::from(windowed && sweep > 0.5 * volume);
+        branches[1] +=
+            usize::from(windowed && first && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0);
+        // The exit, estimated with the speed before the kick (the law adds the kick's share).
+        branches[6] += usize::from(
+            windowed && vn > 0.0 && depth - vn * dt <= 0.0 && depth - 0.5 * vn * dt > 0.0,
+        );
         branches[2] += usize::from(inside);
         // Sliding: the spring holds exactly the Coulomb force; the twist likewise its cap.
         let n_used = -overlap.dv_dxb / area;
@@ -1266,8 +1307,9 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
     }
     let mismatches = harness_mismatches("--law", "cuda-law-host", text, &want);
     println!(
-        "{} cases ({n} sin/cos, {n} cbrt, {n} law; law branches: window {}, first-touch share \
-         {}, inside {}, sliding {}, twist capped {}, spheres {}), {} differ",
+        "{} cases ({n} sin/cos, {n} cbrt, {n} ln/exp/pow, {n} law; law branches: window {}, \
+         first-touch share {}, inside {}, sliding {}, twist capped {}, spheres {}, exit {}), {} \
+         differ",
         want.len(),
         branches[0],
         branches[1],
@@ -1275,6 +1317,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         branches[3],
         branches[4],
         branches[5],
+        branches[6],
         mismatches.len()
     );
     for (k, what) in [
@@ -1284,6 +1327,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         "sliding",
         "twist cap",
         "spheres",
+        "exit",
     ]
     .iter()
     .enumerate()

@@ -348,11 +348,16 @@ fn a_body_wholly_inside_another_is_pushed_out_along_the_line_of_centres() {
 /// `spacing` in a periodic box, randomly oriented, e = 1, μ = 0.
 fn packing_scene(shape: &str, spacing: f64) -> polydem::scene::Scene {
     let side = 4.0 * spacing;
+    // `POLYDEM_PACKING_DT_FRACTION` runs the packings at another step than the default.
+    let dt_fraction = std::env::var("POLYDEM_PACKING_DT_FRACTION")
+        .map(|f| format!("dt_fraction = {f}"))
+        .unwrap_or_default();
     let text = format!(
         r#"gravity = [0.0, 0.0, 0.0]
 [simulation]
 end_time = 1000.0
 seed = 3
+{dt_fraction}
 [domain]
 min = [0.0, 0.0, 0.0]
 max = [{side}, {side}, {side}]

@@ -22,10 +22,10 @@
 //   F i  {prism_status status volume centroid(3) S(3) M(3) depth thickness} for double, then float
 // Sphere input: "lenses N" N × { ra rb d(3) }, then "caps N" N × { c(3) r tri(9) n(3) }; output
 //   L i {volume centroid(3) S(3) M(3) depth thickness} and C i {the same}.
-// Law input: "sincos N" N × { x }, "cbrt N" N × { x }, "law N" N × { c_n c_t e mu damping ln_e
+// Law input: "sincos N" N × { x }, "cbrt N" N × { x }, "pow N" N × { x y }, "law N" N × { c_n c_t e mu damping ln_e
 //   log_norm rocking(1.0/0.0)  volume centroid(3) S(3) M(3) depth thickness  x_a x_b v_a v_b w_a
 //   w_b (3 each) m_eff q_a(w x y z) q_b inv_inertia_a(3) inv_inertia_b(3) r_sphere_a r_sphere_b
-//   spring(3) approach twist dt }; output S i {sin cos}, R i {cbrt}, W i {force_b(3) torque_a(3)
+//   spring(3) approach twist dt }; output S i {sin cos}, R i {cbrt}, P i {ln x, exp y, x^y}, W i {force_b(3) torque_a(3)
 //   torque_b(3) energy spring(3) approach twist}.
 
 #include "overlap.cuh"
@@ -221,6 +221,16 @@ int run_law(const char* path) {
     for (long i = 0; i < nr; ++i) {
         std::printf("R %ld", i);
         put(pd::portable_cbrt(read_f64()));
+        std::printf("\n");
+    }
+    read_word("pow");
+    long np = read_int();
+    for (long i = 0; i < np; ++i) {
+        double x = read_f64(), y = read_f64();
+        std::printf("P %ld", i);
+        put(pd::portable_ln(x));
+        put(pd::portable_exp(y));
+        put(pd::portable_pow(x, y));
         std::printf("\n");
     }
     read_word("law");

@@ -259,7 +259,19 @@ pub fn prism_overlap<T: Real>(
     }
     // Start the interior-point search on the facet plane under the body's centre.
     let start = body.centre - facet.normal * facet.distance(&body.centre);
-    overlap_volume(ws, body.planes(), prism, start)
+    let mut out = overlap_volume(ws, body.planes(), prism, start)?;
+    facet_thickness(ws, facet, &mut out);
+    Ok(out)
+}
+
+/// A facet overlap's thickness is its penetration behind the facet, along the facet's normal
+/// ([`OverlapWorkspace::extent_along`]), not along its own `−S/|S|`: where a contact
+/// straddles facets, each part's S leans on the prism's side planes, and the contact law's
+/// local power law (`contact::law`) needs the depth of the whole contact.
+fn facet_thickness<T: Real>(ws: &OverlapWorkspace<T>, facet: &Plane<T>, out: &mut Overlap<T>) {
+    if out.volume > T::zero() {
+        out.thickness = ws.extent_along(&facet.normal);
+    }
 }
 
 /// [`prism_overlap`] on the planes that can bound it (the wall stage's evaluation). The body
@@ -327,7 +339,9 @@ pub fn prism_overlap_culled<T: Real>(
         overlap_volume(ws, body.planes(), kept, start)
     };
     body.restore_template_order();
-    out
+    let mut out = out?;
+    facet_thickness(ws, facet, &mut out);
+    Ok(out)
 }
 
 /// Contact of `body` with triangle `tri` (counter-clockwise seen from the side the particles

@@ -31,4 +31,4 @@ pub use gjk::gjk_intersect;
 pub use interior::{ChebyshevCentre, chebyshev_centre, chebyshev_centre_wide};
 pub use overlap::{Overlap, OverlapError, OverlapWorkspace, overlap_pair, overlap_volume};
 pub use polytope::{Plane, PosedPolytope};
-pub use real::{Real, portable_cbrt, portable_sin_cos};
+pub use real::{Real, portable_cbrt, portable_exp, portable_ln, portable_pow, portable_sin_cos};

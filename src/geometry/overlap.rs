@@ -163,6 +163,30 @@ impl<T: Real> OverlapWorkspace<T> {
         worst
     }
 
+    /// Extent of the last evaluation's overlap along the unit vector `n` (the spread of its
+    /// vertices' heights): the penetration behind a wall facet when `n` is the facet's normal.
+    /// The `thickness` an evaluation returns is along `−S/|S|`, which for a facet's part of a
+    /// contact that straddles facets leans on the prism's side planes.
+    pub fn extent_along(&self, n: &Vector3<T>) -> T {
+        let (mut lo, mut hi) = (
+            T::max_value().unwrap_or(T::one()),
+            -T::max_value().unwrap_or(T::one()),
+        );
+        let mut extend = |v: &Vector3<T>| {
+            let h = n.dot(v);
+            lo = lo.min(h);
+            hi = hi.max(h);
+        };
+        if self.by_hull {
+            self.hull
+                .triangles()
+                .for_each(|(s, _)| extend(&self.vertex[s]));
+        } else {
+            self.faces.vertices().iter().for_each(&mut extend);
+        }
+        (hi - lo).max(T::zero())
+    }
+
     /// Area of the intersection face lying on plane `i` of the last evaluation (planes of A
     /// first, then of B); zero for planes that do not bound the intersection.
     pub fn face_area(&self, i: usize) -> T {

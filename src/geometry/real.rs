@@ -142,6 +142,83 @@ pub fn portable_sin_cos(x: f64) -> (f64, f64) {
     }
 }
 
+/// ln 2 in two parts (fdlibm's): `LN2_HI` has its low 32 bits zero, so `n · LN2_HI` is exact
+/// for `|n| < 2^20`, and `LN2_LO = ln 2 − LN2_HI`.
+const LN2_HI: f64 = 6.931_471_803_691_238e-1; // 0x1.62e42feep-1
+const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
+
+/// The natural logarithm of a positive finite `x` from `+ − × ÷` and bit operations only, so
+/// that the CPU and the CUDA twin (`cuda/common.cuh: portable_ln`) give the same bits.
+/// `x = m 2^e` with `m ∈ [√½, √2)` (exact, from the exponent bits; subnormals scaled by 2^54
+/// first), `ln m = 2 atanh f = 2 (f + f³/3 + … + f²¹/21)` with `f = (m − 1)/(m + 1)`, `|f| ≤
+/// 0.172` (the first term left out is below 1e-18 of the result), then `e ln 2` in two parts.
+/// NaN for `x ≤ 0` or non-finite `x`. Within 2 ulp of libm (tested).
+pub fn portable_ln(x: f64) -> f64 {
+    if !(x > 0.0 && x.is_finite()) {
+        return f64::NAN;
+    }
+    let mut bits = x.to_bits();
+    let mut e: i64 = 0;
+    if bits >> 52 == 0 {
+        bits = (x * 18_014_398_509_481_984.0).to_bits(); // 2^54
+        e = -54;
+    }
+    e += ((bits >> 52) & 0x7ff) as i64 - 1023;
+    let mut m = f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | (1023u64 << 52));
+    if m > std::f64::consts::SQRT_2 {
+        m *= 0.5;
+        e += 1;
+    }
+    let f = (m - 1.0) / (m + 1.0);
+    let z = f * f;
+    let mut series = 1.0 / 21.0;
+    for k in (0..10).rev() {
+        series = 1.0 / (2 * k + 1) as f64 + z * series;
+    }
+    let e = e as f64;
+    e * LN2_HI + (2.0 * f * series + e * LN2_LO)
+}
+
+/// `e^y` from `+ − × ÷`, `floor` and bit operations only (the CUDA twin is
+/// `cuda/common.cuh: portable_exp`): `y = n ln 2 + r` with `n = ⌊y/ln 2 + 1/2⌋` and `r = (y −
+/// n LN2_HI) − n LN2_LO`, `|r| ≤ 0.347`; the Taylor polynomial of degree 14 in Horner form (the
+/// first term left out is below 1e-19 of the result), then `2^n` applied in two exact halves.
+/// 0 below −746, ∞ above 710, NaN for NaN. Within 2 ulp of libm (tested).
+pub fn portable_exp(y: f64) -> f64 {
+    if y.is_nan() {
+        return y;
+    }
+    if y > 710.0 {
+        return f64::INFINITY;
+    }
+    if y < -746.0 {
+        return 0.0;
+    }
+    let n = (y * std::f64::consts::LOG2_E + 0.5).floor();
+    let r = (y - n * LN2_HI) - n * LN2_LO;
+    let mut p = 1.0 / 87_178_291_200.0; // 1/14!
+    let mut fact = 87_178_291_200.0;
+    for k in (0..14).rev() {
+        fact /= (k + 1) as f64;
+        p = 1.0 / fact + r * p;
+    }
+    let n = n as i64;
+    let half = n / 2;
+    let pow2 = |k: i64| f64::from_bits(((1023 + k) as u64) << 52);
+    p * pow2(half) * pow2(n - half)
+}
+
+/// `x^p` for `x ≥ 0` as `exp(p ln x)` through [`portable_ln`] and [`portable_exp`] (0 for
+/// `x = 0`, `p > 0`): the same bits on the CPU and the GPU (`cuda/common.cuh: portable_pow`).
+/// The contact law raises ratios in `[0, 2]` to exponents in `[1, 4]` with it. Within 32 ulp
+/// of libm's `powf` there (the rounding of `p ln x` is what `exp` magnifies).
+pub fn portable_pow(x: f64, p: f64) -> f64 {
+    if x == 0.0 && p > 0.0 {
+        return 0.0;
+    }
+    portable_exp(p * portable_ln(x))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -195,5 +272,38 @@ mod tests {
         assert_eq!(portable_sin_cos(0.0), (0.0, 1.0));
         assert!(portable_sin_cos(f64::INFINITY).0.is_nan());
         assert!(portable_sin_cos(f64::NAN).1.is_nan());
+    }
+
+    /// Within 2 ulp of libm's ln and exp over their ranges, exact where the result is (ln 1,
+    /// exp 0), and `portable_pow` within 32 ulp of `powf` on the contact law's range (ratios
+    /// in [1e-3, 2], exponents in [1, 4]): the rounding of `p ln x`, up to 28 in magnitude
+    /// there, is what `exp` magnifies (ulps of 28 are 16 ulps of 1).
+    #[test]
+    fn portable_ln_exp_pow_are_within_ulps_of_libm() {
+        let mut rng = crate::rng::Rng::new(7);
+        let ulps = |a: f64, b: f64| (a - b).abs() / (f64::EPSILON * b.abs());
+        let (mut worst_ln, mut worst_exp, mut worst_pow) = (0.0f64, 0.0f64, 0.0f64);
+        for _ in 0..200_000 {
+            let x = 10f64.powf(rng.uniform() * 620.0 - 310.0);
+            // ln near 1 is small: judge it in ulps of 1 there.
+            let l = x.ln();
+            worst_ln = worst_ln.max((portable_ln(x) - l).abs() / (f64::EPSILON * l.abs().max(1.0)));
+            let y = (rng.uniform() - 0.5) * 1400.0;
+            worst_exp = worst_exp.max(ulps(portable_exp(y), y.exp()));
+            let (r, p) = (rng.uniform() * 2.0, 1.0 + 3.0 * rng.uniform());
+            if r > 1e-3 {
+                worst_pow = worst_pow.max(ulps(portable_pow(r, p), r.powf(p)));
+            }
+        }
+        println!("portable ln {worst_ln:.2} exp {worst_exp:.2} pow {worst_pow:.2} ulp");
+        assert!(worst_ln <= 2.0, "ln: {worst_ln} ulp");
+        assert!(worst_exp <= 2.0, "exp: {worst_exp} ulp");
+        assert!(worst_pow <= 32.0, "pow: {worst_pow} ulp");
+        assert_eq!(portable_ln(1.0), 0.0);
+        assert_eq!(portable_exp(0.0), 1.0);
+        assert_eq!(portable_pow(0.0, 1.5), 0.0);
+        assert_eq!(portable_exp(1e6), f64::INFINITY);
+        assert_eq!(portable_exp(-1e6), 0.0);
+        assert!(portable_ln(-1.0).is_nan() && portable_ln(0.0).is_nan());
     }
 }
