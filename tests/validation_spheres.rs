@@ -487,6 +487,43 @@ fn oblique_sliding_impacts(device: Device) {
     }
 }
 
+/// The onset of gross sliding in oblique impacts of the soft sphere (μ = 0.3, e = 0.5, |v| = 1
+/// m/s, no spin, Δt = t_c/40): the rigid-body solution slides through the whole impact from
+/// `tan θ* = 3.5 μ (1 + e)`, θ* = 57.6°, where the tangential impulse reaches `μ` times the
+/// normal one. Above it (57.8°, 60°) the ratio must be 1 within 1e-4 (measured 1.00000). Below
+/// it the contact point stops slipping during the impact and the ratio falls: below 0.995 at
+/// 55° and 0.97 at 50° (measured 0.992 and 0.961), and above the rigid, stiff-contact value
+/// `tan θ / tan θ*` (0.91, 0.76), since the tangential spring's recoil returns part of the
+/// shortfall (the compliant impacts of Maw, Barber & Fawcett, Wear 38, 1976).
+fn sliding_onset(device: Device) {
+    let (m, r, mu, e): (Material, f64, f64, f64) = (soft(), 0.01, 0.3, 0.5);
+    let onset = (3.5 * mu * (1.0 + e)).atan();
+    for (theta, below) in [(50.0f64, 0.97), (55.0, 0.995), (57.8, 1.0), (60.0, 1.0)] {
+        let th = theta.to_radians();
+        let (vn, vt) = (th.cos(), th.sin());
+        let mass = m.rho * 4.0 / 3.0 * PI * r.powi(3);
+        let t_c = polydem::contact::restitution::sphere_contact_time(mass, m.e / r, r, vn);
+        let (vz, vx, _) = wall_impact(device, &m, r, (vn, vt, 0.0), mu, e, t_c / 40.0);
+        let ratio = (vt - vx) / (vz + vn) / mu;
+        println!(
+            "{device:?} θ {theta}° (onset {:.2}°): J_t/(μ J_n) {ratio:.5}",
+            onset.to_degrees()
+        );
+        if th > onset {
+            assert!(
+                (ratio - 1.0).abs() <= 1e-4,
+                "θ {theta}°: J_t/(μ J_n) {ratio}"
+            );
+        } else {
+            assert!(
+                ratio < below && ratio > th.tan() / onset.tan(),
+                "θ {theta}°: J_t/(μ J_n) {ratio}, outside ({}, {below})",
+                th.tan() / onset.tan()
+            );
+        }
+    }
+}
+
 fn sliding_to_rolling(device: Device) {
     let (m, r, g, mu, v0): (Material, f64, f64, f64, f64) = (soft(), 0.01, 9.81, 0.3, 1.0);
     let mut sim = simulation(&m, 0.5, mu, -g, 1e-5, r, true);
@@ -556,6 +593,11 @@ fn sliding_sphere_reaches_rolling_at_the_rigid_body_time() {
 #[test]
 fn sliding_oblique_impacts_match_the_rigid_body_solution() {
     oblique_sliding_impacts(CPU);
+}
+
+#[test]
+fn gross_sliding_begins_at_the_rigid_body_angle() {
+    sliding_onset(CPU);
 }
 
 #[test]
