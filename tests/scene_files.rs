@@ -918,6 +918,47 @@ fn rayleigh_step_matches_the_formula() {
     assert!((s.time_step() - ts.dt).abs() < 1e-20);
 }
 
+/// A small soft grain meeting a large stiff one: their face contact (m* = m_a m_b/(m_a + m_b),
+/// c = E_a/R_a + E_b/R_b, the smaller face) is shorter than either type's with itself, and it
+/// sets the critical step and the check's warning.
+#[test]
+fn the_contact_time_of_two_types_sets_the_step_when_it_is_the_shortest() {
+    let text = replace(
+        "[[insertions]]",
+        "[[particle_types]]\nname = \"bolt\"\nmaterial = \"steel\"\n\
+         generator = { kind = \"cube\", size = 1.0 }\nscale = 0.02\n\n\
+         [[material_pairs]]\nmaterials = [\"steel\", \"steel\"]\nrestitution = 0.5\n\
+         friction = 0.3\n\n[[insertions]]",
+    )
+    .replace("dt = 1.0e-5", "dt_fraction = 0.025");
+    let s = parse(&text).unwrap();
+    let v = polydem::scene::impact_speed(&s);
+    let times = polydem::scene::face_contact_times(&s, v);
+    let names: Vec<&str> = times.iter().map(|t| t.0.as_str()).collect();
+    assert_eq!(names, ["grain", "bolt", "grain + bolt"]);
+    // The closed form of rayleigh_step_matches_the_formula for the pair.
+    let tau = 2.0 * (2.0f64 / 3.0).powf(0.75) * 0.919_062_526_848_883_5 * PI.sqrt()
+        / 0.906_402_477_055_477;
+    let edge = 0.01 / 3f64.sqrt();
+    let r = (3.0 * edge.powi(3) / (4.0 * PI)).cbrt();
+    let (m_a, m_b) = (2500.0 * edge.powi(3), 7800.0 * (2.0 * edge).powi(3));
+    let m = m_a * m_b / (m_a + m_b);
+    let c = 5.0e7 / r + 2.0e11 / (2.0 * r);
+    let t_pair = tau * (m * v.powf(2.0 / 3.0) / (c * (edge * edge).powf(4.0 / 3.0))).powf(0.75);
+    assert!(
+        (times[2].1 - t_pair).abs() < 1e-6 * t_pair,
+        "{} vs {t_pair}",
+        times[2].1
+    );
+    assert!(
+        times[2].1 < times[0].1 && times[2].1 < times[1].1,
+        "{times:?}"
+    );
+    let ts = critical_time_step(&s);
+    assert_eq!(ts.contact_time, Some(times[2].1));
+    assert!((ts.dt - 0.025 * t_pair.min(ts.rayleigh)).abs() < 1e-6 * ts.dt);
+}
+
 #[test]
 fn scale_distributions_and_cylinder_regions() {
     let text = replace("scale = 0.01", "scale = { distribution = \"normal\", mean = 0.01, std = 0.002, min = 0.008, max = 0.012 }")

@@ -348,6 +348,7 @@ fn a_body_wholly_inside_another_is_pushed_out_along_the_line_of_centres() {
 /// `spacing` in a periodic box, randomly oriented, e = 1, μ = 0.
 fn packing_scene(shape: &str, spacing: f64) -> polydem::scene::Scene {
     let side = 4.0 * spacing;
+    let generator = generator(shape);
     // `POLYDEM_PACKING_DT_FRACTION` runs the packings at another step than the default.
     let dt_fraction = std::env::var("POLYDEM_PACKING_DT_FRACTION")
         .map(|f| format!("dt_fraction = {f}"))
@@ -374,7 +375,7 @@ friction = 0.0
 [[particle_types]]
 name = "p"
 material = "m"
-generator = {{ kind = "{shape}", size = 0.01 }}
+generator = {generator}
 [[insertions]]
 type = "p"
 region = {{ kind = "box", min = [0.0, 0.0, 0.0], max = [{side}, {side}, {side}] }}
@@ -401,6 +402,9 @@ fn elastic_packing(device: Device, shape: &str, steps: u64) -> f64 {
         "cube" => 0.0085,
         "octahedron" => 0.008,
         "sphere" => 0.0099,
+        "cuboid" => 0.0088,
+        "prism" => 0.0098,
+        "random_hull" => 0.0075,
         _ => 0.009,
     };
     let scene = packing_scene(shape, spacing);
@@ -436,8 +440,37 @@ fn elastic_packing(device: Device, shape: &str, steps: u64) -> f64 {
     worst
 }
 
-/// Every built-in shape.
-const SHAPES: [&str; 6] = polydem::shape::GENERATOR_NAMES;
+/// Every built-in shape: the regular solids and spheres, and one of each parametrised
+/// generator (a flat cuboid, a 24-gon catalyst cylinder, a mineral-like random hull).
+const SHAPES: [&str; 9] = [
+    "tetrahedron",
+    "cube",
+    "octahedron",
+    "dodecahedron",
+    "icosahedron",
+    "sphere",
+    "cuboid",
+    "prism",
+    "random_hull",
+];
+
+/// The generator of a shape of [`SHAPES`], about 1 cm across.
+fn generator(shape: &str) -> String {
+    match shape {
+        "cuboid" => "{ kind = \"cuboid\", a = 0.01, b = 0.006, c = 0.004 }".into(),
+        "prism" => "{ kind = \"prism\", sides = 24, diameter = 0.008, height = 0.008 }".into(),
+        "random_hull" => "{ kind = \"random_hull\", points = 18, size = 0.01, seed = 5, \
+                          aspect = [1.0, 0.8, 0.6] }"
+            .into(),
+        regular => {
+            assert!(
+                polydem::shape::GENERATOR_NAMES.contains(&regular),
+                "{regular}"
+            );
+            format!("{{ kind = \"{regular}\", size = 0.01 }}")
+        }
+    }
+}
 
 /// The shapes of the long packing runs: `POLYDEM_PACKING_SHAPES` (comma-separated; every
 /// built-in shape by default), so that one machine can run them side by side.

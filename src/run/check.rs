@@ -6,12 +6,12 @@ use std::path::Path;
 
 /// `polydem check`: validates the scene and reports the time-step estimates and counts.
 ///
-/// Besides the Rayleigh step, it reports the face-to-face contact time of each particle type at
-/// an impact speed of 1 m/s and at the free-fall speed over the domain's height, and the chosen
-/// dt as a fraction of the shortest. A dt above [`SAFE_FACE_FRACTION`] of it is flagged: face
-/// impacts then leave the 2 % restitution band of the contact law (docs/contact.md); up to
-/// [`ENERGY_FACE_FRACTION`] of it an elastic face impact also keeps its energy to 1e-3
-/// (docs/validation.md §4).
+/// Besides the Rayleigh step, it reports the face-to-face contact time of each particle type
+/// with itself and of each pair of types (`a + b`, under `per_type`) at the free-fall speed over
+/// the domain's height (at least 1 m/s), and the chosen dt as a fraction of the shortest. A dt
+/// above [`SAFE_FACE_FRACTION`] of it is flagged: face impacts then leave the 2 % restitution
+/// band of the contact law (docs/contact.md); up to [`ENERGY_FACE_FRACTION`] of it an elastic
+/// face impact also keeps its energy to 1e-3 (docs/validation.md §4).
 pub fn check(scene_path: &Path) -> Result<serde_json::Value> {
     let scene: Scene = load_scene(scene_path)?;
     let mut report = check_report(&scene);

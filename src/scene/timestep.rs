@@ -88,12 +88,17 @@ impl Scene {
     }
 }
 
-/// Face-to-face contact time of each particle type with itself at the impact speed `v`
-/// (validation.md §6; see [`crate::contact::restitution::face_contact_time`]): its largest face,
-/// its smallest scale. For a sphere, the head-on sphere–sphere time
+/// Face-to-face contact time of every pair of particle types at the impact speed `v`
+/// (validation.md §6; see [`crate::contact::restitution::face_contact_time`]): each type with
+/// itself (named by the type), then each pair of different types (named `a + b`), each at its
+/// smallest scale, meeting with the larger of their largest faces' areas capped by the smaller
+/// one's. A pair takes `m* = m_a m_b/(m_a + m_b)` and `c = E_a/R_a + E_b/R_b`, so a small soft
+/// grain meeting a stiff one can have a shorter contact than either type with itself. For
+/// spheres, the head-on sphere–sphere time with `r* = r_a r_b/(r_a + r_b)`
 /// ([`crate::contact::restitution::sphere_contact_time`]).
 pub fn face_contact_times(scene: &Scene, v: f64) -> Vec<(String, f64)> {
-    scene
+    // Per type: (name, mass, E/R, largest face area, radius, sphere).
+    let per_type: Vec<(String, f64, f64, f64, f64, bool)> = scene
         .particle_types
         .iter()
         .zip(&scene.scale_distributions)
@@ -118,16 +123,36 @@ pub fn face_contact_times(scene: &Scene, v: f64) -> Vec<(String, f64)> {
                 * s
                 * s;
             let mass = m.density * t.volume * s.powi(3);
-            let c = 2.0 * m.youngs_modulus / (t.equivalent_radius * s);
-            let time = if t.sphere {
-                let r_eff = 0.5 * t.circumscribed_radius * s;
-                crate::contact::restitution::sphere_contact_time(0.5 * mass, c, r_eff, v)
-            } else {
-                crate::contact::restitution::face_contact_time(0.5 * mass, c, area, v)
-            };
-            (ty.name.clone(), time)
+            let stiffness = m.youngs_modulus / (t.equivalent_radius * s);
+            let radius = t.circumscribed_radius * s;
+            (ty.name.clone(), mass, stiffness, area, radius, t.sphere)
         })
-        .collect()
+        .collect();
+    let mut out = Vec::new();
+    for gap in 0..per_type.len() {
+        for i in 0..per_type.len() - gap {
+            let (a, b) = (&per_type[i], &per_type[i + gap]);
+            // A type with itself as m/2 and r/2 exactly (the harmonic means round otherwise).
+            let (mass, r_eff) = if gap == 0 {
+                (0.5 * a.1, 0.5 * a.4)
+            } else {
+                (a.1 * b.1 / (a.1 + b.1), a.4 * b.4 / (a.4 + b.4))
+            };
+            let c = a.2 + b.2;
+            let time = if a.5 && b.5 {
+                crate::contact::restitution::sphere_contact_time(mass, c, r_eff, v)
+            } else {
+                crate::contact::restitution::face_contact_time(mass, c, a.3.min(b.3), v)
+            };
+            let name = if gap == 0 {
+                a.0.clone()
+            } else {
+                format!("{} + {}", a.0, b.0)
+            };
+            out.push((name, time));
+        }
+    }
+    out
 }
 
 /// The impact speed the contact-time estimate assumes: free fall over the domain's height, at
