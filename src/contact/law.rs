@@ -3,14 +3,15 @@
 //! equations and the reasoning behind each term are in docs/contact.md; in short:
 //!
 //! - Elastic: `U(V) = (3/4) c V^{4/3}`, `c = E₁/R₁ + E₂/R₂`, gives `F_B = −U'(V) S` and the
-//!   torque `−U'(V) (M_B + (c_V − x_B) × S)` (seed Eq. 12–13). Over a step, `U'` is taken as
-//!   the mean of the potential's slope over the volume the contact sweeps in the step's kick
-//!   window, `[V − A_n s, V + A_n s]` with `s = |v_n| Δt/2` (the secant of U, exact at rest). A
-//!   face contact's stiffness `F/(3δ)` is unbounded at first touch, so the slope at one point
-//!   of the step (seed Eq. 12 as written) makes a face impact's energy depend on where in a
-//!   step it starts; the secant is what the force does on average over the kick it drives, and
+//!   torque `−U'(V) (M_B + (c_V − x_B) × S)` (seed Eq. 12–13). A face contact's stiffness
+//!   `F/(3δ)` is unbounded at first touch, so the slope at one point of the step (seed Eq. 12
+//!   as written) makes a face impact's energy depend on where in a step it starts. For such
+//!   contacts (local exponent `k = A_n h / V < 3/2`, `h` the overlap's thickness), `U'` is
+//!   taken as the mean of the potential's slope over the volume swept in the step's kick
+//!   window, `[V − A_n s, V + A_n s]` with `s = |v_n| Δt/2` (the secant of U, exact at rest);
 //!   a contact's first step also carries the share of the kick before it that the contact
-//!   entered during.
+//!   entered during, and its last step the share of the kick after it that it leaves during.
+//!   Other contacts take the slope at V, which keeps the step symplectic.
 //! - Normal damping (Hunt–Crossley): `F_d = −ᾱ(e) F_e v_n / v_ref`, `v_ref` the normal speed
 //!   at first touch (contact history), at least `√(2U/m*)`. It is bounded wherever the
 //!   elastic force is, and gives restitution `e` for every exponent of `F_e(δ)`
@@ -112,10 +113,11 @@ pub const WINDOW_FRACTION: f64 = 0.5;
 /// The kick window (its mean slope, the entry and the exit) is for contacts whose local
 /// exponent `k = A_n h / V` (`h` the overlap's thickness) is below this: the force
 /// `F ∝ δ^{4k/3 − 1}` then has the stiffness `δ^{4k/3 − 2}`, unbounded at first touch (a face
-/// on a face, `k = 1`). From `k = 3/2` on (an edge, a sphere, a vertex) the force vanishes at least linearly at touch, the
-/// slope at V is as accurate, and it keeps the step symplectic: with the window open on every
-/// grazing sphere or vertex contact a packing's energy drifted, and the aligned cubes' energy
-/// error stopped converging below `t_c/80` (docs/validation.md §3).
+/// on a face, `k = 1`). From `k = 3/2` on (an edge, a sphere, a vertex) the force vanishes at
+/// least linearly at touch, the slope at V is as accurate, and it keeps the step symplectic:
+/// with the window open on every grazing sphere or vertex contact a packing's energy drifted,
+/// and the aligned cubes' energy error stopped converging below `t_c/80` (docs/validation.md
+/// §3).
 pub const SINGULAR_EXPONENT: f64 = 1.5;
 
 /// The overlap's local power law `V(δ) = V (δ/h)^k` about the current penetration `h` (the
