@@ -17,20 +17,23 @@ pub use porosity::{RadialPorosity, Tube, radial_porosity};
 pub use solids::PackedSolids;
 
 use crate::io::read_checkpoint;
-use crate::scene::restart::SceneFingerprint;
+use crate::scene::restart::{SceneFingerprint, check_against_scene};
 use crate::scene::{Scene, load_scene};
 use crate::state::Particles;
 use anyhow::{Context, Result, anyhow};
 use std::path::Path;
 
 /// A scene and the particles of one of its checkpoints, refused when the checkpoint was
-/// written for another scene (the restart rule: docs/scene.md, Restarts).
+/// written for another scene (the restart rule: docs/scene.md, Restarts) or when a particle
+/// does not fit the scene (a kind it does not have, a mass its type does not give: the checks
+/// of a restart, `check_against_scene`), naming the file and the field.
 pub fn load_state(scene: &Path, checkpoint: &Path) -> Result<(Scene, Particles)> {
     let s = load_scene(scene).with_context(|| format!("scene {}", scene.display()))?;
     let c = read_checkpoint(checkpoint)?;
     SceneFingerprint::of(&s)
         .check(&c, 0)
         .map_err(|e| anyhow!("{}: {e}", checkpoint.display()))?;
+    check_against_scene(&c, &s).map_err(|e| anyhow!("{}: {e}", checkpoint.display()))?;
     Ok((s, c.particles))
 }
 
