@@ -226,6 +226,22 @@ fn restitution_sweep(device: Device) {
     }
 }
 
+/// Steps `e` until a contact has begun and ended, at most `limit` steps.
+fn step_through_impact(e: &mut polydem::backend::Engine, limit: usize) {
+    let (mut touched, mut steps) = (false, 0usize);
+    while steps < limit {
+        e.step().unwrap();
+        steps += 1;
+        let (pairs, walls) = e.contact_counts().unwrap();
+        if pairs + walls > 0 {
+            touched = true;
+        } else if touched {
+            return;
+        }
+    }
+    panic!("no complete impact within {limit} steps");
+}
+
 /// One sphere impact, head-on on the wall (`wall`) or on a second, resting sphere, closing at
 /// `v` with first touch `gap` away; returns the rebound speed over `v` (the normal relative
 /// velocity after the impact).
@@ -253,18 +269,7 @@ fn sphere_impact(
     }
     sim.refresh().unwrap();
     let mut e = engine(sim, device);
-    let (mut touched, mut steps) = (false, 0usize);
-    while steps < 1_000_000 {
-        e.step().unwrap();
-        steps += 1;
-        let (pairs, walls) = e.contact_counts().unwrap();
-        if pairs + walls > 0 {
-            touched = true;
-        } else if touched {
-            break;
-        }
-    }
-    assert!(touched && steps < 1_000_000, "no complete impact");
+    step_through_impact(&mut e, 1_000_000);
     let p = &e.synced().unwrap().particles;
     let vz = |id: u64| p.velocity[p.id.iter().position(|&i| i == id).unwrap()].z;
     let rebound = if wall { vz(0) } else { vz(0) - vz(1) };
@@ -404,18 +409,7 @@ fn wall_impact(
     sim.particles.angular_velocity[0] = Vector3::new(0.0, omega, 0.0);
     sim.refresh().unwrap();
     let mut eng = engine(sim, device);
-    let (mut touched, mut steps) = (false, 0usize);
-    while steps < 100_000 {
-        eng.step().unwrap();
-        steps += 1;
-        let (pairs, walls) = eng.contact_counts().unwrap();
-        if pairs + walls > 0 {
-            touched = true;
-        } else if touched {
-            break;
-        }
-    }
-    assert!(touched && steps < 100_000, "no complete impact");
+    step_through_impact(&mut eng, 100_000);
     let s = eng.synced().unwrap();
     (
         s.particles.velocity[0].z,

@@ -345,26 +345,13 @@ pub(crate) fn overlap_about<T: Real>(
     centroid /= volume;
     // Moment about the overlap centroid rather than x₀.
     moment_b -= centroid.cross(&dv_dxb);
-    let mut thickness = T::zero();
+    // The extent along the normal −S/|S| (`by_hull` is `!enumerated` here).
     let area = dv_dxb.norm();
-    if area > T::zero() {
-        let n = dv_dxb / area;
-        let (mut lo, mut hi) = (
-            T::max_value().unwrap_or(T::one()),
-            -T::max_value().unwrap_or(T::one()),
-        );
-        let mut extend = |v: &Vector3<T>| {
-            let h = n.dot(v);
-            lo = lo.min(h);
-            hi = hi.max(h);
-        };
-        if enumerated {
-            ws.faces.vertices().iter().for_each(&mut extend);
-        } else {
-            ws.hull.triangles().for_each(|(s, _)| extend(&ws.vertex[s]));
-        }
-        thickness = (hi - lo).max(T::zero());
-    }
+    let thickness = if area > T::zero() {
+        ws.extent_along(&(dv_dxb / area))
+    } else {
+        T::zero()
+    };
     Ok(Overlap {
         volume,
         centroid: centroid + x0,
