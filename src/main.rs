@@ -296,7 +296,17 @@ fn main() {
         Err(e) => {
             if comm.size() > 1 {
                 eprintln!("error (rank {} of {}): {e:#}", comm.rank(), comm.size());
-                comm.abort(1);
+                // A stop every rank agreed on (the stability guard's, a particle leaving the
+                // domain) ends MPI in order, each rank having said its part; any other error
+                // is this rank's alone, and ends the others where they wait.
+                let agreed = e
+                    .downcast_ref::<polydem::pipeline::SimulationError>()
+                    .is_some_and(polydem::pipeline::SimulationError::stops_every_rank);
+                if !agreed {
+                    comm.abort(1);
+                }
+                drop(comm);
+                std::process::exit(1);
             }
             eprintln!("error: {e:#}");
             std::process::exit(1);

@@ -457,6 +457,115 @@ fn gpu_ranks_periodic_grid_and_restart() {
     );
 }
 
+/// The pour of `launch/mpi/pour.toml` written to `dir` with checkpoints every 500 steps and
+/// either a speed bound of 2.2 m/s, which particle 26 passes at step 929 (spun up by a
+/// collision), or no walls, so that particle 194 falls out through the closed bottom at step
+/// 1020. Returns the scene's path.
+fn stopping_pour(dir: &Path, stop: &str) -> PathBuf {
+    let mut text = std::fs::read_to_string(repo_root().join("launch/mpi/pour.toml"))
+        .unwrap()
+        .replace(
+            "\"../../meshes",
+            &format!("\"{}/meshes", repo_root().display()),
+        )
+        .replace("checkpoint_interval = 0.02", "checkpoint_interval = 0.01");
+    match stop {
+        "speed" => {
+            text = text.replace(
+                "seed = 5\n",
+                "seed = 5\n\n[simulation.guard]\nmax_speed = 2.2\n",
+            )
+        }
+        "leaving" => {
+            let (a, b) = (
+                text.find("[[walls]]").unwrap(),
+                text.find("[parallel]").unwrap(),
+            );
+            text.replace_range(a..b, "");
+        }
+        _ => unreachable!(),
+    }
+    let path = dir.join(format!("{stop}.toml"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// A stop on one rank of a decomposed run, by the stability guard or by a particle leaving
+/// through a closed face, stops every rank after the same step as the single-rank run: the
+/// ranks agree on it and write the state at the stop together, byte-identical to the
+/// single-rank run's, beside the untouched scheduled checkpoint; the run exits non-zero with
+/// the cause named. (Before, the failing rank alone ended the others: no stopped state.) On
+/// the GPU in double, whose trajectory is the CPU's bit for bit.
+fn stops_every_rank(backend: &str) {
+    let dir = temp_dir(&format!("mpi-stop-{backend}"));
+    for (stop, step, cause) in [
+        (
+            "speed",
+            929,
+            "particle 26 is blowing up: it moves at 2.2368e0 m/s",
+        ),
+        (
+            "leaving",
+            1020,
+            "1 particle(s) left the domain through a closed face: particle 194",
+        ),
+    ] {
+        let scene = stopping_pour(&dir, stop);
+        let name = format!("unstable-step-{step}.ckpt");
+        let one = dir.join(format!("{stop}-1"));
+        let o = output(command(1, scene.to_str().unwrap(), &one, "cpu"));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !o.status.success() && err.contains(cause),
+            "1 rank, {stop}: {err}"
+        );
+        for ranks in [2, 3] {
+            let out = dir.join(format!("{stop}-{backend}-{ranks}"));
+            let mut cmd = command(ranks, scene.to_str().unwrap(), &out, backend);
+            cmd.env("RAYON_NUM_THREADS", "1");
+            if backend == "cuda" {
+                cmd.args(["--gpu-precision", "double"]);
+            }
+            let o = output(cmd);
+            let err = String::from_utf8_lossy(&o.stderr);
+            let what = format!("{ranks} {backend} ranks, {stop}");
+            assert!(!o.status.success(), "{what}: the run must fail: {err}");
+            assert!(
+                err.contains(&format!("step {step}: {cause}"))
+                    && err.contains(&format!("the state at the stop is in {}", out.display()))
+                    && err.contains("the run stops at this step with rank(s)")
+                    && !err.contains("MPI_ABORT"),
+                "{what}: {err}"
+            );
+            same_checkpoint(&one, &out, &name, &what);
+            let latest = read_checkpoint(&out.join("checkpoints/latest.ckpt")).unwrap();
+            assert_eq!(
+                latest.step,
+                if stop == "speed" { 500 } else { 1000 },
+                "{what}"
+            );
+            let stopped = read_checkpoint(&out.join("checkpoints").join(&name)).unwrap();
+            assert_eq!(
+                (stopped.step, stopped.particles.len()),
+                (step, 280),
+                "{what}"
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_stop_on_one_rank_stops_every_rank_with_the_state_written() {
+    stops_every_rank("cpu");
+}
+
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn a_stop_on_one_gpu_rank_stops_every_rank_with_the_state_written() {
+    stops_every_rank("cuda");
+}
+
 /// Interrupting a 2-rank run, as a terminal's Ctrl-C does (SIGINT to the whole process group:
 /// mpirun and its ranks) and as `kill -INT` on mpirun does (mpirun then sends every rank
 /// SIGTERM, and SIGKILL a second later): every rank stops after the same step, the checkpoint

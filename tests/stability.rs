@@ -156,6 +156,99 @@ fn the_deepest_overlap_of_a_particle_is_found_without_a_list() {
     assert_eq!(found[3], None);
 }
 
+/// A scene of one particle type, a cube of edge `a`, with the guard table `guard`.
+fn cube_scene(a: f64, e_modulus: f64, gravity: f64, dt: f64, guard: &str) -> Simulation {
+    let types = format!(
+        "[[particle_types]]\nname = \"cube\"\nmaterial = \"m\"\n\
+         generator = {{ kind = \"cube\", size = {:?} }}\n",
+        a * 3f64.sqrt()
+    );
+    let text = scene_text(&SceneSpec {
+        e_modulus,
+        poisson: 0.3,
+        density: 2500.0,
+        restitution: 1.0,
+        friction: 0.0,
+        gravity,
+        dt,
+        wall_scale: None,
+        wall_motion: None,
+        types: &types,
+    });
+    let text = format!("{text}\n[simulation.guard]\n{guard}\n");
+    let scene = parse_scene(&text, &repo_root(), "guard.toml").unwrap();
+    Simulation::builder(scene).build().unwrap()
+}
+
+/// Two cubes of edge a closing face to face at 2v through a gap, with negligible stiffness
+/// (E = 1 Pa): after n steps their faces overlap by δ = 2 v Δt n − gap, a slab of a² δ, δ/a of
+/// a cube's volume (the guard measures a particle by the ball of its volume, here a³). With
+/// the bound 0.1 the run stops at the first n with δ > a/10, naming the other cube; the face
+/// contact's exponent k = 1 does not change the measure.
+fn deep_face_overlap(device: Device) {
+    let (a, v, dt, gap) = (0.01, 1.0, 1e-4, 1.3e-4);
+    let mut sim = cube_scene(a, 1.0, 0.0, dt, "max_overlap = 0.1");
+    let half = (a + gap) / 2.0;
+    place(
+        &mut sim,
+        &[
+            (Vector3::new(-half, 0.0, 0.0), Vector3::x() * v),
+            (Vector3::new(half, 0.0, 0.0), -Vector3::x() * v),
+        ],
+    );
+    let depth = |n: u64| 2.0 * v * dt * n as f64 - gap;
+    let expected = (1..).find(|&n| depth(n) > 0.1 * a).unwrap();
+    let (step, msg) = run_to_error(device, sim, 1000);
+    println!("cubes face to face: stop at step {step} (closed form {expected}): {msg}");
+    assert_eq!(step, expected, "{msg}");
+    assert!(
+        msg.contains(&format!("step {expected}: particle 0 is blowing up"))
+            && msg.contains("particle 1")
+            && msg.contains("max_overlap"),
+        "{msg}"
+    );
+    if device == CPU {
+        // The overlap's own volume, as the error gives it: a² δ to 1e-9.
+        let x = depth(expected) / a;
+        assert!(msg.contains(&format!("{x:.3}")), "{msg}");
+    }
+}
+
+/// A cube spinning at ω about a face normal (its inertia is isotropic, so ω stays) while it
+/// falls from rest: after step n's first half kick its fastest point moves at
+/// `g Δt (n − 1/2) + ω R`, R = a√3/2 its circumscribed radius, so the speed bound stops it at
+/// the first n past the bound, with ω counted by the polyhedron's own corner.
+fn spinning_speed_bound(device: Device) {
+    let (a, g, dt, vmax, w) = (0.01, 9.81, 1e-3, 1.0, 50.0);
+    let mut sim = cube_scene(a, 1e7, -g, dt, "max_speed = 1.0");
+    place(&mut sim, &[(Vector3::new(0.0, 0.0, 5.0), Vector3::zeros())]);
+    sim.particles.angular_velocity[0] = Vector3::z() * w;
+    let corner = w * a * 3f64.sqrt() / 2.0;
+    let expected = (1u64..)
+        .find(|&n| g * dt * (n as f64 - 0.5) + corner > vmax)
+        .unwrap();
+    let (step, msg) = run_to_error(device, sim, 1000);
+    println!("spinning cube: stop at step {step} (closed form {expected}): {msg}");
+    assert_eq!(step, expected, "{msg}");
+    // Without the spin it would fall 44 steps longer: the corner's speed counts.
+    assert!(expected + 40 < (vmax / (g * dt) + 0.5).ceil() as u64);
+    assert!(
+        msg.contains(&format!("step {expected}: particle 0 is blowing up"))
+            && msg.contains("above the bound 1.0000e0 m/s"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_deep_face_overlap_of_cubes_stops_the_run_at_the_step_it_happens() {
+    deep_face_overlap(CPU);
+}
+
+#[test]
+fn a_spinning_cube_past_the_speed_bound_stops_the_run_at_its_step() {
+    spinning_speed_bound(CPU);
+}
+
 fn speed_bound(device: Device) {
     let (g, dt, vmax) = (9.81, 1e-3, 1.0);
     let text = sphere_scene(1e7, -g, dt, "max_speed = 1.0");
@@ -188,10 +281,12 @@ fn a_speed_past_the_bound_stops_the_run_at_the_step_it_happens() {
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn the_guard_stops_gpu_runs_at_the_same_steps() {
-    deep_overlap(GPU_DOUBLE);
-    speed_bound(GPU_DOUBLE);
-    deep_overlap(GPU_MIXED);
-    speed_bound(GPU_MIXED);
+    for device in [GPU_DOUBLE, GPU_MIXED] {
+        deep_overlap(device);
+        speed_bound(device);
+        deep_face_overlap(device);
+        spinning_speed_bound(device);
+    }
 }
 
 #[test]

@@ -55,6 +55,29 @@ pub enum SimulationError {
         problem: String,
         contacts: String,
     },
+    /// A decomposed run's other ranks stopped it at this step: their own errors (the guard's,
+    /// a non-finite value, a particle leaving the domain) name the cause.
+    #[error(
+        "step {step}: the run stops at this step with rank(s) {ranks:?}, whose error names the particle and the cause"
+    )]
+    Stopped { step: u64, ranks: Vec<usize> },
+}
+
+impl SimulationError {
+    /// Whether every rank of a decomposed run left the same step with an error of this kind,
+    /// agreed through [`Simulation::agree`](super::Simulation::agree): a stability stop, a
+    /// non-finite value, a particle leaving through a closed face, or another rank's stop.
+    /// The ranks can then still work together (write the stopped state, end MPI in order);
+    /// after any other error the failing rank ends them all.
+    pub fn stops_every_rank(&self) -> bool {
+        matches!(
+            self,
+            SimulationError::Unstable { .. }
+                | SimulationError::NonFinite { .. }
+                | SimulationError::LeftDomain { .. }
+                | SimulationError::Stopped { .. }
+        )
+    }
 }
 
 /// The decomposition's exchange errors as the variants a single-rank run would report: a

@@ -59,12 +59,7 @@ impl Simulation {
         for x in self.particles.position.iter_mut() {
             b.wrap(x);
         }
-        let outside: Vec<usize> = (0..self.particles.len())
-            .filter(|&i| {
-                let x = self.particles.position[i];
-                (0..3).any(|k| !b.periodic[k] && (x[k] < b.min[k] || x[k] > b.max[k]))
-            })
-            .collect();
+        let outside = self.outside_domain();
         if !outside.is_empty() {
             if self.scene.domain.on_leaving == LeavingDomain::Error {
                 return Err(self.left_domain(&outside));
@@ -84,6 +79,34 @@ impl Simulation {
         }
         self.timers.exchange += t0.elapsed().as_secs_f64();
         Ok(())
+    }
+
+    /// The local indices of the particles outside a closed face of the domain (periodic axes
+    /// do not count: their wrap moves a particle back in).
+    fn outside_domain(&self) -> Vec<usize> {
+        let b = &self.bounds;
+        (0..self.particles.len())
+            .filter(|&i| {
+                let x = self.particles.position[i];
+                (0..3).any(|k| !b.periodic[k] && (x[k] < b.min[k] || x[k] > b.max[k]))
+            })
+            .collect()
+    }
+
+    /// The closed-face check of stage 1 on its own, before the exchange: a particle outside
+    /// a closed face stops the run ([`SimulationError::LeftDomain`]) unless the scene lets
+    /// particles out (`domain.on_leaving = "remove"`). Run after the drift, where the ranks
+    /// of a decomposed run can agree on it before the exchange's collectives.
+    pub fn check_inside(&self) -> Result<(), SimulationError> {
+        if self.scene.domain.on_leaving != LeavingDomain::Error {
+            return Ok(());
+        }
+        let outside = self.outside_domain();
+        if outside.is_empty() {
+            Ok(())
+        } else {
+            Err(self.left_domain(&outside))
+        }
     }
 
     /// The error for the particles at local indices `outside`, which left the domain through

@@ -74,6 +74,36 @@ impl Simulation {
         }
     }
 
+    /// This rank's outcome of a step's checks, agreed among the ranks of a decomposed run (one
+    /// gather of a byte per rank; nothing in a single-rank run): a rank whose checks failed
+    /// keeps its own error, and the others get [`SimulationError::Stopped`] naming those
+    /// ranks. So every rank leaves the step with an error, after the same step, and they can
+    /// write the stopped state together (`crate::run`) instead of one rank ending all others
+    /// mid-collective. Every error of the guard, of a non-finite value and of a particle that
+    /// left through a closed face goes through here, which is what lets the run treat those
+    /// errors as common to all ranks ([`SimulationError::stops_every_rank`]).
+    pub fn agree(&self, local: Result<(), SimulationError>) -> Result<(), SimulationError> {
+        let Some(par) = self.parallel.as_deref() else {
+            return local;
+        };
+        let failed: Vec<usize> = par
+            .comm
+            .all_gather(&[u8::from(local.is_err())])
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| b.first() == Some(&1))
+            .map(|(r, _)| r)
+            .collect();
+        match local {
+            Err(e) => Err(e),
+            Ok(()) if failed.is_empty() => Ok(()),
+            Ok(()) => Err(SimulationError::Stopped {
+                step: self.step,
+                ranks: failed,
+            }),
+        }
+    }
+
     /// The guard's error for particle `i` (an index of this rank's particles), naming its
     /// contacts from the history.
     pub fn unstable(&self, i: usize, problem: Option<Instability>) -> SimulationError {

@@ -93,14 +93,19 @@ pub struct Simulation {
 
 impl Simulation {
     /// Advances one time step (the stage order of docs/design.md §1; see the module docs).
+    ///
+    /// The guard's checks run twice: after the drift (speed, finiteness, a particle leaving
+    /// through a closed face), and at the end (overlaps, finiteness). In a decomposed run the
+    /// ranks agree on each outcome ([`Self::agree`]), so that all stop after the same step.
     pub fn step(&mut self) -> Result<(), SimulationError> {
         self.half_kick_and_drift(); // 9a
-        self.check_motion()?;
+        let moved = self.check_motion().and_then(|()| self.check_inside());
+        self.agree(moved)?;
         self.exchange()?; // 1
         self.forces(self.dt)?; // 2–8
-        self.check_overlaps()?;
         self.second_half_kick(); // 9b
-        self.check_finite()
+        let end = self.check_overlaps().and_then(|()| self.check_finite());
+        self.agree(end)
     }
 
     /// Stages 2–8 at the current state, advancing the contact history by `dt` (zero: the

@@ -70,10 +70,13 @@ pub(super) fn checkpoint_of(
 }
 
 /// A run stopped by the stability guard (`crate::stability`), a non-finite value or a particle
-/// leaving the domain through a closed face (`domain.on_leaving`): the last
-/// scheduled checkpoint is left as it is, and the state at the stop is written beside it as
-/// `checkpoints/unstable-step-<step>.ckpt` for a post-mortem (or a restart with a smaller step),
-/// on one rank and when every value is finite. Other errors pass through unchanged.
+/// leaving the domain through a closed face (`domain.on_leaving`): the last scheduled
+/// checkpoint is left as it is, and the state at the stop (the end of the step that failed its
+/// checks) is written beside it as `checkpoints/unstable-step-<step>.ckpt` for a post-mortem
+/// or a restart with a smaller step, when every value is finite. In a decomposed run every
+/// rank is here after the same step ([`SimulationError::stops_every_rank`]): they gather the
+/// state together as for a scheduled checkpoint, agreeing first that each could read its part
+/// and that it is finite. Other errors pass through unchanged.
 pub(super) fn stopped_unstable(
     e: anyhow::Error,
     comm: &dyn Comm,
@@ -81,24 +84,24 @@ pub(super) fn stopped_unstable(
     dir: &Path,
     id: &SceneId,
 ) -> anyhow::Error {
-    let unstable = matches!(
-        e.downcast_ref::<SimulationError>(),
-        Some(
-            SimulationError::Unstable { .. }
-                | SimulationError::NonFinite { .. }
-                | SimulationError::LeftDomain { .. }
-        )
-    );
-    if !unstable {
+    let stopped = e
+        .downcast_ref::<SimulationError>()
+        .is_some_and(SimulationError::stops_every_rank);
+    if !stopped {
         return e;
     }
-    if comm.size() > 1 {
-        return e.context("no checkpoint of the stopped state: the run is decomposed");
-    }
-    let sim = match engine.synced() {
-        Ok(sim) => sim,
-        Err(sync) => return e.context(format!("the stopped state could not be read: {sync}")),
+    let (sim, read) = match engine.synced() {
+        Ok(sim) => (Some(sim), None),
+        Err(sync) => (None, Some(sync.to_string())),
     };
+    if comm.any(read.is_some()) {
+        return e.context(match read {
+            Some(why) => format!("the stopped state could not be read: {why}"),
+            None => "no checkpoint of the stopped state: another rank could not read its part"
+                .to_string(),
+        });
+    }
+    let sim = sim.expect("read on every rank");
     let p = &sim.particles;
     let finite = (0..p.len()).all(|i| {
         p.position[i].iter().all(|x| x.is_finite())
@@ -106,12 +109,13 @@ pub(super) fn stopped_unstable(
             && p.angular_velocity[i].iter().all(|x| x.is_finite())
             && p.orientation[i].coords.iter().all(|x| x.is_finite())
     });
-    if !finite {
+    if comm.any(!finite) {
         return e.context("no checkpoint of the stopped state: it holds non-finite values");
     }
     let path = dir
         .join("checkpoints")
         .join(format!("unstable-step-{}.ckpt", sim.step));
+    // Collective in a decomposed run; rank 0 writes, and tells the others how it went.
     let written = checkpoint_of(comm, sim, id).and_then(|c| match c {
         Some(c) => {
             std::fs::create_dir_all(dir.join("checkpoints"))?;
@@ -119,12 +123,21 @@ pub(super) fn stopped_unstable(
         }
         None => Ok(()),
     });
-    match written {
-        Ok(()) => e.context(format!(
+    let mut outcome = match &written {
+        Ok(()) => Vec::new(),
+        Err(w) => format!("{w:#}").into_bytes(),
+    };
+    comm.broadcast(&mut outcome, 0);
+    if outcome.is_empty() {
+        e.context(format!(
             "the state at the stop is in {} (the last scheduled checkpoint is unchanged)",
             path.display()
-        )),
-        Err(w) => e.context(format!("the state at the stop could not be written: {w}")),
+        ))
+    } else {
+        e.context(format!(
+            "the state at the stop could not be written: {}",
+            String::from_utf8_lossy(&outcome)
+        ))
     }
 }
 

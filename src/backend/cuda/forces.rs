@@ -129,37 +129,58 @@ impl CudaSimulation {
             return Err(self.geometry_error(error).into());
         }
         self.host_current = false;
-        if error[2] != 0 {
+        let overlaps = if error[2] != 0 {
             // The stability guard's overlap bound (cuda/contact.cu `guard_overlap`).
-            let i = (u32::MAX - error[2]) as usize;
             self.sync_host()?;
-            if i >= self.host.particles.len() {
-                return Err(SimulationError::Domain {
-                    step: self.host.step,
-                    message: format!(
-                        "a contact of ghost slot {i} overlaps more than {} of the smaller \
-                         particle's volume (simulation.guard.max_overlap); its owner's rank \
-                         names it",
-                        self.host.guard.max_overlap
-                    ),
-                }
-                .into());
-            }
-            // The device names no partner: the host evaluates the particle's overlaps with
-            // the others in f64 from the same positions (those of the force evaluation; the
-            // fused kick changed only velocities), which tells a deep contact from a device
-            // geometry that differs from f64.
-            let host = self
+            Err(self.too_deep((u32::MAX - error[2]) as usize))
+        } else {
+            Ok(())
+        };
+        // In a decomposed run every rank stops after this step if one does
+        // ([`Simulation::agree`]).
+        Ok(self.host.agree(overlaps)?)
+    }
+
+    /// The guard's error for the device's report that a contact of slot `i` overlaps past the
+    /// bound, from the synced host state.
+    fn too_deep(&self, i: usize) -> SimulationError {
+        let step = self.host.step;
+        let n = self.host.particles.len();
+        if i >= n {
+            // A pair is reported by its lower slot, and ghosts follow the owned particles, so
+            // this is not expected; should it happen, the ghost is named by its global id and
+            // its owner's contacts are that rank's.
+            let ghosts = self
                 .host
-                .deepest_particle_overlap(i)
-                .map(|(id, x)| (format!("particle {id}"), x));
-            let problem = crate::stability::Instability::DeepContact {
-                fraction: self.host.guard.max_overlap,
-                host,
+                .parallel
+                .as_deref()
+                .map(|p| &p.ghosts.particles.id);
+            return SimulationError::Unstable {
+                step,
+                id: ghosts
+                    .and_then(|g| g.get(i - n).copied())
+                    .unwrap_or(u64::MAX),
+                problem: format!(
+                    "a contact of this ghost overlaps more than {} of the smaller particle's \
+                     volume (simulation.guard.max_overlap)",
+                    self.host.guard.max_overlap
+                ),
+                contacts: "on its owner's rank".into(),
             };
-            return Err(self.host.unstable(i, Some(problem)).into());
         }
-        Ok(())
+        // The device names no partner: the host evaluates the particle's overlaps with
+        // the others in f64 from the same positions (those of the force evaluation; the
+        // fused kick changed only velocities), which tells a deep contact from a device
+        // geometry that differs from f64.
+        let host = self
+            .host
+            .deepest_particle_overlap(i)
+            .map(|(id, x)| (format!("particle {id}"), x));
+        let problem = crate::stability::Instability::DeepContact {
+            fraction: self.host.guard.max_overlap,
+            host,
+        };
+        self.host.unstable(i, Some(problem))
     }
 
     /// Stage 6, first part ([`super::walls::WallStage::start_overlaps`]) at the current time;

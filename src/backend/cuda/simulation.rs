@@ -275,20 +275,25 @@ impl CudaSimulation {
         // Stage 1: the periodic wrap and the per-step checks ran on the device with the drift;
         // insertion and removal on the host (rare steps).
         let t0 = Instant::now();
-        if flags.unstable != 0 {
+        let motion = if flags.unstable != 0 {
             self.sync_host()?;
             let i = flags.first_unstable();
-            if i < self.host.particles.len() {
+            Err(if i < self.host.particles.len() {
                 let problem = self.host.instability_of(i);
-                return Err(self.host.unstable(i, problem).into());
-            }
-            return Err(SimulationError::NonFinite {
-                step: self.host.step,
-                id: 0,
-                field: "position or velocity (of a ghost)",
-            }
-            .into());
-        }
+                self.host.unstable(i, problem)
+            } else {
+                SimulationError::NonFinite {
+                    step: self.host.step,
+                    id: 0,
+                    field: "position or velocity (of a ghost)",
+                }
+            })
+        } else {
+            Ok(())
+        };
+        // In a decomposed run every rank stops after this step if one does
+        // ([`Simulation::agree`]).
+        self.host.agree(motion)?;
         let pending = self.host.inserter_pending();
         if let Some(par) = self.host.parallel.as_deref_mut() {
             // All ranks rebuild together: when some rank inserts, removes or has a particle
@@ -300,6 +305,11 @@ impl CudaSimulation {
             par.timers.wait += t_wait.elapsed().as_secs_f64();
             if rebuild {
                 self.sync_host()?;
+                // A particle that left through a closed face stops every rank together, before
+                // the exchange's collectives (on the CPU backend the step checks it after the
+                // drift; here the host sees positions at rebuilds, which an exit forces).
+                let inside = self.host.check_inside();
+                self.host.agree(inside)?;
                 self.host.rebuild_exchange_on_host()?;
                 self.upload_walls()?;
                 self.upload_from_host()?;
