@@ -113,6 +113,48 @@ PD_HD double mean_pressure(double c, double lo, double hi) {
     return 0.75 * c * (x + y) * (x * x + y * y) / (x * x + x * y + y * y);
 }
 
+// V* = (A_n Δt √(c/m*) / σ)³, σ = 0.5: the volume below which the potential is regularized
+// (law.rs `resolved_volume`, RESOLVED_STEP).
+PD_HD double resolved_volume(double c, double area, double dt, double effective_mass) {
+    double x = area * dt * sqrt_(c / effective_mass) / 0.5;
+    return x * x * x;
+}
+
+// W(V): (c/2) V*^{-2/3} V² below V*, U(V) − (1/4) c V*^{4/3} above (law.rs `resolved_potential`).
+PD_HD double resolved_potential(double c, double v, double resolved) {
+    if (v <= 0.0) {
+        return 0.0;
+    }
+    if (v < resolved) {
+        double r = portable_cbrt(resolved);
+        return 0.5 * c * v * v / (r * r);
+    }
+    return contact_potential(c, v) - 0.25 * c * resolved * portable_cbrt(resolved);
+}
+
+// W'(V) (law.rs `resolved_pressure`).
+PD_HD double resolved_pressure(double c, double v, double resolved) {
+    if (v <= 0.0) {
+        return 0.0;
+    }
+    if (v < resolved) {
+        double r = portable_cbrt(resolved);
+        return c * v / (r * r);
+    }
+    return c * portable_cbrt(v);
+}
+
+// The mean slope of W over [lo, hi] (law.rs `resolved_mean_pressure`).
+PD_HD double resolved_mean_pressure(double c, double lo, double hi, double resolved) {
+    if (hi <= lo) {
+        return resolved_pressure(c, hi, resolved);
+    }
+    if (lo >= resolved) {
+        return mean_pressure(c, lo, hi);
+    }
+    return (resolved_potential(c, hi, resolved) - resolved_potential(c, lo, resolved)) / (hi - lo);
+}
+
 // The overlap's local power law V(δ) = V (δ/h)^k about its depth h (law.rs `LocalPowerLaw`).
 struct LocalPowerLaw {
     double volume, depth, exponent;
@@ -222,23 +264,25 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     double sweep = travel * area;
     LocalPowerLaw local = local_power_law(volume, area, o.thickness);
     bool windowed = local.exponent < 1.5; // law.rs SINGULAR_EXPONENT
+    // The regularized potential W of every contact (law.rs `resolved_volume`).
+    double resolved = resolved_volume(stiffness, area, dt, kin.effective_mass);
     double pressure = windowed && sweep > 0.5 * volume
-                          ? mean_pressure(stiffness, volume - sweep, volume + sweep)
-                          : stiffness * portable_cbrt(volume); // law.rs WINDOW_FRACTION
+                          ? resolved_mean_pressure(stiffness, volume - sweep, volume + sweep, resolved)
+                          : resolved_pressure(stiffness, volume, resolved); // law.rs WINDOW_FRACTION
     if (windowed && first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0) {
-        pressure += contact_potential(stiffness, volume - sweep) / (2.0 * sweep);
+        pressure += resolved_potential(stiffness, volume - sweep, resolved) / (2.0 * sweep);
     }
     if (first_touch) {
         state->approach_speed = max_(abs_(vn), 2.2250738585072014e-308);
     }
-    double energy = contact_potential(stiffness, volume);
+    double energy = resolved_potential(stiffness, volume, resolved);
     double v_ref = max_(state->approach_speed, sqrt_(2.0 * energy / kin.effective_mass));
     NormalForce nf = normal_force(params, kin, pressure, area, v_ref, vn, dt);
     // The exit (law.rs): a separating contact that the coming drift carries apart.
     if (windowed && vn > 0.0 && dt > 0.0) {
         double exit = 0.5 * (vn + nf.f_normal * dt / kin.effective_mass) * dt;
         if (local.depth - 2.0 * exit <= 0.0 && local.depth - exit > 0.0) {
-            pressure += contact_potential(stiffness, local_volume_at(local, -exit)) / (2.0 * exit * area);
+            pressure += resolved_potential(stiffness, local_volume_at(local, -exit), resolved) / (2.0 * exit * area);
             nf = normal_force(params, kin, pressure, area, v_ref, vn, dt);
         }
     }

@@ -523,10 +523,13 @@ dir = "{}"
     errors
 }
 
-/// The energy change must shrink at every halving of Δt, t_c/20 … t_c/160, and by at least
-/// 2^(3 × 1.8) over the three (second order; observed 2.54 over the three, the middle halving
-/// nearly flat: docs/validation.md §3). Before the kick window was restricted to face-like
-/// contacts (docs/contact.md §1) the error flattened at −1.5e-4 from t_c/80 on.
+/// The energy change must lie within a second-order envelope at every step, t_c/20 … t_c/160:
+/// `|ΔE(Δt)| ≤ 2 |ΔE(t_c/20)| (20 Δt/t_c)²` (a factor 2 of slack, since the box is chaotic: a
+/// change of step changes which contacts occur, and one halving may gain while the envelope
+/// falls as Δt²), and fall by at least 2^(3 × 1.8) over the three halvings (observed 2.57:
+/// docs/validation.md §3). Before the kick window was restricted to face-like contacts
+/// (docs/contact.md §1) the error flattened at −1.5e-4 from t_c/80 on, twice the envelope at
+/// t_c/160.
 #[test]
 fn aligned_cubes_in_a_periodic_box_conserve_energy_to_second_order() {
     aligned_cubes(CPU);
@@ -545,10 +548,15 @@ fn aligned_cubes(device: Device) {
         .map(|w| (w[0].abs() / w[1].abs()).log2())
         .collect();
     println!("{device:?} aligned cubes: orders {orders:.2?}");
-    assert!(
-        orders.iter().all(|&o| o > 0.0),
-        "the energy change does not shrink with dt: {errors:?}"
-    );
+    for (k, e) in errors.iter().enumerate() {
+        let envelope = 2.0 * errors[0].abs() / 4f64.powi(k as i32);
+        assert!(
+            e.abs() <= envelope,
+            "t_c/{}: energy change {e:e} outside the second-order envelope {envelope:e} \
+             (errors {errors:?})",
+            20 << k
+        );
+    }
     let overall = (errors[0].abs() / errors[3].abs()).log2() / 3.0;
     assert!(
         overall > 1.8,

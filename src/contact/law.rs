@@ -11,7 +11,10 @@
 //!   window, `[V − A_n s, V + A_n s]` with `s = |v_n| Δt/2` (the secant of U, exact at rest);
 //!   a contact's first step also carries the share of the kick before it that the contact
 //!   entered during, and its last step the share of the kick after it that it leaves during.
-//!   Other contacts take the slope at V, which keeps the step symplectic.
+//!   Other contacts take the slope at V, which keeps the step symplectic. Every contact takes
+//!   U regularized below `V* = (A_n Δt √(c/m*)/2)³` ([`resolved_volume`]): linear in V there,
+//!   with a stiffness the step resolves, so that a face resting under a load (whose seed
+//!   stiffness no practical step resolves) stays at rest instead of chattering.
 //! - Normal damping (Hunt–Crossley): `F_d = −ᾱ(e) F_e v_n / v_ref`, `v_ref` the normal speed
 //!   at first touch (contact history), at least `√(2U/m*)`. It is bounded wherever the
 //!   elastic force is, and gives restitution `e` for every exponent of `F_e(δ)`
@@ -186,6 +189,68 @@ pub fn mean_pressure(c: f64, lo: f64, hi: f64) -> f64 {
     0.75 * c * (x + y) * (x * x + y * y) / (x * x + x * y + y * y)
 }
 
+/// `ω Δt` at the stiffest point of a face contact's law as regularized below
+/// [`resolved_volume`]: a resting face then oscillates about its load with at most half a
+/// radian per step, well inside the explicit step's limit of 2 even with several such
+/// contacts on one particle.
+pub const RESOLVED_STEP: f64 = 0.5;
+
+/// The volume `V* = (A_n Δt √(c/m*) / σ)³`, `σ` = [`RESOLVED_STEP`], below which a face
+/// contact's potential is regularized ([`resolved_potential`]). The seed's face law
+/// `F = c A_n^{4/3} δ^{1/3}` has the stiffness `F/(3δ)`, unbounded as `δ → 0`: a face resting
+/// under a load `m g` sits at `δ = (m g / (c A_n^{4/3}))³` (0.6 nm for a soft 2 cm cube, 1e-15 m
+/// at E = 10 MPa), where its oscillation period is far below any practical step, so an explicit
+/// step cannot hold it at rest: it is thrown off, falls back and chatters at the step's scale,
+/// and every hop resets its friction spring. Below `V*` the force grows linearly with the
+/// stiffness `A_n² c V*^{−2/3} = σ² m*/Δt²`, which the step resolves; above it the force is
+/// the seed's. `V*` shrinks as `Δt³`, so the law converges to the seed's as the step does; an
+/// impact at `Δt = t_c/40` reaches about 1e4 times `V*`.
+pub fn resolved_volume(c: f64, area: f64, dt: f64, effective_mass: f64) -> f64 {
+    let x = area * dt * (c / effective_mass).sqrt() / RESOLVED_STEP;
+    x * x * x
+}
+
+/// The regularized face potential: `W(V) = (c/2) V*^{−2/3} V²` below `V*`, `U(V) − (1/4) c
+/// V*^{4/3}` above it ([`resolved_volume`]); zero at touch, continuous with a continuous
+/// slope `W'`, which is `c V*^{−2/3} V` below `V*` and the seed's `c V^{1/3}` above. `U` for
+/// `V* = 0`.
+pub fn resolved_potential(c: f64, v: f64, resolved: f64) -> f64 {
+    if v <= 0.0 {
+        0.0
+    } else if v < resolved {
+        let r = portable_cbrt(resolved);
+        0.5 * c * v * v / (r * r)
+    } else {
+        potential(c, v) - 0.25 * c * resolved * portable_cbrt(resolved)
+    }
+}
+
+/// `W'(V)` of [`resolved_potential`].
+fn resolved_pressure(c: f64, v: f64, resolved: f64) -> f64 {
+    if v <= 0.0 {
+        0.0
+    } else if v < resolved {
+        let r = portable_cbrt(resolved);
+        c * v / (r * r)
+    } else {
+        c * portable_cbrt(v)
+    }
+}
+
+/// The mean slope of [`resolved_potential`] over `[lo, hi]` (`hi > 0`): [`mean_pressure`]
+/// where the window lies above `V*` (the offset cancels), the difference quotient of `W`
+/// where it reaches below (the kick window is used only when it is wider than the volume, so
+/// the quotient has no cancellation).
+pub fn resolved_mean_pressure(c: f64, lo: f64, hi: f64, resolved: f64) -> f64 {
+    if hi <= lo {
+        resolved_pressure(c, hi, resolved)
+    } else if lo >= resolved {
+        mean_pressure(c, lo, hi)
+    } else {
+        (resolved_potential(c, hi, resolved) - resolved_potential(c, lo, resolved)) / (hi - lo)
+    }
+}
+
 /// Below this fraction of the overlap's area scale `V^{2/3}`, `|S|` is taken for a body
 /// wholly inside the other ([`wholly_inside`]).
 pub const INSIDE_AREA_FRACTION: f64 = 1e-6;
@@ -294,25 +359,31 @@ pub fn contact_forces(
     let sweep = travel * area;
     let local = LocalPowerLaw::new(volume, area, overlap.thickness);
     let windowed = local.exponent < SINGULAR_EXPONENT;
+    // The potential is regularized where the step cannot resolve the stiffness (a face at
+    // rest, V below V*); elsewhere W is U up to a constant, and the force is the seed's. Every
+    // contact takes W, so that a face tilting onto an edge (its exponent crossing 3/2) keeps a
+    // continuous force; an edge or a vertex never gets below V* in practice (V* grows as
+    // A_n³, faster than its V).
+    let resolved = resolved_volume(stiffness, area, dt, kin.effective_mass);
     // Where the window is narrow against the volume the slope at V is as good (and keeps the
     // step symplectic: a contact at rest or in slow motion is Eq. 12 exactly).
     let mut pressure = if windowed && sweep > WINDOW_FRACTION * volume {
-        mean_pressure(stiffness, volume - sweep, volume + sweep)
+        resolved_mean_pressure(stiffness, volume - sweep, volume + sweep, resolved)
     } else {
-        stiffness * portable_cbrt(volume)
+        resolved_pressure(stiffness, volume, resolved)
     };
     // A contact that began during the last drift (the last position, V − 2 A s, was apart)
     // missed the part of the last kick's window that lay in contact, [0, V − A s]: it is
     // carried now.
     if windowed && first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0
     {
-        pressure += potential(stiffness, volume - sweep) / (2.0 * sweep);
+        pressure += resolved_potential(stiffness, volume - sweep, resolved) / (2.0 * sweep);
     }
     // Hunt–Crossley damping, on the elastic force's line of action.
     if first_touch {
         state.approach_speed = vn.abs().max(f64::MIN_POSITIVE);
     }
-    let energy = potential(stiffness, volume);
+    let energy = resolved_potential(stiffness, volume, resolved);
     let v_ref = state
         .approach_speed
         .max((2.0 * energy / kin.effective_mass).sqrt());
@@ -337,7 +408,8 @@ pub fn contact_forces(
     if windowed && vn > 0.0 && dt > 0.0 {
         let exit = 0.5 * (vn + f_normal * dt / kin.effective_mass) * dt;
         if local.depth - 2.0 * exit <= 0.0 && local.depth - exit > 0.0 {
-            pressure += potential(stiffness, local.volume_at(-exit)) / (2.0 * exit * area);
+            pressure += resolved_potential(stiffness, local.volume_at(-exit), resolved)
+                / (2.0 * exit * area);
             (f_elastic, c_n, f_normal) = normal(pressure);
         }
     }
