@@ -41,16 +41,9 @@ pub struct StabilityGuard {
 }
 
 impl StabilityGuard {
-    /// The guard of `scene` for the particles now placed (`radius` their circumscribed radii),
-    /// whose contacts store the elastic energy `elastic` (J).
-    pub fn new(
-        settings: &GuardSettings,
-        scene: &Scene,
-        particles: &Particles,
-        radius: &[f64],
-        elastic: f64,
-    ) -> Self {
-        let speed_scale = speed_scale(scene, particles, radius, elastic);
+    /// The guard of a scene whose speed scale is `speed_scale` ([`speed_scale`]; in a
+    /// decomposed run the largest over the ranks, so that every rank holds the same bounds).
+    pub fn new(settings: &GuardSettings, speed_scale: f64) -> Self {
         let max_speed = match settings.max_speed {
             Some(v) => v,
             None if speed_scale > 0.0 => settings.speed_factor * speed_scale,
@@ -72,9 +65,9 @@ impl StabilityGuard {
         }
     }
 
-    /// What is wrong with particle `i` after the drift, if anything: a non-finite value, or a
-    /// speed above the bound.
-    pub fn check_motion(&self, p: &Particles, radius: &[f64], i: usize) -> Option<Instability> {
+    /// What is wrong with particle `i` (circumscribed radius `radius`) after the drift, if
+    /// anything: a non-finite value, or a speed above the bound.
+    pub fn check_motion(&self, p: &Particles, radius: f64, i: usize) -> Option<Instability> {
         let finite = |v: &Vector3<f64>| v.iter().all(|x| x.is_finite());
         for (field, ok) in [
             ("position", finite(&p.position[i])),
@@ -89,7 +82,7 @@ impl StabilityGuard {
                 return Some(Instability::NonFinite { field });
             }
         }
-        let speed = p.velocity[i].norm() + p.angular_velocity[i].norm() * radius[i];
+        let speed = p.velocity[i].norm() + p.angular_velocity[i].norm() * radius;
         (speed > self.max_speed).then_some(Instability::Speed {
             speed,
             bound: self.max_speed,
@@ -190,28 +183,73 @@ impl std::fmt::Display for Instability {
 /// `elastic` (J) would give the lightest particle now placed, `√(2 U / m_min)` (a packing that
 /// starts compressed releases it). Zero for a scene where nothing drives motion.
 pub fn speed_scale(scene: &Scene, particles: &Particles, radius: &[f64], elastic: f64) -> f64 {
-    let d = scene.domain.max - scene.domain.min;
-    let fall = (2.0 * scene.gravity.norm() * d.norm()).sqrt();
-    let max_radius = scene.max_bounding_radius();
-    let insert = scene
-        .insertions
-        .iter()
-        .map(|ins| ins.velocity.norm() + ins.angular_velocity.norm() * max_radius)
-        .fold(0.0, f64::max);
-    let wall = scene
-        .walls
-        .iter()
-        .map(|w| w.motion.max_speed(&w.triangles))
-        .fold(0.0, f64::max);
-    let placed = (0..particles.len())
-        .map(|i| particles.velocity[i].norm() + particles.angular_velocity[i].norm() * radius[i])
-        .filter(|s| s.is_finite())
-        .fold(0.0, f64::max);
-    let lightest = particles.mass.iter().copied().fold(f64::INFINITY, f64::min);
-    let released = if elastic > 0.0 && lightest.is_finite() && lightest > 0.0 {
-        (2.0 * elastic / lightest).sqrt()
-    } else {
-        0.0
-    };
-    fall + insert + wall + placed + released
+    SpeedScale::of(scene, particles, radius, elastic).value()
+}
+
+/// The parts of [`speed_scale`], so that a decomposed run can combine its ranks' particles:
+/// what the scene drives, and the placed particles' fastest point, stored elastic energy and
+/// lightest mass.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpeedScale {
+    /// Free fall, insertion and wall motion (m/s): the same on every rank.
+    pub driven: f64,
+    /// The fastest `|v| + |ω| R` of the placed particles (m/s).
+    pub placed: f64,
+    /// The elastic energy stored in their contacts (J).
+    pub elastic: f64,
+    /// The lightest of them (kg; infinite for none).
+    pub lightest: f64,
+}
+
+impl SpeedScale {
+    /// The parts for `particles` (circumscribed radii `radius`) of `scene`.
+    pub fn of(scene: &Scene, particles: &Particles, radius: &[f64], elastic: f64) -> Self {
+        let d = scene.domain.max - scene.domain.min;
+        let fall = (2.0 * scene.gravity.norm() * d.norm()).sqrt();
+        let max_radius = scene.max_bounding_radius();
+        let insert = scene
+            .insertions
+            .iter()
+            .map(|ins| ins.velocity.norm() + ins.angular_velocity.norm() * max_radius)
+            .fold(0.0, f64::max);
+        let wall = scene
+            .walls
+            .iter()
+            .map(|w| w.motion.max_speed(&w.triangles))
+            .fold(0.0, f64::max);
+        let placed = (0..particles.len().min(radius.len()))
+            .map(|i| {
+                particles.velocity[i].norm() + particles.angular_velocity[i].norm() * radius[i]
+            })
+            .filter(|s| s.is_finite())
+            .fold(0.0, f64::max);
+        let lightest = particles.mass.iter().copied().fold(f64::INFINITY, f64::min);
+        SpeedScale {
+            driven: fall + insert + wall,
+            placed,
+            elastic,
+            lightest,
+        }
+    }
+
+    /// The parts of several ranks' particles as one: the fastest, the summed energy (in rank
+    /// order), the lightest.
+    pub fn merged(parts: &[SpeedScale]) -> Self {
+        parts.iter().skip(1).fold(parts[0], |a, b| SpeedScale {
+            driven: a.driven.max(b.driven),
+            placed: a.placed.max(b.placed),
+            elastic: a.elastic + b.elastic,
+            lightest: a.lightest.min(b.lightest),
+        })
+    }
+
+    /// The speed scale (m/s).
+    pub fn value(&self) -> f64 {
+        let released = if self.elastic > 0.0 && self.lightest.is_finite() && self.lightest > 0.0 {
+            (2.0 * self.elastic / self.lightest).sqrt()
+        } else {
+            0.0
+        };
+        self.driven + self.placed + released
+    }
 }

@@ -494,8 +494,11 @@ fn stopping_pour(dir: &Path, stop: &str) -> PathBuf {
 /// through a closed face, stops every rank after the same step as the single-rank run: the
 /// ranks agree on it and write the state at the stop together, byte-identical to the
 /// single-rank run's, beside the untouched scheduled checkpoint; the run exits non-zero with
-/// the cause named. (Before, the failing rank alone ended the others: no stopped state.) On
-/// the GPU in double, whose trajectory is the CPU's bit for bit.
+/// the cause named, with the single-rank run's speed scale. (Before, the failing rank alone
+/// ended the others: no stopped state.) On the GPU in double, whose trajectory is the CPU's bit
+/// for bit: there the reported speed once took the circumscribed radius of another particle
+/// (the cached radii follow the last list build's order, not the synced state's) and the
+/// decomposed GPU start left insertion out of the speed scale.
 fn stops_every_rank(backend: &str) {
     let dir = temp_dir(&format!("mpi-stop-{backend}"));
     for (stop, step, cause) in [
@@ -519,6 +522,11 @@ fn stops_every_rank(backend: &str) {
             !o.status.success() && err.contains(cause),
             "1 rank, {stop}: {err}"
         );
+        // The guard's bounds come from the whole run's particles on every rank count: the
+        // speed scale the error names is the single-rank one.
+        let scale = err
+            .find("the scene's speed scale is")
+            .map(|k| err[k..].split(')').next().unwrap_or_default().to_string());
         for ranks in [2, 3] {
             let out = dir.join(format!("{stop}-{backend}-{ranks}"));
             let mut cmd = command(ranks, scene.to_str().unwrap(), &out, backend);
@@ -537,6 +545,12 @@ fn stops_every_rank(backend: &str) {
                     && !err.contains("MPI_ABORT"),
                 "{what}: {err}"
             );
+            if let Some(scale) = &scale {
+                assert!(
+                    err.contains(scale.as_str()),
+                    "{what}: not \"{scale}\": {err}"
+                );
+            }
             same_checkpoint(&one, &out, &name, &what);
             let latest = read_checkpoint(&out.join("checkpoints/latest.ckpt")).unwrap();
             assert_eq!(

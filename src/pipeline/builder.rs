@@ -104,6 +104,7 @@ impl SimulationBuilder {
                 // Every rank takes part in the first exchange's rebuild.
                 sim.dirty = true;
                 sim.exchange()?;
+                sim.reset_guard();
                 Ok(sim)
             }
             (None, false) => {

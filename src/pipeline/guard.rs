@@ -3,23 +3,52 @@
 //! particle's contacts.
 
 use super::{Simulation, SimulationError};
-use crate::stability::{Instability, StabilityGuard};
+use crate::stability::{Instability, SpeedScale, StabilityGuard};
 use rayon::prelude::*;
 
 impl Simulation {
     /// Resolves the stability guard's bounds for the particles now placed (their speeds and
     /// the elastic energy of the last force evaluation count in the scene's speed scale).
+    ///
+    /// In a decomposed run the scale is the largest over the ranks (a collective call), so
+    /// that every rank holds the bounds of the single-rank run and a stop does not depend on
+    /// which rank owns the particle.
     pub fn reset_guard(&mut self) {
         if self.radius.len() != self.particles.len() {
             self.refresh_radii();
         }
-        self.guard = StabilityGuard::new(
-            &self.scene.simulation.guard,
+        let mut scale = SpeedScale::of(
             &self.scene,
             &self.particles,
             &self.radius,
             self.stats.elastic_energy,
         );
+        if let Some(par) = self.parallel.as_deref() {
+            let mine = [scale.driven, scale.placed, scale.elastic, scale.lightest];
+            let parts: Vec<SpeedScale> = par
+                .comm
+                .all_gather(&crate::domain::pack::f64s(&mine))
+                .iter()
+                .map(|b| {
+                    let x: Vec<f64> = crate::domain::pack::read_f64s(b).collect();
+                    SpeedScale {
+                        driven: x[0],
+                        placed: x[1],
+                        elastic: x[2],
+                        lightest: x[3],
+                    }
+                })
+                .collect();
+            scale = SpeedScale::merged(&parts);
+        }
+        self.guard = StabilityGuard::new(&self.scene.simulation.guard, scale.value());
+    }
+
+    /// Particle `i`'s circumscribed radius, from its type and scale (the cached radii follow
+    /// the order of the last list build, which a GPU run's synced state need not share).
+    fn circumscribed_radius(&self, i: usize) -> f64 {
+        let kind = self.scene.particle_types[self.particles.kind[i] as usize].template;
+        self.scene.templates[kind].circumscribed_radius * self.particles.scale[i]
     }
 
     /// [`Self::check_finite`] for a restored state, whose cause is the checkpoint.
@@ -43,19 +72,21 @@ impl Simulation {
         let found = (0..n)
             .into_par_iter()
             .with_min_len(crate::par::CHEAP)
-            .find_first(|&i| self.guard.check_motion(p, &self.radius, i).is_some());
+            .find_first(|&i| self.guard.check_motion(p, self.radius[i], i).is_some());
         match found {
-            Some(i) => Err(self.unstable(i, self.guard.check_motion(p, &self.radius, i))),
+            Some(i) => Err(self.unstable(i, self.guard.check_motion(p, self.radius[i], i))),
             None => Ok(()),
         }
     }
 
     /// What the stability guard finds wrong with particle `i` now (finiteness and speed).
     pub fn instability_of(&self, i: usize) -> Option<Instability> {
-        if self.radius.len() != self.particles.len() {
-            return None;
-        }
-        self.guard.check_motion(&self.particles, &self.radius, i)
+        (i < self.particles.len())
+            .then(|| {
+                self.guard
+                    .check_motion(&self.particles, self.circumscribed_radius(i), i)
+            })
+            .flatten()
     }
 
     /// The stability guard's overlap check on the last force evaluation.
