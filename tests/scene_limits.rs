@@ -472,6 +472,55 @@ fn decomposition_errors_name_file_line_and_key() {
 
 /// Unknown keys and type errors no longer hide each other or the value errors: every one is
 /// listed, in one error, with its line (only the first schema error was shown before).
+/// Required keys of the wrong type (`youngs_modulus = "x"`, `material = 3`, `min = "low"` in an
+/// inline table) no longer stop the listing: a placeholder stands in for each, and the type
+/// errors after them in the file and every value error are listed with them, the placeholders'
+/// own value errors left out. (Reading stopped at the first such key before: one error.)
+#[test]
+fn required_keys_of_the_wrong_type_do_not_hide_other_errors() {
+    let text = BASE
+        .replacen("youngs_modulus = 5.0e7", "youngs_modulus = \"x\"", 1)
+        .replacen("density = 2500.0", "density = -2500.0", 1)
+        .replacen("restitution = 0.5", "restitution = 1.5", 1)
+        .replacen("material = \"glass\"", "material = 3", 1)
+        .replacen("min = [-0.1, -0.1, 0.1]", "min = \"low\"", 1)
+        .replacen("count = 20", "count = 20\nkount = 3", 1);
+    let err = parse(&text).expect_err("rejected");
+    let msg = err.to_string();
+    let mut keys = err.keys();
+    keys.sort();
+    assert_eq!(
+        keys,
+        [
+            "insertions[0].kount",
+            "insertions[0].region.min",
+            "material_pairs[0].restitution",
+            "materials[0].density",
+            "materials[0].youngs_modulus",
+            "particle_types[0].material",
+        ],
+        "{msg}"
+    );
+    let line = |needle: &str| 1 + text.lines().position(|l| l.contains(needle)).unwrap();
+    for (needle, key) in [
+        ("youngs_modulus = ", "materials[0].youngs_modulus: "),
+        (
+            "density = -2500.0",
+            "materials[0].density: must be a positive",
+        ),
+        ("restitution = 1.5", "material_pairs[0].restitution: "),
+        ("material = 3", "particle_types[0].material: "),
+        ("min = \"low\"", "insertions[0].region.min: "),
+        ("kount = 3", "insertions[0].kount: unknown key"),
+    ] {
+        assert!(
+            msg.contains(&format!("test.toml:{}: {key}", line(needle))),
+            "{key} at line {}: {msg}",
+            line(needle)
+        );
+    }
+}
+
 #[test]
 fn schema_and_value_errors_are_listed_together() {
     let text = BASE

@@ -75,10 +75,15 @@ pub(super) fn build(text: &str, base: &Path, file_name: &str) -> Result<Scene, S
     // Schema errors (unknown keys, wrong types) are collected one at a time: each offending
     // key is blanked out of the text (spaces, so every span and line stays where it was) and
     // the text is read again, so that all of them are listed together and the value checks
-    // still run on what remains. A missing required key cannot be blanked away: reading stops
-    // there with what was found.
+    // still run on what remains. A required key of the wrong type, once blanked, is missing:
+    // a placeholder of a type the schema takes is written where it was, so that reading goes
+    // on (the placeholder's own value errors are not reported). A required key missing from
+    // the file stops reading there with what was found.
     let mut errors: Vec<KeyError> = Vec::new();
     let mut current = text.to_string();
+    // Paths blanked for their type (by key), and the keys standing on a placeholder.
+    let mut blanked_at: Vec<(String, String)> = Vec::new();
+    let mut placeholders: Vec<String> = Vec::new();
     let raw: SceneFile = loop {
         let e = match toml::from_str::<SceneFile>(&current) {
             Ok(raw) => break raw,
@@ -95,12 +100,28 @@ pub(super) fn build(text: &str, base: &Path, file_name: &str) -> Result<Scene, S
         };
         let missing = e.message().starts_with("missing field ");
         // A key blanked for its type is then missing: it was reported already.
-        if !(missing && errors.iter().any(|k| k.key == key)) {
-            errors.push(KeyError { key, line, message });
+        if missing && let Some((_, at)) = blanked_at.iter().find(|(k, _)| *k == key) {
+            match placeholder(&current, text, &index, at, &key) {
+                Some(t) if !placeholders.contains(&key) => {
+                    placeholders.push(key);
+                    current = t;
+                    continue;
+                }
+                _ => {
+                    return Err(SceneError::Invalid {
+                        file: file_name.to_string(),
+                        errors,
+                    });
+                }
+            }
         }
         let blanked = (!missing && errors.len() < 100)
             .then(|| blank_key(&current, &index, &path))
             .flatten();
+        if blanked.is_some() {
+            blanked_at.push((key.clone(), path.clone()));
+        }
+        errors.push(KeyError { key, line, message });
         match blanked {
             Some(t) if toml::de::DeTable::parse(&t).is_ok() => current = t,
             _ => {
@@ -112,12 +133,28 @@ pub(super) fn build(text: &str, base: &Path, file_name: &str) -> Result<Scene, S
         }
     };
     errors.sort_by_key(|e| e.line);
+    let schema_errors = errors.len();
     let mut v = Validator {
         base,
         index: &index,
         errors,
     };
     let scene = v.scene(raw, file_name);
+    // A placeholder's own value errors say nothing about the file, nor does a blanked key's
+    // absence (its type error is listed).
+    let on_placeholder = |key: &str| {
+        blanked_at.iter().map(|(k, _)| k).any(|p| {
+            key == p
+                || key
+                    .strip_prefix(p.as_str())
+                    .is_some_and(|r| r.starts_with(['.', '[']))
+        })
+    };
+    let mut k = 0;
+    v.errors.retain(|e| {
+        k += 1;
+        k <= schema_errors || !on_placeholder(&e.key)
+    });
     if v.errors.is_empty() {
         Ok(scene)
     } else {
@@ -126,6 +163,46 @@ pub(super) fn build(text: &str, base: &Path, file_name: &str) -> Result<Scene, S
             errors: v.errors,
         })
     }
+}
+
+/// `current` with a placeholder value written where the key at `path` of the original `text`
+/// was (blanked for its type, and required): the first of `0`, `""`, `false`, `[]`, `{}` with
+/// which the file reads past that key, written as `name=value` into the key's blanked span,
+/// padded with spaces (so no span or line moves). `None` when none fits or none is taken.
+fn placeholder(
+    current: &str,
+    text: &str,
+    index: &SpanIndex,
+    path: &str,
+    key: &str,
+) -> Option<String> {
+    let (name, value) = index.spans_of(path)?;
+    let span = name.start.min(value.start)..name.end.max(value.end);
+    if text[span.clone()].contains('\n') {
+        return None;
+    }
+    let key_text = &text[name];
+    ["0", "\"\"", "false", "[]", "{}"]
+        .iter()
+        .find_map(|candidate| {
+            let written = format!("{key_text}={candidate}");
+            if written.len() > span.len() || written.contains('\n') {
+                return None;
+            }
+            let mut t = current.to_string();
+            let padded = format!("{written:<width$}", width = span.len());
+            t.replace_range(span.clone(), &padded);
+            // Still refused there: the error falls on the placeholder, or names the key.
+            let still = match toml::from_str::<SceneFile>(&t) {
+                Ok(_) => false,
+                Err(e) => {
+                    let at = e.span().unwrap_or(0..0);
+                    (at.start < span.end && span.start < at.end.max(at.start + 1))
+                        || schema::explain_serde_message(&index.path_at(&at), e.message()).0 == key
+                }
+            };
+            (!still && toml::de::DeTable::parse(&t).is_ok()).then_some(t)
+        })
 }
 
 /// `text` with the key at `path` and its value replaced by spaces (newlines kept, so spans and
