@@ -3,7 +3,7 @@
 `polydem bench` reports collected in docs/data/neighbor_study.jsonl (one JSON object per run:
 the scene, the mode, seconds per step, the `neighbor` report) and prints the table, and writes
 docs/neighbor_study.svg: seconds per step of each mode per scene, and the hybrid gain G against
-the seed's G_max (shared/papers/hybrid-cpu-gpu-verlet.txt, Eq. 7 and 9).
+the seed's G_max (Skorych & Dosta, docs/design.md §10; Eq. 7 and 9).
 
     python3 scripts/neighbor_study.py [data.jsonl] [out.svg]
 """

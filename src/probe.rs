@@ -82,7 +82,7 @@ fn shape_spec(name: &str, value: &Value) -> Result<ShapeSpec> {
     Ok(match source {
         "vertices" => ShapeSpec::Vertices(
             serde_json::from_value(field("vertices").clone())
-                .map_err(|e| anyhow!("shapes.{name}.vertices: expected [[x,y,z], ...]: {e}"))?,
+                .with_context(|| format!("shapes.{name}.vertices: expected [[x,y,z], ...]"))?,
         ),
         "mesh" => ShapeSpec::Mesh(
             field("mesh")
@@ -159,13 +159,13 @@ fn load_shapes(
                     .map(|v| nalgebra::Point3::new(v[0], v[1], v[2]))
                     .collect();
                 ConvexTemplate::from_points(name, &pts)
-                    .map_err(|e| anyhow!("shapes.{name}.vertices: {e}"))?
+                    .with_context(|| format!("shapes.{name}.vertices"))?
             }
             ShapeSpec::Mesh(mesh) => ConvexTemplate::from_file(&base.join(&mesh))
-                .map_err(|e| anyhow!("shapes.{name}.mesh: {e}"))?,
+                .with_context(|| format!("shapes.{name}.mesh"))?,
             ShapeSpec::Generator { generator, size } => Generator::parse(&generator, size)
                 .and_then(|g| g.build())
-                .map_err(|e| anyhow!("shapes.{name}.generator: {e}"))?,
+                .with_context(|| format!("shapes.{name}.generator"))?,
         };
         if template.sphere {
             return Err(anyhow!(

@@ -12,7 +12,7 @@ use polydem::pipeline::Simulation;
 use polydem::scene::load_scene;
 
 /// Baker & Kudrolli (Phys. Rev. E 82, 061304, 2010), poured (0.51) then tapped (0.63)
-/// dodecahedra, each ±0.01 (../shared/reference/validation.md §5): from the loose value's lower
+/// dodecahedra, each ±0.01 (docs/validation.md §6): from the loose value's lower
 /// bound to the dense value's upper bound.
 const PACKING_RANGE: (f64, f64) = (0.50, 0.64);
 /// Particle size: circumscribed diameter (m).

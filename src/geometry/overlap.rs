@@ -28,7 +28,7 @@
 //!   lying on coincident planes of A and B counts half to each;
 //! - `M_B = Σ_{u ∈ B} A_u (c_u − c) × n_u`, the moment of that surface about the overlap
 //!   centroid `c`, from which the energy-conserving torque on B about its centre `x_B` is
-//!   `−U'(V) (M_B + (c − x_B) × S)` (../shared/reference/validation.md §1). For A the moment is
+//!   `−U'(V) (M_B + (c − x_B) × S)` (docs/contact.md §1, seed paper Eq. 13). For A the moment is
 //!   `−M_B` (the closed surface has zero vector moment).
 
 use super::Real;

@@ -1,5 +1,5 @@
 //! The pair list built on the host for the GPU backend's particle slots: the host half of the
-//! hybrid CPU–GPU scheme (shared/papers/hybrid-cpu-gpu-verlet.txt, Sec. 3.1, operations A1,
+//! hybrid CPU–GPU scheme (Skorych & Dosta, docs/design.md §10; Sec. 3.1, operations A1,
 //! B1, B5 and B12 of its Fig. 1). The host takes the device's positions in the device's slot
 //! order, sorts the particles by cell as the device build does (the GPU reorders its arrays by
 //! this order when it takes the list, for locality), and lists the candidate pairs in the new

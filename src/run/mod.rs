@@ -25,7 +25,7 @@ use crate::domain::{Comm, SerialComm};
 use crate::io::{remove_temporary_files, write_atomic};
 use crate::pipeline::{RestoredState, Simulation};
 use crate::scene::{Inserter, InserterState, load_scene};
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Context, Result};
 use checkpoints::{KeptCheckpoints, SceneId, read_restart, save_checkpoint, stopped_unstable};
 use output::{Outputs, Schedule};
 use serde_json::json;
@@ -124,7 +124,7 @@ fn start_or_restore(
     let state: InserterState = serde_json::from_slice(&header.inserter)
         .with_context(|| format!("{}: insertion state", path.display()))?;
     let inserter =
-        Inserter::try_restore(&scene, &state).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        Inserter::try_restore(&scene, &state).with_context(|| path.display().to_string())?;
     let (particles, history) = local.map(|c| (c.particles, c.history)).unwrap_or_default();
     let mut sim = Simulation::builder(scene)
         .comm(comm.clone())

@@ -1,5 +1,5 @@
 //! Stage 2 on the GPU: who builds the pair list, per `[simulation.neighbor] mode`
-//! (docs/design.md §7; the hybrid CPU–GPU seed, shared/papers/hybrid-cpu-gpu-verlet.txt).
+//! (docs/design.md §7; the hybrid CPU–GPU seed, Skorych & Dosta, docs/design.md §10).
 //!
 //! - `gpu`: the device bins, sorts and searches ([`super::pairs`]).
 //! - `cpu`: the seed's sequential mode (its Fig. 1A): at a rebuild the host takes the device's
