@@ -9,7 +9,7 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use polydem::geometry::Real;
 use polydem::geometry::gjk_intersect;
-use polydem::geometry::overlap::{PairWorkspace, overlap_pair};
+use polydem::geometry::pair::{PairWorkspace, overlap_pair};
 use polydem::rng::Rng;
 use polydem::shape::{ConvexTemplate, Generator};
 use std::hint::black_box;

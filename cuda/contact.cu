@@ -257,7 +257,7 @@ PD_DEVICE void evaluate_pair(const PairArgs& q, size_t k) {
 #if PD_DOUBLE_GEOMETRY
     int status = overlap_pair_t<GeomReal, true>(ws, A, B, &g);
 #else
-    // Mixed precision (geometry::overlap::overlap_pair_mixed): f32 where the centre proves an
+    // Mixed precision (geometry::pair::overlap_pair_mixed): f32 where the centre proves an
     // overlap thick enough for it, f64 otherwise (STATUS_WIDE), and f64 again where f32 cannot
     // resolve the dual hull: a thin slab between two faces lying on each other puts its two
     // large faces' dual points at 1/δ and the others at ~1/L.

@@ -394,7 +394,7 @@ template <class T> struct PairWorkspace {
     OverlapWorkspace<T> overlap;
 };
 
-// overlap::axis_separates: whether the plane with normal `axis` separates A from B by a gap of
+// pair::axis_separates: whether the plane with normal `axis` separates A from B by a gap of
 // more than `margin`: min_A axis·a − max_B axis·b > margin |axis|. Two support evaluations over
 // the template vertices in each body's frame: the frame-coherence test run before GJK.
 PD_HD bool axis_separates(const BodyRef& A, const BodyRef& B, V3<double> axis, double margin) {
@@ -412,7 +412,7 @@ PD_HD bool axis_separates(const BodyRef& A, const BodyRef& B, V3<double> axis, d
     return min_a - max_b > margin * norm(axis);
 }
 
-// overlap::overlap_pair: narrow phase and overlap of A against B computed in arithmetic T in a
+// pair::overlap_pair: narrow phase and overlap of A against B computed in arithmetic T in a
 // frame centred near the contact (docs/design.md §3): frame origin on the centre line where the
 // bounding spheres would touch, planes culled to those that reach the other's ball and the faces
 // that miss it set aside, Chebyshev centre started at the origin (the verdict when it proves an

@@ -49,7 +49,7 @@ enum GeometryStatus {
 };
 
 // Mixed precision evaluates in f64 a pair whose Chebyshev radius (about half its overlap's
-// thickness) is below this many f32 epsilons of ra + rb (geometry::overlap::MIXED_WIDE_ULPS).
+// thickness) is below this many f32 epsilons of ra + rb (geometry::pair::MIXED_WIDE_ULPS).
 #define PD_MIXED_WIDE_ULPS 512.0
 
 // Mixed precision evaluates in f64 a pair whose f32 dual hull has a vertex outside one of the

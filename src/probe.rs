@@ -18,7 +18,8 @@
 //! with triangles counter-clockwise seen from the side the particle is meant to be on.
 
 use crate::geometry::clip::facet_contact;
-use crate::geometry::overlap::{OverlapWorkspace, PairWorkspace, overlap_pair};
+use crate::geometry::overlap::OverlapWorkspace;
+use crate::geometry::pair::{PairWorkspace, overlap_pair};
 use crate::geometry::polytope::{PosedPolytope, cast, widen};
 use crate::geometry::{Overlap, Real};
 use crate::shape::{ConvexTemplate, Generator, MESH_EXTENSIONS};

@@ -2,7 +2,7 @@
 //! `overlap.cuh`, `polytope.cuh`, `prism.cuh`) with the Rust reference, on a machine without a
 //! GPU: the headers compile as plain host C++17, `cuda/host/geometry_harness.cpp` runs them on
 //! cases written by this test, and the results are compared with
-//! `geometry::overlap::{overlap_pair, axis_separates}` and
+//! `geometry::pair::{overlap_pair, axis_separates}` and
 //! `geometry::clip::{facet_prism, prism_overlap_culled}` in f64 and f32.
 //!
 //! The headers replay the Rust code operation for operation (nalgebra's orders of summation
@@ -17,10 +17,8 @@ use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use polydem::geometry::Real;
 use polydem::geometry::clip::{facet_prism, prism_overlap_culled};
 use polydem::geometry::gjk_intersect;
-use polydem::geometry::overlap::{
-    Overlap, OverlapError, OverlapWorkspace, PairGeometry, PairWorkspace, axis_separates,
-    overlap_pair,
-};
+use polydem::geometry::overlap::{Overlap, OverlapError, OverlapWorkspace};
+use polydem::geometry::pair::{PairGeometry, PairWorkspace, axis_separates, overlap_pair};
 use polydem::geometry::polytope::{PosedPolytope, cast};
 use polydem::geometry::quickhull::HullError;
 use polydem::rng::Rng;

@@ -23,14 +23,14 @@ mod common;
 
 use common::*;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
-use polydem::geometry::overlap::{
+use polydem::geometry::pair::{
     MIXED_VERTEX_SLACK, PairWorkspace, overlap_pair, overlap_pair_mixed,
 };
 use polydem::io::Packing;
 use polydem::shape::ConvexTemplate;
 
 /// Whether a pair's geometry is a contact: intersecting with a positive overlap volume.
-fn in_contact(g: &polydem::geometry::overlap::PairGeometry) -> bool {
+fn in_contact(g: &polydem::geometry::pair::PairGeometry) -> bool {
     g.intersects && g.overlap.volume > 0.0
 }
 

@@ -8,7 +8,7 @@ mod common;
 use common::*;
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use polydem::geometry::Real;
-use polydem::geometry::overlap::{PairGeometry, PairWorkspace, overlap_pair};
+use polydem::geometry::pair::{PairGeometry, PairWorkspace, overlap_pair};
 use polydem::shape::{ConvexTemplate, Generator};
 use std::f64::consts::{FRAC_PI_4, SQRT_2};
 

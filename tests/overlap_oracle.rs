@@ -7,7 +7,7 @@ mod common;
 use common::*;
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use polydem::geometry::gjk_intersect;
-use polydem::geometry::overlap::{PairWorkspace, overlap_pair};
+use polydem::geometry::pair::{PairWorkspace, overlap_pair};
 use polydem::rng::Rng;
 
 /// One random pair of the acceptance set.

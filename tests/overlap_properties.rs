@@ -4,7 +4,7 @@ mod common;
 
 use common::*;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
-use polydem::geometry::overlap::{PairWorkspace, overlap_pair};
+use polydem::geometry::pair::{PairWorkspace, overlap_pair};
 use proptest::prelude::*;
 use std::sync::OnceLock;
 

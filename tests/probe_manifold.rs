@@ -32,7 +32,7 @@ mod common;
 
 use common::{polydem_bin, repo_root};
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
-use polydem::geometry::overlap::{PairWorkspace, overlap_pair};
+use polydem::geometry::pair::{PairWorkspace, overlap_pair};
 use polydem::rng::Rng;
 use polydem::shape::{ConvexTemplate, Generator, load_mesh};
 use serde_json::{Value, json};

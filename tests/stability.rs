@@ -371,7 +371,7 @@ fn a_body_wholly_inside_another_is_pushed_out_along_the_line_of_centres() {
     use nalgebra::Isometry3;
     use polydem::contact::history::ContactState;
     use polydem::contact::{ContactKinematics, ContactParameters, contact_forces};
-    use polydem::geometry::overlap::{PairWorkspace, overlap_pair};
+    use polydem::geometry::pair::{PairWorkspace, overlap_pair};
     use polydem::shape::ConvexTemplate;
     let cube = |edge: f64| {
         let h = edge / 2.0;

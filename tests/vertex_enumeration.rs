@@ -11,9 +11,10 @@ mod common;
 use common::*;
 use nalgebra::Vector3;
 use polydem::geometry::overlap::{
-    Overlap, OverlapWorkspace, PairWorkspace, overlap_pair, overlap_volume,
-    overlap_volume_by_enumeration, overlap_volume_by_hull,
+    Overlap, OverlapWorkspace, overlap_volume, overlap_volume_by_enumeration,
+    overlap_volume_by_hull,
 };
+use polydem::geometry::pair::{PairWorkspace, overlap_pair};
 use polydem::geometry::polytope::Plane;
 use polydem::geometry::vertex_enumeration::ENUM_MAX_PLANES;
 use polydem::rng::Rng;

@@ -76,7 +76,7 @@ pub struct Simulation {
     pub parallel: Option<Box<Parallel>>,
     pairs: PairList,
     /// Per pair of `pairs`, the axis that separated it at the last evaluation (zero: none
-    /// known), tried before GJK ([`crate::geometry::overlap::axis_separates`]); cleared when
+    /// known), tried before GJK ([`crate::geometry::pair::axis_separates`]); cleared when
     /// the list is rebuilt.
     separating_axes: Vec<Vector3<f64>>,
     bounds: Bounds,

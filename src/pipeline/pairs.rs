@@ -8,7 +8,7 @@ use crate::contact::{
     ContactForces, ContactKey, ContactKinematics, ContactParameters, ContactState, contact_forces,
 };
 use crate::geometry::Overlap;
-use crate::geometry::overlap::{PairWorkspace, axis_separates, overlap_pair};
+use crate::geometry::pair::{PairWorkspace, axis_separates, overlap_pair};
 use crate::geometry::sphere::sphere_lens;
 use crate::state::Particles;
 use nalgebra::{Isometry3, Vector3};

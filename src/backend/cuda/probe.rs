@@ -2,7 +2,7 @@
 //! GJK + overlap (stages 4–5) for given pairs of posed templates and the facet-prism overlap
 //! (stage 6) for given body–triangle cases, each evaluated in f64 and in f32 by the same device
 //! functions the step uses. It is how the tests hold the kernels, run on a GPU, to
-//! `geometry::overlap::overlap_pair` and `geometry::clip::prism_overlap_culled`.
+//! `geometry::pair::overlap_pair` and `geometry::clip::prism_overlap_culled`.
 
 use super::error::CudaError;
 use super::kernels::{KernelConfig, Precision, compile};
