@@ -24,9 +24,8 @@ use polydem::scene::parse_scene;
 use std::path::Path;
 use std::process::Command;
 
-fn sphere_scene(e_modulus: f64, gravity: f64, dt: f64, guard: &str) -> String {
-    let types = "[[particle_types]]\nname = \"ball\"\nmaterial = \"m\"\n\
-                 generator = { kind = \"sphere\", size = 0.02 }\n";
+/// A scene of one particle type `types` (elastic, frictionless) with the guard table `guard`.
+fn guard_scene(types: &str, e_modulus: f64, gravity: f64, dt: f64, guard: &str) -> String {
     let text = scene_text(&SceneSpec {
         e_modulus,
         poisson: 0.3,
@@ -40,6 +39,12 @@ fn sphere_scene(e_modulus: f64, gravity: f64, dt: f64, guard: &str) -> String {
         types,
     });
     format!("{text}\n[simulation.guard]\n{guard}\n")
+}
+
+fn sphere_scene(e_modulus: f64, gravity: f64, dt: f64, guard: &str) -> String {
+    let types = "[[particle_types]]\nname = \"ball\"\nmaterial = \"m\"\n\
+                 generator = { kind = \"sphere\", size = 0.02 }\n";
+    guard_scene(types, e_modulus, gravity, dt, guard)
 }
 
 fn place(sim: &mut Simulation, at: &[(Vector3<f64>, Vector3<f64>)]) {
@@ -163,19 +168,7 @@ fn cube_scene(a: f64, e_modulus: f64, gravity: f64, dt: f64, guard: &str) -> Sim
          generator = {{ kind = \"cube\", size = {:?} }}\n",
         a * 3f64.sqrt()
     );
-    let text = scene_text(&SceneSpec {
-        e_modulus,
-        poisson: 0.3,
-        density: 2500.0,
-        restitution: 1.0,
-        friction: 0.0,
-        gravity,
-        dt,
-        wall_scale: None,
-        wall_motion: None,
-        types: &types,
-    });
-    let text = format!("{text}\n[simulation.guard]\n{guard}\n");
+    let text = guard_scene(&types, e_modulus, gravity, dt, guard);
     let scene = parse_scene(&text, &repo_root(), "guard.toml").unwrap();
     Simulation::builder(scene).build().unwrap()
 }

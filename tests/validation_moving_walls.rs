@@ -115,6 +115,17 @@ fn cube_on_moving_floor(
     sim
 }
 
+/// The cube at rest on a floor that does not move, unperturbed.
+fn cube_on_fixed_floor(stepping: Stepping) -> Simulation {
+    cube_on_moving_floor(
+        stepping,
+        "{ kind = \"translate\", velocity = [0.0, 0.0, 0.0] }",
+        [0.0, 0.0],
+        Vector3::zeros(),
+        None,
+    )
+}
+
 fn run_until(sim: &mut Simulation, t: f64) {
     while sim.time < t - 0.5 * sim.dt {
         sim.step().unwrap();
@@ -356,13 +367,7 @@ fn resting_faces_at_the_default_step_on_gpu() {
 
 fn resting_cube(device: Device) {
     for stepping in DEFAULT_STEPS {
-        let sim = cube_on_moving_floor(
-            stepping,
-            "{ kind = \"translate\", velocity = [0.0, 0.0, 0.0] }",
-            [0.0, 0.0],
-            Vector3::zeros(),
-            None,
-        );
+        let sim = cube_on_fixed_floor(stepping);
         let t = sim.scene.templates[0].clone();
         let (m, c) = (RHO * t.volume, stepping.e_modulus / t.equivalent_radius);
         let x = sim.dt * (c / m).sqrt() / polydem::contact::law::RESOLVED_STEP;
@@ -407,13 +412,7 @@ fn resting_cube(device: Device) {
 #[test]
 fn a_stack_of_cubes_rests_at_the_default_step() {
     for stepping in DEFAULT_STEPS {
-        let mut sim = cube_on_moving_floor(
-            stepping,
-            "{ kind = \"translate\", velocity = [0.0, 0.0, 0.0] }",
-            [0.0, 0.0],
-            Vector3::zeros(),
-            None,
-        );
+        let mut sim = cube_on_fixed_floor(stepping);
         let t = sim.scene.templates[0].clone();
         let z0 = sim.particles.position[0].z;
         for k in 1..4u64 {
