@@ -1,5 +1,6 @@
 //! Contact physics: the contact law, its history store, and wall contacts.
 
+mod facet_grid;
 pub mod history;
 pub mod law;
 pub mod restitution;
