@@ -20,6 +20,7 @@
 
 use super::{Face, MAX_INPUT_POINTS, MAX_TEMPLATE_FACES, MAX_TEMPLATE_VERTICES, ShapeError};
 use nalgebra::{Point3, Vector3};
+use super::faces::merge_regions;
 use std::collections::HashMap;
 
 /// Points within this fraction of the bounding-box diagonal of a plane count as on it. It is set
@@ -130,7 +131,7 @@ pub(crate) fn too_many_faces(src: &str, faces: usize) -> ShapeError {
 }
 
 /// Why one hull construction failed.
-enum AttemptError {
+pub(super) enum AttemptError {
     /// The merged faces are more than a template may have: final, not worth a retry.
     TooManyFaces(usize),
     /// A numerical or topological failure that a retry (unwelded, perturbed) may avoid.
@@ -271,175 +272,6 @@ fn attempt(
         edges,
         exact_hull_volume,
     })
-}
-
-/// One merged face before vertex selection.
-struct Region {
-    /// Unit outward normal: the normalised sum of the member triangles' area vectors.
-    normal: Vector3<f64>,
-    /// Boundary loop (hull vertex indices), counter-clockwise seen from outside.
-    boundary: Vec<usize>,
-}
-
-/// Groups the closed triangle mesh `tris` into planar regions (see the module docs).
-fn merge_regions(
-    hull: &[Point3<f64>],
-    tris: &[[usize; 3]],
-    tol: f64,
-) -> Result<Vec<Region>, AttemptError> {
-    // Directed edge → triangle; the quickhull output must be a closed, oriented manifold.
-    let mut edge_tri: HashMap<(usize, usize), usize> = HashMap::with_capacity(3 * tris.len());
-    for (ti, t) in tris.iter().enumerate() {
-        for k in 0..3 {
-            if edge_tri.insert((t[k], t[(k + 1) % 3]), ti).is_some() {
-                return Err("quickhull mesh has a repeated edge".into());
-            }
-        }
-    }
-    let twin = |a: usize, b: usize| edge_tri.get(&(b, a)).copied();
-    if edge_tri.keys().any(|&(a, b)| twin(a, b).is_none()) {
-        return Err("quickhull mesh is not closed".into());
-    }
-    let area_vec = |t: &[usize; 3]| (hull[t[1]] - hull[t[0]]).cross(&(hull[t[2]] - hull[t[0]]));
-    let mut order: Vec<usize> = (0..tris.len()).collect();
-    order.sort_by(|&s, &t| {
-        area_vec(&tris[t])
-            .norm()
-            .total_cmp(&area_vec(&tris[s]).norm())
-    });
-
-    // Region growing from the largest triangles, against the seed's fixed plane.
-    let mut region = vec![usize::MAX; tris.len()];
-    let mut count = 0;
-    for &seed in &order {
-        if region[seed] != usize::MAX {
-            continue;
-        }
-        let r = count;
-        count += 1;
-        region[seed] = r;
-        let Some(n0) = area_vec(&tris[seed]).try_normalize(0.0) else {
-            continue; // zero-area triangle: left alone here, merged below
-        };
-        let d0 = tris[seed]
-            .iter()
-            .map(|&v| n0.dot(&hull[v].coords))
-            .sum::<f64>()
-            / 3.0;
-        let mut stack = vec![seed];
-        while let Some(t) = stack.pop() {
-            for k in 0..3 {
-                let Some(nb) = twin(tris[t][k], tris[t][(k + 1) % 3]) else {
-                    continue;
-                };
-                let on_plane = tris[nb]
-                    .iter()
-                    .all(|&v| (n0.dot(&hull[v].coords) - d0).abs() <= tol);
-                if region[nb] == usize::MAX && on_plane {
-                    region[nb] = r;
-                    stack.push(nb);
-                }
-            }
-        }
-    }
-
-    // Slivers: a region whose area is below tol × its longest edge joins the neighbouring region
-    // with which it shares the most edges (its vertices lie on that region's boundary).
-    let mut area = vec![Vector3::zeros(); count];
-    let mut longest = vec![0.0f64; count];
-    for (ti, t) in tris.iter().enumerate() {
-        area[region[ti]] += area_vec(t);
-        for k in 0..3 {
-            longest[region[ti]] =
-                longest[region[ti]].max((hull[t[(k + 1) % 3]] - hull[t[k]]).norm());
-        }
-    }
-    let sliver: Vec<bool> = (0..count)
-        .map(|r| 0.5 * area[r].norm() <= tol * longest[r])
-        .collect();
-    // Every region that is not a sliver stays one face (slivers only join others), so the face
-    // count is known here: a hull with too many faces is refused before the work below and the
-    // vertex selection, which grow with the square of the hull's size.
-    let faces = sliver.iter().filter(|s| !**s).count();
-    if faces > MAX_TEMPLATE_FACES {
-        return Err(AttemptError::TooManyFaces(faces));
-    }
-    let mut members: Vec<Vec<usize>> = vec![Vec::new(); count];
-    for (ti, &r) in region.iter().enumerate() {
-        members[r].push(ti);
-    }
-    // `target` is a union-find forest: a merged sliver points at the region it joined.
-    let mut target: Vec<usize> = (0..count).collect();
-    let root = |target: &[usize], mut r: usize| {
-        while target[r] != r {
-            r = target[r];
-        }
-        r
-    };
-    for r in (0..count).filter(|&r| sliver[r]) {
-        let mut shared: HashMap<usize, usize> = HashMap::new();
-        for t in members[r].iter().map(|&ti| &tris[ti]) {
-            for k in 0..3 {
-                if let Some(nb) = twin(t[k], t[(k + 1) % 3]) {
-                    let q = root(&target, region[nb]);
-                    if q != r {
-                        *shared.entry(q).or_insert(0) += 1;
-                    }
-                }
-            }
-        }
-        if let Some((&q, _)) = shared
-            .iter()
-            .max_by_key(|(q, n)| (**n, std::cmp::Reverse(**q)))
-        {
-            target[r] = q;
-        }
-    }
-    for r in region.iter_mut() {
-        *r = root(&target, *r);
-    }
-
-    // Boundary loops: per region, the directed edges whose twin lies in another region.
-    let mut ids: Vec<usize> = region.clone();
-    ids.sort_unstable();
-    ids.dedup();
-    let slot = |r: usize| ids.binary_search(&r).unwrap_or(0);
-    let mut next: Vec<HashMap<usize, usize>> = vec![HashMap::new(); ids.len()];
-    let mut sum = vec![Vector3::zeros(); ids.len()];
-    for (ti, t) in tris.iter().enumerate() {
-        let r = slot(region[ti]);
-        sum[r] += area_vec(t);
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            let inside = twin(a, b).is_some_and(|nb| region[nb] == region[ti]);
-            if !inside && next[r].insert(a, b).is_some() {
-                return Err("a merged face touches itself at a vertex".into());
-            }
-        }
-    }
-    let mut out = Vec::with_capacity(ids.len());
-    for (r, edges) in next.iter().enumerate() {
-        let Some(&start) = edges.keys().min() else {
-            return Err("a merged face has no boundary".into());
-        };
-        let mut boundary = vec![start];
-        let mut v = start;
-        while let Some(&w) = edges.get(&v) {
-            if w == start || boundary.len() > edges.len() {
-                break;
-            }
-            boundary.push(w);
-            v = w;
-        }
-        if boundary.len() != edges.len() {
-            return Err("a merged face is not a disk".into());
-        }
-        let normal = sum[r]
-            .try_normalize(0.0)
-            .ok_or("a merged face has zero area")?;
-        out.push(Region { normal, boundary });
-    }
-    Ok(out)
 }
 
 /// Checks that the points span a volume and returns their bounding-box diagonal.

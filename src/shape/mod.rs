@@ -5,6 +5,7 @@
 //! in [`ConvexTemplate::file_to_body`]. Coplanar hull triangles are merged into one polygon face
 //! with one outward normal (seed paper Sec. 2.1), which is what the contact kernels consume.
 
+mod faces;
 mod generators;
 mod hull;
 mod import;
