@@ -7,7 +7,11 @@ use nalgebra::Vector3;
 /// Whether triangle `t` meets the axis-aligned box of centre `c` and half-widths `h`, by the
 /// separating-axis theorem: the box's three axes, the triangle's normal and the nine cross
 /// products of a box axis with a triangle edge (Akenine-Möller's triangle–box test).
-pub(super) fn triangle_meets_box(t: &[Vector3<f64>; 3], c: &Vector3<f64>, h: &Vector3<f64>) -> bool {
+pub(super) fn triangle_meets_box(
+    t: &[Vector3<f64>; 3],
+    c: &Vector3<f64>,
+    h: &Vector3<f64>,
+) -> bool {
     let v = t.map(|p| p - c);
     let separated = |axis: &Vector3<f64>| {
         let p = v.map(|q| axis.dot(&q));

@@ -12,13 +12,13 @@
 //! force is then independent of how the wall is meshed and is never counted twice across shared
 //! edges and vertices.
 
+use super::facet_grid::{FacetGrid, triangle_meets_box};
 use crate::geometry::clip::{facet_prism, prism_overlap_culled};
 use crate::geometry::overlap::{OverlapError, OverlapWorkspace};
 use crate::geometry::sphere::sphere_facet;
 use crate::geometry::{Overlap, Plane, PosedPolytope};
 use crate::shape::ConvexTemplate;
 use nalgebra::{Isometry3, Point3, Vector3};
-use super::facet_grid::{FacetGrid, triangle_meets_box};
 use std::collections::HashMap;
 
 /// A vertex's coordinates as bits, to find shared edges exactly.

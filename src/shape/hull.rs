@@ -18,9 +18,9 @@
 //! Because the faces come from the quickhull's own triangle adjacency, the topology is consistent
 //! by construction even for noisy input near the tolerance.
 
+use super::faces::merge_regions;
 use super::{Face, MAX_INPUT_POINTS, MAX_TEMPLATE_FACES, MAX_TEMPLATE_VERTICES, ShapeError};
 use nalgebra::{Point3, Vector3};
-use super::faces::merge_regions;
 use std::collections::HashMap;
 
 /// Points within this fraction of the bounding-box diagonal of a plane count as on it. It is set
