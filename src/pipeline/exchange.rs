@@ -204,13 +204,8 @@ impl Simulation {
 
     /// Each particle's bounding (circumscribed) radius, for the broad phase.
     pub(super) fn refresh_radii(&mut self) {
-        let types = &self.scene.particle_types;
-        let templates = &self.scene.templates;
         self.radius = (0..self.particles.len())
-            .map(|i| {
-                templates[types[self.particles.kind[i] as usize].template].circumscribed_radius
-                    * self.particles.scale[i]
-            })
+            .map(|i| self.circumscribed_radius(i))
             .collect();
     }
 }

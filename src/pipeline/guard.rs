@@ -46,7 +46,7 @@ impl Simulation {
 
     /// Particle `i`'s circumscribed radius, from its type and scale (the cached radii follow
     /// the order of the last list build, which a GPU run's synced state need not share).
-    fn circumscribed_radius(&self, i: usize) -> f64 {
+    pub(super) fn circumscribed_radius(&self, i: usize) -> f64 {
         let kind = self.scene.particle_types[self.particles.kind[i] as usize].template;
         self.scene.templates[kind].circumscribed_radius * self.particles.scale[i]
     }
