@@ -28,6 +28,21 @@ pub enum CudaError {
         max_vertices: usize,
         max_faces: usize,
     },
+    /// A buffer of the step did not fit in the GPU's memory: the driver's out-of-memory,
+    /// named by what was being allocated (`CudaError::out_of_memory`).
+    #[error(
+        "{what} need {}, and the GPU has {} free of {}; run fewer particles per GPU \
+         (more ranks), a smaller skin, or the CPU backend",
+        needed(need),
+        gib(*free),
+        gib(*total)
+    )]
+    DeviceMemory {
+        what: String,
+        need: Option<usize>,
+        free: usize,
+        total: usize,
+    },
     #[error(transparent)]
     Simulation(#[from] SimulationError),
     #[error(transparent)]
@@ -45,6 +60,42 @@ pub enum CudaError {
         device: usize,
         decomposed: bool,
     },
+}
+
+/// Bytes as GiB with two decimals, for the memory errors.
+fn gib(bytes: usize) -> String {
+    format!("{:.2} GiB", bytes as f64 / (1u64 << 30) as f64)
+}
+
+/// What a [`CudaError::DeviceMemory`] says was needed: the bytes when they are known before
+/// the allocation (a list whose pairs are counted), else nothing.
+fn needed(need: &Option<usize>) -> String {
+    need.map_or_else(
+        || "more GPU memory than is free".to_string(),
+        |b| format!("{} of GPU memory", gib(b)),
+    )
+}
+
+impl CudaError {
+    /// This error, or, when it is the driver's out-of-memory, a [`CudaError::DeviceMemory`]
+    /// naming `what` failed to fit, the bytes it needed (`need`, when known) and the device's
+    /// free and total memory now. Other errors pass through unchanged.
+    pub(super) fn out_of_memory(self, what: impl FnOnce() -> String, need: Option<usize>) -> Self {
+        match self {
+            CudaError::Driver(e)
+                if e.0 == cudarc::driver::sys::cudaError_enum::CUDA_ERROR_OUT_OF_MEMORY =>
+            {
+                let (free, total) = cudarc::driver::result::mem_get_info().unwrap_or((0, 0));
+                CudaError::DeviceMemory {
+                    what: what(),
+                    need,
+                    free,
+                    total,
+                }
+            }
+            other => other,
+        }
+    }
 }
 
 impl From<cudarc::driver::DriverError> for CudaError {

@@ -76,6 +76,19 @@ impl PairList {
     }
 }
 
+/// Device bytes per pair of a list ([`PairStage::allocate_list`]): the pair, its two
+/// references, the cached separating axis, the springs in and out, the forces, energy and
+/// contact flag, the deferred index and, for polyhedra, the staged planes (`staged_bytes`),
+/// the plane-count bucket and the bucket order.
+pub(super) fn pair_bytes(spheres: bool, staged_bytes: usize) -> usize {
+    let common = 2 * 4 + 2 * 4 + 3 * 8 + 2 * HISTORY_WIDTH * 8 + 9 * 8 + 8 + 4 + 4;
+    if spheres {
+        common
+    } else {
+        common + staged_bytes + 1 + 4
+    }
+}
+
 /// The contact history handed to the next list build: for each particle in the numbering
 /// before the build's reordering, its pairs' partner ids and springs (CSR).
 pub(super) struct HistorySource {
@@ -151,6 +164,23 @@ impl PairStage {
     /// of two owned particles first; device builds only). Returns the reordering: `order[k]`
     /// = the slot before the build now at slot `k`.
     pub(super) fn build(
+        &mut self,
+        gpu: &Gpu,
+        p: &mut DeviceParticles,
+        walls: Option<&mut WallStage>,
+        decomposed: bool,
+        source: ListSource,
+    ) -> Result<CudaSlice<u32>, CudaError> {
+        let n = p.n;
+        // The allocation of the counted list names its bytes itself; an earlier one (the
+        // binning, the search's counts) is named here.
+        self.build_list(gpu, p, walls, decomposed, source)
+            .map_err(|e| e.out_of_memory(|| format!("the pair-list build of {n} particles"), None))
+    }
+
+    /// [`PairStage::build`], with the device's out-of-memory while allocating the counted
+    /// list's per-pair buffers named with their bytes.
+    fn build_list(
         &mut self,
         gpu: &Gpu,
         p: &mut DeviceParticles,
@@ -258,6 +288,54 @@ impl PairStage {
             let (np, pairs, offset) = list_pairs(gpu, p, 0, cell_start, grid, skin)?;
             (np, np, pairs, Some(offset))
         };
+        let spheres = gpu.config.spheres;
+        let staged_bytes = staged_planes_bytes(gpu.config.precision);
+        let per_pair = pair_bytes(spheres, staged_bytes);
+        let list = Self::allocate_list(
+            gpu,
+            p,
+            (np, n_interior),
+            (pairs, offset),
+            &history,
+            &order,
+            spheres,
+        )
+        .map_err(|e| {
+            e.out_of_memory(
+                || format!("the pair list of {n} particles ({np} pairs, {per_pair} bytes each)"),
+                Some(np * per_pair),
+            )
+        })?;
+        self.list = Some(list);
+        self.reference = match reference {
+            Some(r) => r,
+            None => st.clone_dtod(&p.position)?,
+        };
+        self.half_skin = 0.5 * skin;
+        self.rebuild = false;
+        self.builds += 1;
+        self.generation += 1;
+        Ok(order)
+    }
+
+    /// The per-pair buffers of a list of `np` pairs (`n_interior` of two owned particles),
+    /// given its pairs and per-particle offsets: the references per particle sorted by
+    /// partner id and the springs of the pairs that survive from `history`
+    /// ([`pair_bytes`] per pair in all).
+    #[allow(clippy::too_many_arguments)]
+    fn allocate_list(
+        gpu: &Gpu,
+        p: &DeviceParticles,
+        (np, n_interior): (usize, usize),
+        (pairs, offset): (CudaSlice<i32>, Option<CudaSlice<u32>>),
+        history: &HistorySource,
+        order: &CudaSlice<u32>,
+        spheres: bool,
+    ) -> Result<PairList, CudaError> {
+        let st = gpu.stream.clone();
+        let k = &gpu.k;
+        let n = p.n;
+        let ni = n as i32;
         // References per particle, sorted by partner id.
         let npi = np as i32;
         let mut ref_count = zeros::<u32>(&st, n)?;
@@ -287,16 +365,15 @@ impl PairStage {
                 &npi,
                 &pairs,
                 &p.id,
-                &order,
+                order,
                 &history.offset,
                 &history.partner,
                 &history.spring,
                 &mut spring_in,
             )?;
         }
-        let spheres = gpu.config.spheres;
         let staged_bytes = staged_planes_bytes(gpu.config.precision);
-        self.list = Some(PairList {
+        Ok(PairList {
             n: np,
             n_interior,
             offset,
@@ -317,16 +394,7 @@ impl PairStage {
             order: zeros::<u32>(&st, if spheres { 1 } else { np })?,
             bucket_count: zeros::<u32>(&st, PLANE_BUCKETS)?,
             bucket_fill: zeros::<u32>(&st, PLANE_BUCKETS)?,
-        });
-        self.reference = match reference {
-            Some(r) => r,
-            None => st.clone_dtod(&p.position)?,
-        };
-        self.half_skin = 0.5 * skin;
-        self.rebuild = false;
-        self.builds += 1;
-        self.generation += 1;
-        Ok(order)
+        })
     }
 }
 

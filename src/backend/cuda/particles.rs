@@ -131,6 +131,10 @@ macro_rules! declare_particles {
         }
 
         impl DeviceParticles {
+            /// Device bytes per particle slot, all arrays together.
+            pub(super) const BYTES_PER_PARTICLE: usize =
+                0 $($(+ $width * std::mem::size_of::<$ty>())*)*;
+
             /// No particles (one zero per buffer).
             pub(super) fn empty(st: &Arc<CudaStream>) -> Result<Self, CudaError> {
                 Ok(DeviceParticles {

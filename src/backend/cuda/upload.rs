@@ -136,7 +136,13 @@ impl CudaSimulation {
                 ghost,
                 id: p.id.clone(),
             },
-        )?;
+        )
+        .map_err(|e| {
+            e.out_of_memory(
+                || format!("the particle arrays of {n} particles"),
+                Some(n * DeviceParticles::BYTES_PER_PARTICLE),
+            )
+        })?;
         // History, as a CSR over the uploaded order, for the coming list build.
         let index: HashMap<u64, usize> = p.id.iter().enumerate().map(|(i, &g)| (g, i)).collect();
         let mut per: Vec<Vec<(u64, [f64; HISTORY_WIDTH])>> = vec![Vec::new(); n];
