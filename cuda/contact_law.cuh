@@ -31,7 +31,7 @@ struct ContactKinematics {
 // The history of one contact (history.rs `ContactState`), PD_HISTORY_WIDTH doubles in memory.
 struct ContactHistoryRecord {
     V3<double> spring;
-    double approach_speed; // 0: not evaluated yet
+    double approach_speed; // this loading cycle's, + loading, - unloading; 0: not evaluated yet
     double twist;
 };
 
@@ -111,6 +111,17 @@ PD_HD double mean_pressure(double c, double lo, double hi) {
     }
     double x = portable_cbrt(lo), y = portable_cbrt(hi);
     return 0.75 * c * (x + y) * (x * x + y * y) / (x * x + x * y + y * y);
+}
+
+// The Hunt–Crossley reference speed of the current loading cycle, signed by its phase
+// (law.rs loading_cycle_speed): a new cycle at first touch and at each approach after an
+// unloading; the largest approach speed of the cycle while loading.
+PD_HD double loading_cycle_speed(double stored, double vn) {
+    double speed = max_(abs_(vn), 2.2250738585072014e-308);
+    if (vn < 0.0) {
+        return stored > 0.0 ? max_(stored, speed) : speed;
+    }
+    return stored == 0.0 ? -speed : -abs_(stored);
 }
 
 // V* = (A_n Δt √(c/m*) / σ)³, σ = 0.5: the volume below which the potential is regularized
@@ -272,11 +283,9 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     if (windowed && first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0) {
         pressure += resolved_potential(stiffness, volume - sweep, resolved) / (2.0 * sweep);
     }
-    if (first_touch) {
-        state->approach_speed = max_(abs_(vn), 2.2250738585072014e-308);
-    }
+    state->approach_speed = loading_cycle_speed(state->approach_speed, vn);
     double energy = resolved_potential(stiffness, volume, resolved);
-    double v_ref = max_(state->approach_speed, sqrt_(2.0 * energy / kin.effective_mass));
+    double v_ref = max_(abs_(state->approach_speed), sqrt_(2.0 * energy / kin.effective_mass));
     NormalForce nf = normal_force(params, kin, pressure, area, v_ref, vn, dt);
     // The exit (law.rs): a separating contact that the coming drift carries apart.
     if (windowed && vn > 0.0 && dt > 0.0) {

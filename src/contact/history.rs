@@ -44,8 +44,10 @@ impl ContactKey {
 pub struct ContactState {
     /// Tangential spring displacement ξ (Cundall–Strack), kept in the current tangent plane.
     pub spring: Vector3<f64>,
-    /// Normal approach speed at first touch, the Hunt–Crossley damping's reference speed
-    /// (docs/contact.md §2); 0 marks a contact that has not been evaluated yet.
+    /// Normal approach speed of the contact's current loading cycle, the Hunt–Crossley
+    /// damping's reference speed, signed by the cycle's phase: positive while loading, negative
+    /// while unloading ([`crate::contact::law::loading_cycle_speed`], docs/contact.md §2); 0
+    /// marks a contact that has not been evaluated yet.
     #[serde(default)]
     pub approach_speed: f64,
     /// Relative twist angle about the normal held by the torsional spring of twisting friction

@@ -152,8 +152,16 @@ impl Simulation {
                     ),
                     None => format!("particle {}", if k.a == id { k.b } else { k.a }),
                 };
-                if st.approach_speed > 1e-300 {
-                    format!("{what} (first touched at {:.3e} m/s)", st.approach_speed)
+                if st.approach_speed.abs() > 1e-300 {
+                    let phase = if st.approach_speed > 0.0 {
+                        "loading"
+                    } else {
+                        "unloading"
+                    };
+                    format!(
+                        "{what} ({phase}, approached at {:.3e} m/s)",
+                        st.approach_speed.abs()
+                    )
                 } else {
                     format!("{what} (in contact from rest)")
                 }
