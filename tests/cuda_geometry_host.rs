@@ -1206,8 +1206,11 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             } else {
                 rand3(&mut rng, -1.0, 1.0) * 10f64.powf(rng.range(-9.0, -4.0))
             },
+            // Loading (positive) or unloading (negative) cycles of the reference speed.
             approach_speed: if first {
                 0.0
+            } else if i % 5 < 2 {
+                -speed * rng.range(0.5, 2.0)
             } else {
                 speed * rng.range(0.5, 2.0)
             },
