@@ -505,7 +505,7 @@ fn stops_every_rank(backend: &str) {
         (
             "speed",
             929,
-            "particle 26 is blowing up: it moves at 2.2368e0 m/s",
+            "particle 26 is blowing up: it moves at 2.2410e0 m/s",
         ),
         (
             "leaving",
