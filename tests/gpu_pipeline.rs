@@ -7,7 +7,7 @@
 mod common;
 
 use common::*;
-use polydem::backend::cuda::{CudaSimulation, Precision};
+use polydem::backend::cuda::Precision;
 use polydem::pipeline::{RestoredState, Simulation};
 use polydem::scene::parse_scene;
 use std::collections::HashMap;
@@ -100,7 +100,8 @@ fn three_steps_from_a_cpu_state_match_contact_by_contact() {
     for precision in [Precision::Double, Precision::Mixed] {
         // Both start from a restored copy, so both build their list at the first step.
         let mut cpu = copy(&start);
-        let mut gpu = CudaSimulation::new(copy(&start), 0, precision).unwrap();
+        let mut engine = gpu_engine(copy(&start), precision);
+        let gpu = engine.cuda_mut().unwrap();
         cpu.step().unwrap();
         gpu.step().unwrap();
         let (lc, lg) = (cpu.candidate_pair_ids(), gpu.candidate_pair_ids().unwrap());
@@ -172,7 +173,8 @@ fn three_steps_from_a_cpu_state_match_contact_by_contact() {
 fn a_thousand_steps_of_a_dense_pour_match_the_cpu() {
     for precision in [Precision::Double, Precision::Mixed] {
         let mut cpu = simulation();
-        let mut gpu = CudaSimulation::from_scene(scene(), 0, precision).unwrap();
+        let mut engine = gpu_engine(scene_start(scene()), precision);
+        let gpu = engine.cuda_mut().unwrap();
         let mut worst = (0.0f64, 0.0f64, 0.0f64);
         for k in 1..=1000 {
             cpu.step().unwrap();
@@ -230,8 +232,10 @@ fn a_thousand_steps_of_a_dense_pour_match_the_cpu() {
 #[ignore = "needs a CUDA GPU"]
 fn six_thousand_steps_of_a_sphere_pour_match_the_cpu() {
     let mut cpu = Simulation::builder(sphere_scene()).build().unwrap();
-    let mut double = CudaSimulation::from_scene(sphere_scene(), 0, Precision::Double).unwrap();
-    let mut mixed = CudaSimulation::from_scene(sphere_scene(), 0, Precision::Mixed).unwrap();
+    let mut double = gpu_engine(scene_start(sphere_scene()), Precision::Double);
+    let double = double.cuda_mut().unwrap();
+    let mut mixed = gpu_engine(scene_start(sphere_scene()), Precision::Mixed);
+    let mixed = mixed.cuda_mut().unwrap();
     let mut worst = (0.0f64, 0.0f64, 0.0f64);
     for k in 1..=6000 {
         cpu.step().unwrap();
@@ -399,12 +403,11 @@ fn the_examples_on_the_gpu_stay_bitwise_equal_to_the_cpu() {
         let text = std::fs::read_to_string(path).unwrap();
         let scene = || parse_scene(&text, &dir, &name).unwrap();
         let mut cpu = Simulation::builder(scene()).build().unwrap();
-        let mut gpu = CudaSimulation::new(
+        let mut engine = gpu_engine(
             Simulation::builder(scene()).build().unwrap(),
-            0,
             Precision::Double,
-        )
-        .unwrap();
+        );
+        let gpu = engine.cuda_mut().unwrap();
         for _ in 0..5000 {
             cpu.step().unwrap();
             gpu.step().unwrap();
@@ -457,7 +460,8 @@ fn moving_walls_on_the_gpu_match_the_cpu() {
         }
         let copy = |s: &Simulation| restored(scene(), s);
         let mut cpu = copy(&start);
-        let mut gpu = CudaSimulation::new(copy(&start), 0, Precision::Double).unwrap();
+        let mut engine = gpu_engine(copy(&start), Precision::Double);
+        let gpu = engine.cuda_mut().unwrap();
         let mut worst = (0.0f64, 0.0f64, 0.0f64);
         // Contacts summed over the steps (the shaken bed is loose: 10–40 wall contacts at a
         // time on the CPU).

@@ -14,7 +14,7 @@
 mod common;
 
 use common::*;
-use polydem::backend::cuda::{CudaSimulation, Precision};
+use polydem::backend::cuda::Precision;
 use polydem::pipeline::{RestoredState, Simulation};
 use polydem::scene::{NeighborMode, Scene, parse_scene};
 use std::collections::HashMap;
@@ -209,7 +209,8 @@ fn on_gpu(
     stale: bool,
 ) -> (Bits, polydem::neighbor::NeighborReport) {
     let end = scene.simulation.end_time;
-    let mut g = CudaSimulation::from_scene(scene, 0, Precision::Double).unwrap();
+    let mut engine = gpu_engine(scene_start(scene), Precision::Double);
+    let g = engine.cuda_mut().unwrap();
     g.force_stale_host_lists(stale);
     match steps {
         Some(n) => {

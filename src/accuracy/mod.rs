@@ -81,6 +81,25 @@ pub const CASES: [&str; 7] = [
 pub const SHORT_FRACTIONS: [f64; 3] = [0.1, 0.05, 0.025];
 pub const FULL_FRACTIONS: [f64; 5] = [0.2, 0.1, 0.05, 0.025, 0.0125];
 
+/// The devices `bench accuracy` runs on: the CPU, or with a GPU chosen by `backend` both
+/// precisions (or the one `precision` names).
+pub fn devices(
+    backend: crate::backend::BackendChoice,
+    precision: Option<Precision>,
+) -> Result<Vec<Device>> {
+    let serial = crate::domain::SerialComm;
+    Ok(
+        match crate::backend::select_device(backend, Precision::Double, &serial)? {
+            Device::Cuda { ordinal, .. } => precision
+                .map_or(vec![Precision::Double, Precision::Mixed], |p| vec![p])
+                .into_iter()
+                .map(|precision| Device::Cuda { ordinal, precision })
+                .collect(),
+            Device::Cpu => vec![Device::Cpu],
+        },
+    )
+}
+
 fn device_name(d: Device) -> String {
     match d {
         Device::Cpu => "cpu".into(),

@@ -4,13 +4,16 @@
 //! - [`solids`]: the particles as solids: point coverage and vertical reach, on a grid.
 //! - [`fill`]: fill height and bulk solid fraction in a vertical container.
 //! - [`porosity`]: porosity of a tube section, overall and by distance from the wall.
+//! - [`command`]: the `polydem analyze` subcommands and their checks.
 //! - [`drum`]: the averaged flow of a rotating drum, its angle of repose and flowing layer.
 
+pub mod command;
 pub mod drum;
 pub mod fill;
 pub mod porosity;
 pub mod solids;
 
+pub use command::{AnalyzeWhat, AnalyzedCylinder, analyze};
 pub use drum::{DrumFlow, DrumSamples, DrumSection, FieldCell};
 pub use fill::{Disk, FillHeight, HeapProfile, fill_height, heap_profile};
 pub use porosity::{RadialPorosity, Tube, radial_porosity};

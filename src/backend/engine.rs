@@ -46,15 +46,9 @@ impl Engine {
             (Start::State(sim), Device::Cuda { ordinal, precision }) => {
                 Box::new(CudaSimulation::new(*sim, ordinal, precision)?)
             }
-            (Start::Scene { scene, comm }, Device::Cuda { ordinal, precision }) => {
-                let host = Simulation::builder(*scene)
-                    .comm(comm)
-                    .evaluate_forces(false)
-                    .build()?;
-                let mut c = CudaSimulation::new(host, ordinal, precision)?;
-                c.evaluate_first_forces()?;
-                Box::new(c)
-            }
+            (Start::Scene { scene, comm }, Device::Cuda { ordinal, precision }) => Box::new(
+                CudaSimulation::from_scene(*scene, comm, ordinal, precision)?,
+            ),
         };
         if let Device::Cuda { precision, .. } = device {
             tracing::info!(
@@ -104,6 +98,11 @@ impl Engine {
     /// this copies only the contact flags.
     pub fn contact_counts(&mut self) -> Result<(u64, u64)> {
         self.backend.contact_counts()
+    }
+
+    /// See [`Backend::cuda_mut`].
+    pub fn cuda_mut(&mut self) -> Option<&mut CudaSimulation> {
+        self.backend.cuda_mut()
     }
 
     /// See [`Backend::device_bytes`].

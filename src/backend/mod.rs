@@ -67,6 +67,12 @@ pub trait Backend {
 
     /// The backend's name in summaries: "cpu" or "cuda".
     fn name(&self) -> &'static str;
+
+    /// The CUDA simulation behind this backend, for what only the GPU has (its list and build
+    /// counters, the hybrid builder's test switches); `None` on the CPU.
+    fn cuda_mut(&mut self) -> Option<&mut cuda::CudaSimulation> {
+        None
+    }
 }
 
 /// Which backend a run asks for (`--backend`).

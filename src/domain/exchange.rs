@@ -56,7 +56,7 @@ impl Parallel {
         let par = &*self;
         let s = scene;
         // A new sphere inside its region can touch spheres up to 2 r_max from it.
-        let reach = 2.0 * s.max_bounding_radius() * (1.0 + 1e-9) + 1e-12;
+        let reach = s.insertion_reach();
         let regions: Vec<Aabb> = s
             .insertions
             .iter()

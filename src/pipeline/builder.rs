@@ -76,7 +76,7 @@ impl SimulationBuilder {
     /// Whether a new simulation evaluates its first forces (default: yes). Without, the
     /// particles of count insertions are placed (and in a decomposed run sent to their owners
     /// with the ghosts chosen) and nothing more: for a backend that evaluates the first forces
-    /// itself ([`crate::backend::cuda::CudaSimulation::from_scene`]).
+    /// itself (a new GPU run through [`crate::backend::Engine::new`]).
     pub fn evaluate_forces(mut self, evaluate: bool) -> Self {
         self.evaluate_forces = evaluate;
         self

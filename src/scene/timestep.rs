@@ -35,7 +35,20 @@ impl Scene {
     /// as a candidate pair, `2 r_max + skin` (the largest bounding diameter plus the skin). It
     /// sizes the binning cells, the facet grids of the walls and the decomposition's halo.
     pub fn cutoff(&self) -> f64 {
-        2.0 * self.max_bounding_radius() + self.simulation.neighbor.skin
+        self.cutoff_with_skin(self.simulation.neighbor.skin)
+    }
+
+    /// How far outside an insertion region a particle can still stop a new one placed in it:
+    /// two bounding radii (a new particle's bounding sphere lies inside its region), widened
+    /// by a relative 1e-9 and 1e-12 m so that rounding never leaves a touching one out.
+    pub fn insertion_reach(&self) -> f64 {
+        2.0 * self.max_bounding_radius() * (1.0 + 1e-9) + 1e-12
+    }
+
+    /// The cutoff of a list built with `skin` in place of the scene's (a hybrid list's
+    /// enlarged skin): `2 r_max + skin`.
+    pub fn cutoff_with_skin(&self, skin: f64) -> f64 {
+        2.0 * self.max_bounding_radius() + skin
     }
 
     /// Smallest volume-equivalent radius any particle type can have at its smallest scale

@@ -306,6 +306,30 @@ pub const GPU_MIXED: polydem::backend::Device = polydem::backend::Device::Cuda {
     precision: polydem::backend::cuda::Precision::Mixed,
 };
 
+/// `start` on GPU 0 in `precision`, made as every backend is, by [`polydem::backend::Engine::new`];
+/// [`polydem::backend::Engine::cuda_mut`] gives the GPU's own methods.
+#[allow(dead_code)]
+pub fn gpu_engine(
+    start: impl Into<polydem::backend::Start>,
+    precision: polydem::backend::cuda::Precision,
+) -> polydem::backend::Engine {
+    let device = polydem::backend::Device::Cuda {
+        ordinal: 0,
+        precision,
+    };
+    polydem::backend::Engine::new(start, device).expect("GPU backend")
+}
+
+/// A new single-rank run of `scene` (its particles placed, its first forces evaluated by the
+/// backend that steps it).
+#[allow(dead_code)]
+pub fn scene_start(scene: polydem::scene::Scene) -> polydem::backend::Start {
+    polydem::backend::Start::Scene {
+        scene: Box::new(scene),
+        comm: std::sync::Arc::new(polydem::domain::SerialComm),
+    }
+}
+
 /// `sim` (its forces evaluated) on `device`.
 #[allow(dead_code)]
 pub fn engine(

@@ -63,4 +63,8 @@ impl Backend for CudaSimulation {
     fn name(&self) -> &'static str {
         "cuda"
     }
+
+    fn cuda_mut(&mut self) -> Option<&mut CudaSimulation> {
+        Some(self)
+    }
 }

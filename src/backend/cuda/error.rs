@@ -47,9 +47,12 @@ pub enum CudaError {
     Simulation(#[from] SimulationError),
     #[error(transparent)]
     Halo(#[from] HaloError),
-    /// The host build of a pair list could not run.
-    #[error("the host's pair-list build: {0}")]
-    Prebuild(String),
+    /// The thread of a host build of the pair list could not be started.
+    #[error("the host's pair-list build could not start its thread")]
+    PrebuildThread(#[source] std::io::Error),
+    /// The thread of a host build of the pair list panicked.
+    #[error("the host's pair-list build panicked")]
+    PrebuildPanicked,
     /// A host-built pair list does not fit the device's particles (another count, or a
     /// decomposed run, whose lists the device builds).
     #[error(

@@ -80,7 +80,7 @@ pub struct PairMaterial {
 
 impl PairMaterial {
     /// The parameters of a pair with restitution `e`, friction coefficient `friction` and
-    /// damping coefficient `damping` = ᾱ(e) (as `Simulation::new` computes it).
+    /// damping coefficient `damping` = ᾱ(e) (as `SimulationBuilder::build` computes it).
     pub fn new(restitution: f64, friction: f64, damping: f64) -> Self {
         // The same expressions as contact::law (`e.ln()`, `powi(2)`), for the same bits.
         let log_restitution = restitution.ln();

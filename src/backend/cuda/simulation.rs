@@ -96,7 +96,11 @@ pub struct CudaSimulation {
 impl CudaSimulation {
     /// Moves `host` (freshly created or restored, forces evaluated or restored) onto GPU
     /// `ordinal`, compiling the kernels for it with the scene's configuration.
-    pub fn new(host: Simulation, ordinal: usize, precision: Precision) -> Result<Self, CudaError> {
+    pub(crate) fn new(
+        host: Simulation,
+        ordinal: usize,
+        precision: Precision,
+    ) -> Result<Self, CudaError> {
         let ctx = CudaContext::new(ordinal)?;
         // SAFETY: nothing has been allocated yet. Every buffer is used on the main stream but
         // the wall list's, which the wall stream also uses between the two events of
@@ -117,7 +121,7 @@ impl CudaSimulation {
         let k = Kernels::load(&ctx, &config, arch)?;
         let device = ctx.name().unwrap_or_else(|_| format!("GPU {ordinal}"));
         let s = &host.scene;
-        // Materials: restitution, friction and damping coefficient per pair (as Simulation::new).
+        // Materials: restitution, friction and damping coefficient per pair (as `SimulationBuilder::build` does).
         let n_mat = s.materials.len();
         let mut materials = Vec::with_capacity(n_mat * n_mat);
         for a in 0..n_mat {
@@ -167,22 +171,26 @@ impl CudaSimulation {
         Ok(sim)
     }
 
-    /// A new simulation of `scene` on GPU `ordinal`: particles of count insertions placed on
+    /// A new simulation of `scene` on `comm`'s ranks, this one on GPU `ordinal`: particles of count insertions placed on
     /// the host, the first forces evaluated on the device (as [`Simulation::builder`] does on the
     /// CPU, advancing the springs by one step).
-    pub fn from_scene(
+    pub(crate) fn from_scene(
         scene: crate::scene::Scene,
+        comm: std::sync::Arc<dyn crate::domain::Comm>,
         ordinal: usize,
         precision: Precision,
     ) -> Result<Self, CudaError> {
-        let host = Simulation::builder(scene).evaluate_forces(false).build()?;
+        let host = Simulation::builder(scene)
+            .comm(comm)
+            .evaluate_forces(false)
+            .build()?;
         let mut sim = CudaSimulation::new(host, ordinal, precision)?;
         sim.evaluate_first_forces()?;
         Ok(sim)
     }
 
     /// The first force evaluation of a new simulation (see [`CudaSimulation::from_scene`]).
-    pub fn evaluate_first_forces(&mut self) -> Result<(), CudaError> {
+    fn evaluate_first_forces(&mut self) -> Result<(), CudaError> {
         let dt = self.host.dt;
         self.forces(dt, false)
     }

@@ -245,7 +245,7 @@ impl Inserter {
         let near = if scene.domain.periodic.iter().any(|&p| p) {
             None
         } else {
-            let reach = 2.0 * scene.max_bounding_radius() * (1.0 + 1e-9) + 1e-12;
+            let reach = scene.insertion_reach();
             Some(
                 scene
                     .insertions

@@ -33,6 +33,8 @@
 //! `gpu`. A decomposed run rebuilds through the host's exchange, whose device build follows
 //! the migration; there every mode builds on the device (docs/design.md §7).
 
+mod auto;
+
 use super::error::CudaError;
 use super::gpu::Gpu;
 use super::launch::{cfg, zeros};
@@ -41,6 +43,7 @@ use super::pairs::ListSource;
 use super::particles::DeviceParticles;
 use crate::neighbor::{Bounds, Builder, NeighborReport, SlotList, Switch, build_slot_list};
 use crate::scene::{NeighborMode, Scene};
+use auto::Auto;
 use cudarc::driver::CudaSlice;
 use std::thread::JoinHandle;
 use std::time::Instant;
@@ -82,7 +85,7 @@ impl HostSlots {
         std::thread::Builder::new()
             .name(name.into())
             .spawn(move || self.build(&bounds, skin))
-            .map_err(|e| CudaError::Prebuild(e.to_string()))
+            .map_err(CudaError::PrebuildThread)
     }
 }
 
@@ -103,100 +106,6 @@ struct Interval {
     step: u64,
     /// Seconds of its build, as the GPU saw it.
     build: f64,
-}
-
-/// `auto`'s state (see the module docs).
-struct Auto {
-    /// Seconds per step measured per builder (its trials of the latest round).
-    per_step: [Option<f64>; 3],
-    /// This round's measured seconds and steps per builder.
-    round: [(f64, u64); 3],
-    /// This round's `gpu` intervals: seconds and count (the seed's stretch per list).
-    gpu_intervals: (f64, u64),
-    /// The trial under way.
-    trial: Option<Trial>,
-    /// The builders still to try in this round.
-    queue: Vec<Builder>,
-    /// The round's probe of the host's build time is due (after the next device build).
-    want_probe: bool,
-    /// The probe in flight: a host build from the positions of a device build, run while the
-    /// GPU steps and then dropped; and its measured seconds once it has finished.
-    probe: Option<JoinHandle<SlotList>>,
-    probe_seconds: Option<f64>,
-    /// When the last probe started, and when the builder was made: probes are rationed to
-    /// about 1 % of the run's time ([`PROBE_EVERY`], [`FIRST_PROBE_S`]).
-    last_probe: Option<Instant>,
-    created: Instant,
-    /// Intervals until the next round, and the gap after it (doubling).
-    until_round: u64,
-    gap: u64,
-}
-
-/// A trial: its builder, the intervals still to skip (the switch's transition) and to
-/// measure, and the seconds and steps measured so far.
-struct Trial {
-    builder: Builder,
-    skip: u32,
-    left: u32,
-    seconds: f64,
-    steps: u64,
-}
-
-/// Intervals a trial skips after a switch, and measures.
-const TRIAL_SKIP: u32 = 1;
-const TRIAL_MEASURE: u32 = 3;
-/// A trial of another builder ends early when it is this much slower per step than `gpu`.
-const TRIAL_LOSS: f64 = 1.10;
-/// Hybrid is tried only when the host builds a list in this fraction of the GPU's stretch
-/// per list (else the list would be late and dropped), and when the device's build is at
-/// least this fraction of that stretch (else there is nothing to gain).
-const HOST_FITS: f64 = 0.8;
-const BUILD_WORTH: f64 = 0.02;
-/// The first probe waits for this much run time (s): a shorter run has nothing to gain.
-const FIRST_PROBE_S: f64 = 1.0;
-/// A probe starts at least this many times the last probe's build time after it.
-const PROBE_EVERY: f64 = 100.0;
-/// Intervals between the first two rounds of trials; each gap doubles, up to the last.
-const FIRST_GAP: u64 = 64;
-const LAST_GAP: u64 = 4096;
-
-impl Auto {
-    fn new() -> Self {
-        Auto {
-            per_step: [None; 3],
-            round: [(0.0, 0); 3],
-            gpu_intervals: (0.0, 0),
-            trial: None,
-            queue: vec![Builder::Gpu],
-            want_probe: true,
-            probe: None,
-            probe_seconds: None,
-            last_probe: None,
-            created: Instant::now(),
-            until_round: 0,
-            gap: FIRST_GAP,
-        }
-    }
-
-    /// A new round: `gpu` first, a fresh probe of the host.
-    fn start_round(&mut self) {
-        self.queue = vec![Builder::Gpu];
-        self.per_step = [None; 3];
-        self.round = [(0.0, 0); 3];
-        self.gpu_intervals = (0.0, 0);
-        self.want_probe = true;
-    }
-
-    /// Whether a probe may start now: not before [`FIRST_PROBE_S`] of run time, and then
-    /// [`PROBE_EVERY`] times the last probe's build time after it, so that probing (a host
-    /// build on every core, beside the thread that drives the GPU) costs about 1 % at most.
-    fn probe_allowed(&self) -> bool {
-        match (self.last_probe, self.probe_seconds) {
-            (None, _) => self.created.elapsed().as_secs_f64() >= FIRST_PROBE_S,
-            (Some(t), Some(c)) => t.elapsed().as_secs_f64() >= PROBE_EVERY * c,
-            (Some(_), None) => false,
-        }
-    }
 }
 
 /// Stage 2's builder choice and its bookkeeping (see the module docs).
@@ -231,7 +140,7 @@ impl ListBuilder {
             max: scene.domain.max,
             periodic: scene.domain.periodic,
         };
-        let hybrid_cutoff = 2.0 * scene.max_bounding_radius() + n.hybrid_skin;
+        let hybrid_cutoff = scene.cutoff_with_skin(n.hybrid_skin);
         let builder = match (decomposed, n.mode) {
             (true, _) | (_, NeighborMode::Gpu | NeighborMode::Auto) => Builder::Gpu,
             (false, NeighborMode::Cpu) => Builder::Cpu,
@@ -363,10 +272,7 @@ impl ListBuilder {
                     return Ok(None);
                 }
                 let t0 = Instant::now();
-                let list = pre
-                    .thread
-                    .join()
-                    .map_err(|_| CudaError::Prebuild("the host build panicked".into()))?;
+                let list = pre.thread.join().map_err(|_| CudaError::PrebuildPanicked)?;
                 self.report.host_wait_s += t0.elapsed().as_secs_f64();
                 self.tau_cpu.0 += list.seconds;
                 self.tau_cpu.1 += 1;
@@ -450,146 +356,29 @@ impl ListBuilder {
         let Some(auto) = self.auto.as_mut() else {
             return Ok(());
         };
-        if !auto.want_probe
-            || auto.probe.is_some()
-            || self.builder != Builder::Gpu
-            || p.n == 0
-            || !auto.probe_allowed()
-        {
+        if self.builder != Builder::Gpu || p.n == 0 || !auto.probe_due() {
             return Ok(());
         }
-        auto.want_probe = false;
-        auto.last_probe = Some(Instant::now());
         let slots = HostSlots::copy(gpu, p, &p.position)?;
-        auto.probe = Some(slots.spawn("polydem-probe", self.bounds, self.hybrid_skin)?);
+        auto.start_probe(slots.spawn("polydem-probe", self.bounds, self.hybrid_skin)?);
         Ok(())
     }
 
     /// `auto`: a list interval of `builder` took `seconds` over `steps`; picks the builder of
-    /// the list that the build at `step` makes.
+    /// the list that the build at `step` makes ([`Auto::interval`]).
     fn auto_interval(&mut self, builder: Builder, seconds: f64, steps: u64, step: u64) {
         let mean = |(s, k): (f64, u64)| (k > 0).then(|| s / k as f64);
         let tau_dev = mean(self.tau_dev);
         let Some(auto) = self.auto.as_mut() else {
             return;
         };
-        // The probe's result, once its thread is done.
-        if auto.probe.as_ref().is_some_and(|t| t.is_finished())
-            && let Some(t) = auto.probe.take()
-            && let Ok(list) = t.join()
-        {
-            auto.probe_seconds = Some(list.seconds);
-            self.tau_cpu.0 += list.seconds;
+        if let Some(seconds) = auto.finished_probe() {
+            self.tau_cpu.0 += seconds;
             self.tau_cpu.1 += 1;
         }
-        let mut note = None;
-        if let Some(t) = auto.trial.as_mut() {
-            if builder == t.builder && steps > 0 {
-                if t.skip > 0 {
-                    t.skip -= 1;
-                } else {
-                    t.seconds += seconds;
-                    t.steps += steps;
-                    t.left -= 1;
-                    if builder == Builder::Gpu {
-                        auto.gpu_intervals.0 += seconds;
-                        auto.gpu_intervals.1 += 1;
-                    } else if let Some(g) = auto.per_step[Builder::Gpu.index()]
-                        && t.seconds / t.steps as f64 > TRIAL_LOSS * g
-                    {
-                        // Clearly slower: no need to measure it further.
-                        t.left = 0;
-                    }
-                }
-            }
-            if t.left == 0 {
-                let r = &mut auto.round[t.builder.index()];
-                r.0 += t.seconds;
-                r.1 += t.steps;
-                auto.per_step[t.builder.index()] = Some(r.0 / r.1.max(1) as f64);
-                let first_gpu = t.builder == Builder::Gpu && auto.round[0].1 == t.steps;
-                auto.trial = None;
-                if first_gpu {
-                    // What else is worth a trial, from the probe and the device's builds.
-                    let stretch = mean(auto.gpu_intervals).unwrap_or(0.0);
-                    let (fits, worth, faster) = match (auto.probe_seconds, tau_dev) {
-                        (Some(c), Some(d)) => {
-                            (c < HOST_FITS * stretch, d >= BUILD_WORTH * stretch, c < d)
-                        }
-                        _ => (false, false, false),
-                    };
-                    if fits && worth {
-                        auto.queue.push(Builder::Hybrid);
-                    }
-                    if faster {
-                        auto.queue.push(Builder::Cpu);
-                    }
-                    if !auto.queue.is_empty() {
-                        auto.queue.push(Builder::Gpu);
-                    }
-                    let fmt = |x: Option<f64>| x.map_or("unknown".into(), |x| format!("{x:.2e} s"));
-                    note = Some(format!(
-                        "host build {}, device build {}, GPU stretch per list {stretch:.2e} s",
-                        fmt(auto.probe_seconds),
-                        fmt(tau_dev)
-                    ));
-                }
-            }
-        } else if auto.until_round > 0 {
-            auto.until_round -= 1;
-            if auto.until_round == 0 {
-                auto.start_round();
-            }
-        }
-        let mut next = self.builder;
-        let mut reason = None;
-        if auto.trial.is_none() && auto.until_round == 0 {
-            if !auto.queue.is_empty() {
-                let b = auto.queue.remove(0);
-                auto.trial = Some(Trial {
-                    builder: b,
-                    skip: if b == self.builder { 0 } else { TRIAL_SKIP },
-                    left: TRIAL_MEASURE,
-                    seconds: 0.0,
-                    steps: 0,
-                });
-                next = b;
-                reason = Some(format!("trial of {}", b.name()));
-            } else {
-                // The round is over: the fastest measured, until the next round.
-                let measured: Vec<(Builder, f64)> = Builder::ALL
-                    .into_iter()
-                    .filter_map(|b| auto.per_step[b.index()].map(|t| (b, t)))
-                    .collect();
-                if let Some(&(b, _)) = measured.iter().min_by(|x, y| x.1.total_cmp(&y.1)) {
-                    next = b;
-                    let parts: Vec<String> = measured
-                        .iter()
-                        .map(|(b, t)| format!("{} {t:.3e} s/step", b.name()))
-                        .collect();
-                    reason = Some(format!("fastest measured: {}", parts.join(", ")));
-                    tracing::info!(
-                        "neighbor mode auto: picks {} at step {step} ({}{})",
-                        b.name(),
-                        parts.join(", "),
-                        note.as_deref().map_or(String::new(), |n| format!("; {n}"))
-                    );
-                }
-                auto.until_round = auto.gap;
-                auto.gap = (2 * auto.gap).min(LAST_GAP);
-            }
-        }
-        if let Some(n) = &note
-            && next != self.builder
-        {
-            tracing::info!("neighbor mode auto: {n}");
-        }
-        self.report.measured_s_per_step = Builder::ALL
-            .into_iter()
-            .filter_map(|b| auto.per_step[b.index()].map(|t| (b, t)))
-            .collect();
-        if next != self.builder {
-            let reason = reason.unwrap_or_default();
+        let switch = auto.interval(self.builder, builder, seconds, steps, step, tau_dev);
+        self.report.measured_s_per_step = auto.measured();
+        if let Some((next, reason)) = switch {
             tracing::info!(
                 "neighbor mode auto: {} → {} at step {step} ({reason})",
                 self.builder.name(),
@@ -621,122 +410,5 @@ impl ListBuilder {
             _ => None,
         };
         r
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::scene::test_sphere_scene;
-
-    /// A scene of spheres with `mode` (the builder needs its skins and box only).
-    fn builder(mode: &str) -> ListBuilder {
-        let scene = test_sphere_scene(&format!("mode = \"{mode}\""));
-        let bounds = Bounds {
-            min: scene.domain.min,
-            max: scene.domain.max,
-            periodic: scene.domain.periodic,
-        };
-        let grid = GridParams::new(&bounds, scene.cutoff(), 4000);
-        ListBuilder::new(&scene, grid, false, 1000)
-    }
-
-    /// Feeds `auto` list intervals of 100 steps, each builder taking its seconds per step from
-    /// `cost`, with a device build of `device` s and a probe that measured `host` s; returns
-    /// the builder after `intervals` intervals and the builders used, in order.
-    fn drive(
-        b: &mut ListBuilder,
-        cost: impl Fn(Builder) -> f64,
-        device: f64,
-        host: f64,
-        intervals: u64,
-    ) -> Vec<Builder> {
-        let mut used = Vec::new();
-        for k in 0..intervals {
-            let now = b.builder;
-            used.push(now);
-            if now != Builder::Cpu {
-                b.count_build(false, device);
-            }
-            if let Some(a) = b.auto.as_mut() {
-                a.probe_seconds = Some(host);
-                a.want_probe = false;
-            }
-            b.auto_interval(now, 100.0 * cost(now), 100, 100 * (k + 1));
-        }
-        used
-    }
-
-    /// Hybrid 10 % faster, a host that builds in a fifth of the GPU's stretch and a device
-    /// build worth 5 % of it: auto tries gpu, hybrid, gpu, then runs hybrid, and logs it.
-    #[test]
-    fn auto_picks_hybrid_when_it_measures_faster() {
-        let mut b = builder("auto");
-        let cost = |x: Builder| if x == Builder::Hybrid { 0.9e-3 } else { 1.0e-3 };
-        let used = drive(&mut b, cost, 5e-3, 0.02, 40);
-        assert_eq!(b.builder, Builder::Hybrid, "used {used:?}");
-        let r = b.report();
-        assert!(r.switches.len() >= 3, "{:?}", r.switches);
-        assert_eq!(r.switches.last().unwrap().to, Builder::Hybrid);
-        assert!(
-            r.switches
-                .last()
-                .unwrap()
-                .reason
-                .starts_with("fastest measured")
-        );
-        let hybrid = r
-            .measured_s_per_step
-            .iter()
-            .find(|m| m.0 == Builder::Hybrid);
-        assert!((hybrid.unwrap().1 - 0.9e-3).abs() < 1e-12);
-        // It keeps hybrid until the next round, 64 intervals after the pick (interval 12),
-        // which tries gpu, hybrid and gpu again and picks hybrid again.
-        let rest = drive(&mut b, cost, 5e-3, 0.02, 60);
-        assert!(rest[..30].iter().all(|&x| x == Builder::Hybrid), "{rest:?}");
-        assert!(rest[30..].contains(&Builder::Gpu), "{rest:?}");
-        assert_eq!(b.builder, Builder::Hybrid);
-    }
-
-    /// A host build ten times the GPU's stretch per list (the spheres on the H200): hybrid is
-    /// never tried, auto stays on gpu.
-    #[test]
-    fn auto_does_not_try_hybrid_when_the_host_cannot_keep_up() {
-        let mut b = builder("auto");
-        let used = drive(&mut b, |_| 1.0e-3, 5e-3, 1.0, 200);
-        assert!(used.iter().all(|&x| x == Builder::Gpu), "{used:?}");
-        assert!(b.report().switches.is_empty());
-    }
-
-    /// A hybrid 50 % slower than gpu: its trial ends after one measured interval (after the
-    /// skipped one), and auto returns to gpu.
-    #[test]
-    fn a_losing_trial_ends_early() {
-        let mut b = builder("auto");
-        let cost = |x: Builder| if x == Builder::Hybrid { 1.5e-3 } else { 1.0e-3 };
-        let used = drive(&mut b, cost, 5e-3, 0.02, 30);
-        let hybrid = used.iter().filter(|&&x| x == Builder::Hybrid).count();
-        assert_eq!(hybrid, 2, "{used:?}");
-        assert_eq!(b.builder, Builder::Gpu);
-    }
-
-    /// Fixed modes never switch; a decomposed run builds on the device whatever the mode.
-    #[test]
-    fn fixed_modes_keep_their_builder() {
-        for (mode, want) in [
-            ("gpu", Builder::Gpu),
-            ("cpu", Builder::Cpu),
-            ("hybrid", Builder::Hybrid),
-        ] {
-            let mut b = builder(mode);
-            drive(&mut b, |_| 1e-3, 5e-3, 0.02, 50);
-            assert_eq!(b.builder, want);
-        }
-        let mut b = builder("hybrid");
-        b.builder = Builder::Gpu;
-        assert_eq!(b.snapshot_distance(), f64::INFINITY);
-        let h = builder("hybrid");
-        // Snapshot at max((S − s)/2, S/4) with S = 2s: s/2.
-        assert!((h.snapshot_distance() - 0.5 * h.skin).abs() < 1e-15);
     }
 }
