@@ -31,8 +31,9 @@ typedef int64_t pd_i64;
 typedef uint32_t pd_u32;
 #endif
 
-// Doubles per contact in the contact history: the tangential spring (3), the approach speed
-// at first touch, the twist angle (Rust: backend::cuda::layout::HISTORY_WIDTH).
+// Doubles per contact in the contact history: the tangential spring (3), the current loading
+// cycle's approach speed signed by its phase, the twist angle (Rust:
+// backend::cuda::layout::HISTORY_WIDTH).
 #define PD_HISTORY_WIDTH 5
 
 namespace pd {

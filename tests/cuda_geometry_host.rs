@@ -1176,7 +1176,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             },
         };
         let speed = 10f64.powf(rng.range(-3.0, 0.5));
-        let kin = ContactKinematics {
+        let mut kin = ContactKinematics {
             x_a,
             x_b,
             v_a: rand3(&mut rng, -1.0, 1.0) * speed,
@@ -1199,6 +1199,13 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             sphere_radius_a: if sphere { 0.005 } else { 0.0 },
             sphere_radius_b: if sphere && i % 8 == 3 { 0.004 } else { 0.0 },
         };
+        // Bodies moving together: the normal speed is exactly 0 (the reference speed's
+        // branch for a contact at rest).
+        if i % 29 == 11 {
+            kin.v_b = kin.v_a;
+            kin.w_a = Vector3::zeros();
+            kin.w_b = Vector3::zeros();
+        }
         let first = i % 3 == 0;
         let state = ContactState {
             spring: if first {

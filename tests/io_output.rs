@@ -505,7 +505,8 @@ fn checkpoint() -> Checkpoint {
             ContactKey::wall(84, 3),
             ContactState {
                 spring: Vector3::new(0.0, -0.0, 1e-300),
-                approach_speed: f64::MIN_POSITIVE,
+                // An unloading cycle's reference speed is stored negative.
+                approach_speed: -f64::MIN_POSITIVE,
                 twist: 0.0,
             },
         ),

@@ -461,18 +461,20 @@ fn a_stack_of_cubes_rests_at_the_default_step() {
 /// A resting face whose contact was formed by an impact settles as fast as one loaded from
 /// rest. The cube rests on the fixed floor at the default step (10 MPa) and is given a
 /// downward speed v0 of a tenth of ω δ_eq (its oscillation stays inside the resting depth),
-/// once with the contact's history as an impact at 1 m/s leaves it (approach speed 1 m/s,
-/// loading) and once as its settling from rest left it. The regularized face is a linear
-/// spring with ω Δt = σ = 1/2 (docs/contact.md §1), and the Hunt–Crossley reference speed
-/// `max(v_cycle, √(2W/m*))` makes its damping `ᾱ/2` of critical (ζ = 0.716 for e = 0.5) once
-/// the loading cycle's own approach speed is the reference. The closed form's envelope
+/// once with the contact's history set as if it were still in the loading cycle of an impact at
+/// 1 m/s (approach speed +1 m/s) and once as its settling from rest left it. The regularized
+/// face is a linear spring with ω Δt = σ = 1/2 (docs/contact.md §1), and the Hunt–Crossley
+/// reference speed `max(v_cycle, √(2W/m*))` makes its damping `ᾱ/2` of critical (ζ = 0.716
+/// for e = 0.5) once the loading cycle's own approach speed is the reference. The closed form's envelope
 /// `v0 e^{−ζωt}/√(1 − ζ²)` falls below 1e-3 v0 after `ln(1e3/√(1 − ζ²))/(2πζ)` = 1.61
 /// periods 2π/ω:
-/// - from rest the speed stays below 1e-3 v0 from no later than that (the explicit step at
-///   ω Δt = 1/2 damps a little more: 0.95 periods measured);
-/// - formed by the impact, the first loading cycle keeps 1 m/s as its reference and is almost
-///   undamped, and every cycle after it takes its own: at most one period later than from rest
-///   (1.59 measured).
+/// - from rest the speed stays below 1e-3 v0 from no later than that, and no sooner than half
+///   of it (the explicit step at ω Δt = 1/2 damps more than the continuous oscillator: 0.95
+///   periods measured; a dashpot that stopped the approach at every step would settle within
+///   a step, 0.08 periods);
+/// - formed by the impact, the contact still in the loading cycle of a 1 m/s impact keeps 1
+///   m/s as its reference and is almost undamped, and every cycle after it takes its own: a
+///   quarter to one period later than from rest (1.59 measured).
 ///
 /// With the first impact's 1 m/s kept as the reference for every cycle, as the law did before,
 /// the impact-formed contact's damping was `ᾱ ω δ_eq / (1 m/s)`, 2e-4 of this: the cube's
@@ -534,11 +536,13 @@ fn a_contact_formed_by_an_impact_settles_like_one_loaded_from_rest() {
          the impact; closed form's envelope (ζ = {zeta:.4}) {envelope:.2}"
     );
     assert!(
-        rest_settled <= envelope,
+        rest_settled <= envelope && rest_settled >= 0.5 * envelope,
         "from rest: settled at period {rest_settled}, the envelope at {envelope}"
     );
+    // The impact's history took effect: its first cycle is almost undamped, so it settles
+    // later than from rest (0.64 periods measured), but by at most a period.
     assert!(
-        impact_settled <= rest_settled + 1.0,
+        impact_settled <= rest_settled + 1.0 && impact_settled >= rest_settled + 0.25,
         "impact-formed: settled at period {impact_settled}, from rest at {rest_settled}"
     );
 }

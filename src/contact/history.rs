@@ -1,6 +1,7 @@
 //! Contact history: the per-contact state that outlives a step (the tangential spring, the
-//! approach speed at first touch, the twist angle), keyed by the pair of global ids so that it survives neighbour-list rebuilds,
-//! reordering and migration (docs/design.md §3).
+//! approach speed of the current loading cycle, the twist angle), keyed by the pair of global
+//! ids so that it survives neighbour-list rebuilds, reordering and migration (docs/design.md
+//! §3).
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};

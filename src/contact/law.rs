@@ -15,8 +15,9 @@
 //!   U regularized below `V* = (A_n Δt √(c/m*)/2)³` ([`resolved_volume`]): linear in V there,
 //!   with a stiffness the step resolves, so that a face resting under a load (whose seed
 //!   stiffness no practical step resolves) stays at rest instead of chattering.
-//! - Normal damping (Hunt–Crossley): `F_d = −ᾱ(e) F_e v_n / v_ref`, `v_ref` the normal speed
-//!   at first touch (contact history), at least `√(2U/m*)`. It is bounded wherever the
+//! - Normal damping (Hunt–Crossley): `F_d = −ᾱ(e) F_e v_n / v_ref`, `v_ref` the approach
+//!   speed of the contact's current loading cycle ([`loading_cycle_speed`], kept in the
+//!   contact history), at least `√(2U/m*)`. It is bounded wherever the
 //!   elastic force is, and gives restitution `e` for every exponent of `F_e(δ)`
 //!   ([`super::restitution::hunt_crossley_alpha`]).
 //! - The normal force acts on the elastic force's line of action, through
@@ -327,10 +328,12 @@ pub fn contact_point(
 /// A cycle begins at first touch, at the contact's impact speed, and again whenever a contact
 /// that was unloading approaches once more while still in contact (a rebound inside the
 /// contact, a face rocking back, the oscillation of a contact settling under load); during the
-/// approach the magnitude follows the largest speed reached. A free impact is one cycle whose
-/// approach speed only falls, so it keeps its first-touch speed and the restitution `e` that ᾱ
-/// was solved for. Keeping the first impact's speed for every later cycle (about 1 m/s for a
-/// poured grain) would leave a contact settling at µm/s with a damping some 10⁴ times too weak.
+/// approach the magnitude follows the largest speed reached. A central impact is one cycle
+/// whose approach speed only falls, so it keeps its first-touch speed and the restitution `e`
+/// that ᾱ was solved for (an eccentric one whose contact point rebounds and approaches again
+/// inside the impact is several cycles: docs/contact.md §2). Keeping the first impact's speed
+/// for every later cycle (about 1 m/s for a poured grain) would leave a contact settling at
+/// µm/s with a damping some 10⁴ times too weak.
 pub fn loading_cycle_speed(stored: f64, vn: f64) -> f64 {
     let speed = vn.abs().max(f64::MIN_POSITIVE);
     if vn < 0.0 {
@@ -535,5 +538,39 @@ pub fn contact_forces(
         elastic_energy: energy
             + 0.5 * k_t * state.spring.norm_squared()
             + 0.25 * k_t * disk * state.twist * state.twist,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::loading_cycle_speed;
+
+    /// Every transition of the reference speed's state, against its definition: first touch
+    /// (stored 0) approaching, separating, at rest and with a NaN speed; a loading cycle that
+    /// slows or speeds up; an unloading; a new cycle after an unloading.
+    #[test]
+    fn loading_cycles_start_follow_and_turn() {
+        let tiny = f64::MIN_POSITIVE;
+        for (stored, vn, want) in [
+            (0.0, -2.0, 2.0),
+            (0.0, 2.0, -2.0),
+            (0.0, 0.0, -tiny),
+            (0.0, -0.0, -tiny),
+            (0.0, f64::NAN, -tiny),
+            (3.0, -2.0, 3.0),
+            (1.0, -2.0, 2.0),
+            (3.0, 2.0, -3.0),
+            (3.0, 0.0, -3.0),
+            (-3.0, 2.0, -3.0),
+            (-3.0, -2.0, 2.0),
+            (-tiny, -1e-9, 1e-9),
+        ] {
+            let got = loading_cycle_speed(stored, vn);
+            assert_eq!(
+                got.to_bits(),
+                f64::to_bits(want),
+                "stored {stored:e}, vn {vn:e}: {got:e}, want {want:e}"
+            );
+        }
     }
 }

@@ -45,7 +45,8 @@ impl GridParams {
 }
 
 /// Doubles per contact in the device's contact history: the tangential spring ξ (3), the
-/// approach speed at first touch and the twist angle (`contact::ContactState`, in that order;
+/// current loading cycle's approach speed, signed by its phase, and the twist angle
+/// (`contact::ContactState`, in that order;
 /// `cuda/contact_law.cuh: PD_HISTORY_WIDTH`).
 pub const HISTORY_WIDTH: usize = 5;
 
