@@ -192,13 +192,13 @@ struct NormalForce {
 };
 
 PD_HD NormalForce normal_force(const ContactParameters& params, const ContactKinematics& kin, double pressure,
-                               double area, double v_ref, double vn, double dt) {
+                               double area, double v_ref, double share, double vn, double dt) {
     NormalForce out;
     out.f_elastic = pressure * area;
     out.c_n = params.damping * out.f_elastic / v_ref;
     double f_damp = -out.c_n * vn;
     if (dt > 0.0) {
-        double limit = kin.effective_mass * abs_(vn) / dt;
+        double limit = share * kin.effective_mass * abs_(vn) / dt;
         f_damp = min_(max_(f_damp, -limit), limit);
     }
     out.f_normal = max_(out.f_elastic + f_damp, 0.0);
@@ -285,14 +285,18 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     }
     state->approach_speed = loading_cycle_speed(state->approach_speed, vn);
     double energy = resolved_potential(stiffness, volume, resolved);
-    double v_ref = max_(abs_(state->approach_speed), sqrt_(2.0 * energy / kin.effective_mass));
-    NormalForce nf = normal_force(params, kin, pressure, area, v_ref, vn, dt);
+    double cycle = abs_(state->approach_speed), floor_speed = sqrt_(2.0 * energy / kin.effective_mass);
+    double v_ref = max_(cycle, floor_speed);
+    // The share of the relative speed a dashpot may take per step (law.rs DASHPOT_STEP_FRACTION
+    // where the floor sets the damping).
+    double share = floor_speed > cycle ? 0.5 : 1.0;
+    NormalForce nf = normal_force(params, kin, pressure, area, v_ref, share, vn, dt);
     // The exit (law.rs): a separating contact that the coming drift carries apart.
     if (windowed && vn > 0.0 && dt > 0.0) {
         double exit = 0.5 * (vn + nf.f_normal * dt / kin.effective_mass) * dt;
         if (local.depth - 2.0 * exit <= 0.0 && local.depth - exit > 0.0) {
             pressure += resolved_potential(stiffness, local_volume_at(local, -exit), resolved) / (2.0 * exit * area);
-            nf = normal_force(params, kin, pressure, area, v_ref, vn, dt);
+            nf = normal_force(params, kin, pressure, area, v_ref, share, vn, dt);
         }
     }
     double f_elastic = nf.f_elastic;
@@ -339,7 +343,7 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
         double c_roll = 0.25 * c_n * disk;
         double inverse = inverse_inertia_about(kin, w_perp / rocking);
         if (dt > 0.0 && inverse > 0.0) {
-            c_roll = min_(c_roll, 1.0 / (dt * inverse));
+            c_roll = min_(c_roll, share / (dt * inverse));
         }
         couple_b -= w_perp * c_roll;
     }

@@ -320,6 +320,18 @@ pub fn contact_point(
     }
 }
 
+/// The largest share of its relative speed that the normal or rocking dashpot of a contact
+/// damped by the floor `√(2W/m*)` (at rest, or loaded slowly) may take in one explicit step:
+/// `c Δt/m* ≤ 1/2`, `m*` (or the moment of inertia) the one the contact sees; a contact
+/// damped to its cycle's approach speed (an impact) keeps the whole speed, `c Δt/m* ≤ 1`, as
+/// its restitution needs at low `e` and coarse steps (a vertex at e = 0.1 and t_c/40 rebounds
+/// at 0.12 with 1/2). A particle's contacts are evaluated apart, so their dashpots add up on
+/// it unseen by each other, and at the floor a low restitution's damping is far overcritical
+/// (`ᾱ/2` of critical at the regularized face's `ω Δt = 1/2`: 5 for e = 0.1): with the whole
+/// speed per contact, a cube of e = 0.1 resting on four others had twice its speed taken at
+/// each step and kept oscillating (1.5e-4 m/s after 0.25 s at 0.1 MPa; 8e-12 m/s with 1/2).
+pub const DASHPOT_STEP_FRACTION: f64 = 0.5;
+
 /// The Hunt–Crossley reference speed a contact carries into the next step, given the stored
 /// one and this step's normal speed `vn` (> 0 separating; docs/contact.md §2). Its magnitude is
 /// the approach speed of the current loading cycle, its sign the phase: positive while the
@@ -413,17 +425,27 @@ pub fn contact_forces(
     // cycle's approach speed.
     state.approach_speed = loading_cycle_speed(state.approach_speed, vn);
     let energy = resolved_potential(stiffness, volume, resolved);
-    let v_ref = state
-        .approach_speed
-        .abs()
-        .max((2.0 * energy / kin.effective_mass).sqrt());
+    let (cycle, floor) = (
+        state.approach_speed.abs(),
+        (2.0 * energy / kin.effective_mass).sqrt(),
+    );
+    let v_ref = cycle.max(floor);
+    // The share of the relative speed a dashpot may take per step: the whole of it for a
+    // contact damped to its cycle's approach speed (an impact), DASHPOT_STEP_FRACTION where the
+    // floor sets the damping (a contact at rest or loaded slowly, overcritical at low e).
+    let share = if floor > cycle {
+        DASHPOT_STEP_FRACTION
+    } else {
+        1.0
+    };
     let normal = |pressure: f64| {
         let f_elastic = pressure * area;
         let c_n = params.damping * f_elastic / v_ref;
         let mut f_damp = -c_n * vn;
-        // An explicit step's dashpot impulse never reverses the normal approach on its own.
+        // An explicit step's dashpot impulse takes at most `share` of the normal approach
+        // speed: never reverses it on its own.
         if dt > 0.0 {
-            let limit = kin.effective_mass * vn.abs() / dt;
+            let limit = share * kin.effective_mass * vn.abs() / dt;
             f_damp = f_damp.clamp(-limit, limit);
         }
         // The contact pushes, never pulls.
@@ -501,7 +523,7 @@ pub fn contact_forces(
         let mut c_roll = 0.25 * c_n * disk;
         let inverse = kin.inverse_inertia_about(&(w_perp / rocking));
         if dt > 0.0 && inverse > 0.0 {
-            c_roll = c_roll.min(1.0 / (dt * inverse));
+            c_roll = c_roll.min(share / (dt * inverse));
         }
         couple_b -= w_perp * c_roll;
     }
