@@ -392,6 +392,9 @@ template <class T> struct PairWorkspace {
     PosedPolytope<T> a;
     PosedPolytope<T> b;
     OverlapWorkspace<T> overlap;
+    // pair_planes_t left planes of an intersection the Chebyshev centre did not prove (GJK's
+    // verdict, no interior thicker than the LP's tolerance): see overlap_pair_t.
+    bool unproven;
 };
 
 // pair::axis_separates: whether the plane with normal `axis` separates A from B by a gap of
@@ -435,6 +438,7 @@ template <class T, bool kFull, bool kWide = false>
 PD_HD int pair_planes_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out,
                         V3<double>* frame, bool* ready) {
     *ready = false;
+    ws.unproven = false;
     out->intersects = 0;
     out->separating_axis = zero3<double>();
     out->overlap = overlap_zero<double>();
@@ -480,6 +484,7 @@ PD_HD int pair_planes_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B
         restore_aside(ws.a);
         restore_aside(ws.b);
         centre = chebyshev_centre_wide(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes);
+        ws.unproven = true;
     }
     PD_CLK(5)
     origin = origin + widen(centre.point);
@@ -512,7 +517,14 @@ PD_HD int overlap_pair_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& 
     bool ready;
     int st = pair_planes_t<T, kFull>(ws, A, B, out, &frame, &ready);
     if (st != STATUS_OK || !ready) return st;
-    return overlap_of_planes<T, kFull>(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, frame, out);
+    st = overlap_of_planes<T, kFull>(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, frame, out);
+    // Touching below what the dual resolves (pair.rs overlap_pair): no volume.
+    if (st == STATUS_HULL_DEGENERATE && ws.unproven) {
+        out->intersects = 1;
+        out->overlap = overlap_zero<double>();
+        return STATUS_OK;
+    }
+    return st;
 }
 
 template <class T> PD_HD int overlap_pair(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out) {

@@ -454,3 +454,66 @@ fn a_resting_face_tilted_by_round_off_keeps_its_wall_contact() {
         o.volume
     );
 }
+
+/// Two cubes of a poured pile (1.10 and 1.23 cm, turned) that touch along a sliver GJK counts
+/// as intersecting but whose Chebyshev centre finds no interior thicker than 2e-17 m (1.7e-15
+/// of the pair's size): the dual points of an overlap that thin span less than three
+/// dimensions to f64, and the pair query stopped the run ("dual hull failed: the points span
+/// less than three dimensions", step 1 976 866 of the pile). It is a touching pair: no volume,
+/// in f64, f32 and mixed precision alike (poses as the run reported them).
+#[test]
+fn touching_below_what_the_dual_resolves_has_no_volume() {
+    use nalgebra::{Quaternion, Translation3};
+    use polydem::geometry::pair::overlap_pair_mixed;
+    let cube = |size: f64| Generator::parse("cube", size).unwrap().build().unwrap();
+    let (ta, tb) = (cube(0.012), cube(0.012));
+    let pose = |x: [f64; 3], q: [f64; 4]| {
+        Isometry3::from_parts(
+            Translation3::new(x[0], x[1], x[2]),
+            UnitQuaternion::new_unchecked(Quaternion::new(q[0], q[1], q[2], q[3])),
+        )
+    };
+    let pa = pose(
+        [
+            -0.028239433889745848,
+            0.02731255681625542,
+            0.010259968026271934,
+        ],
+        [
+            -0.23037576541399032,
+            0.668525998502521,
+            0.23037575758723522,
+            0.6685259952703657,
+        ],
+    );
+    let pb = pose(
+        [
+            -0.030143005692809508,
+            0.029340879739901495,
+            0.00353726389911433,
+        ],
+        [
+            0.2874511062246991,
+            0.28745110812115565,
+            0.6460432342205854,
+            0.6460432349989607,
+        ],
+    );
+    let (a, b) = (
+        (&ta, 0.9195573907383391, &pa),
+        (&tb, 1.0211201337892601, &pb),
+    );
+    let r64 = overlap_pair(&mut PairWorkspace::<f64>::boxed(), a, b).expect("f64");
+    let r32 = overlap_pair(&mut PairWorkspace::<f32>::boxed(), a, b).expect("f32");
+    let mixed = overlap_pair_mixed(
+        &mut PairWorkspace::<f32>::boxed(),
+        &mut PairWorkspace::<f64>::boxed(),
+        a,
+        b,
+    )
+    .expect("mixed");
+    for (what, r) in [("f64", &r64), ("f32", &r32), ("mixed", &mixed)] {
+        assert_eq!(r.overlap.volume, 0.0, "{what}");
+    }
+    assert!(r64.intersects && mixed.intersects);
+}

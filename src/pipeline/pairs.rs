@@ -209,7 +209,11 @@ impl Simulation {
                         SimulationError::Geometry {
                             step,
                             what: format!("particles {} and {}", p.id[a], p.id[b]),
-                            message: e.to_string(),
+                            message: format!(
+                                "{e}; to reproduce with `polydem probe overlap`: A {}, B {}",
+                                probe_body(ta, p.scale[a], &pose_a),
+                                probe_body(tb, p.scale[b], &pose_b)
+                            ),
                         }
                     })?;
                     if g.overlap.volume <= 0.0 {
@@ -299,4 +303,16 @@ pub(super) fn normal_effective_mass(
         inverse += 1.0 / p.mass[i] + body.component_div(&p.inertia[i]).dot(&body);
     }
     1.0 / inverse
+}
+
+/// A body of a failed pair query as `polydem probe overlap` takes it (launch/probe/README.md):
+/// the template and scale, and the pose as JSON to the last bit (`{:?}` prints the shortest
+/// decimal that reads back the same f64).
+fn probe_body(t: &crate::shape::ConvexTemplate, scale: f64, pose: &Isometry3<f64>) -> String {
+    let (x, q) = (pose.translation.vector, pose.rotation.quaternion());
+    format!(
+        "template \"{}\" scale {scale:?} {{\"position\": [{:?}, {:?}, {:?}], \"orientation\": \
+         [{:?}, {:?}, {:?}, {:?}]}}",
+        t.name, x.x, x.y, x.z, q.w, q.i, q.j, q.k
+    )
 }
