@@ -13,7 +13,7 @@
 mod common;
 
 use common::*;
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use polydem::geometry::Real;
 use polydem::geometry::clip::{facet_prism, prism_overlap_culled};
 use polydem::geometry::gjk_intersect;
@@ -22,7 +22,7 @@ use polydem::geometry::pair::{PairGeometry, PairWorkspace, axis_separates, overl
 use polydem::geometry::polytope::{PosedPolytope, cast};
 use polydem::geometry::quickhull::HullError;
 use polydem::rng::Rng;
-use polydem::shape::{ConvexTemplate, Generator};
+use polydem::shape::ConvexTemplate;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -699,47 +699,18 @@ fn parity(what: &str, produce: Producer) {
     // Two cubes of a poured pile touching below what the dual resolves: GJK counts them as
     // intersecting, the Chebyshev centre finds no interior, the dual hull is degenerate, and
     // the pair touches with no volume (overlap_cases.rs has the same pair).
+    let (cube, [(sa, pose_a), (sb, pose_b)]) = pile_touching_pair();
     shapes.push(Shape {
         name: "cube 12 mm",
-        template: Generator::parse("cube", 0.012).unwrap().build().unwrap(),
+        template: cube,
     });
-    let pose = |x: [f64; 3], q: [f64; 4]| {
-        Isometry3::from_parts(
-            Translation3::new(x[0], x[1], x[2]),
-            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])),
-        )
-    };
     pairs.push(PairCase {
         a: shapes.len() - 1,
         b: shapes.len() - 1,
-        sa: 0.9195573907383391,
-        sb: 1.0211201337892601,
-        pose_a: pose(
-            [
-                -0.028239433889745848,
-                0.02731255681625542,
-                0.010259968026271934,
-            ],
-            [
-                -0.23037576541399032,
-                0.668525998502521,
-                0.23037575758723522,
-                0.6685259952703657,
-            ],
-        ),
-        pose_b: pose(
-            [
-                -0.030143005692809508,
-                0.029340879739901495,
-                0.00353726389911433,
-            ],
-            [
-                0.2874511062246991,
-                0.28745110812115565,
-                0.6460432342205854,
-                0.6460432349989607,
-            ],
-        ),
+        sa,
+        sb,
+        pose_a,
+        pose_b,
         axis: Vector3::zeros(),
         margin: 0.0,
         kind: "touching below the dual's resolution",

@@ -463,46 +463,9 @@ fn a_resting_face_tilted_by_round_off_keeps_its_wall_contact() {
 /// in f64, f32 and mixed precision alike (poses as the run reported them).
 #[test]
 fn touching_below_what_the_dual_resolves_has_no_volume() {
-    use nalgebra::{Quaternion, Translation3};
     use polydem::geometry::pair::overlap_pair_mixed;
-    let cube = |size: f64| Generator::parse("cube", size).unwrap().build().unwrap();
-    let (ta, tb) = (cube(0.012), cube(0.012));
-    let pose = |x: [f64; 3], q: [f64; 4]| {
-        Isometry3::from_parts(
-            Translation3::new(x[0], x[1], x[2]),
-            UnitQuaternion::new_unchecked(Quaternion::new(q[0], q[1], q[2], q[3])),
-        )
-    };
-    let pa = pose(
-        [
-            -0.028239433889745848,
-            0.02731255681625542,
-            0.010259968026271934,
-        ],
-        [
-            -0.23037576541399032,
-            0.668525998502521,
-            0.23037575758723522,
-            0.6685259952703657,
-        ],
-    );
-    let pb = pose(
-        [
-            -0.030143005692809508,
-            0.029340879739901495,
-            0.00353726389911433,
-        ],
-        [
-            0.2874511062246991,
-            0.28745110812115565,
-            0.6460432342205854,
-            0.6460432349989607,
-        ],
-    );
-    let (a, b) = (
-        (&ta, 0.9195573907383391, &pa),
-        (&tb, 1.0211201337892601, &pb),
-    );
+    let (cube, [(sa, pa), (sb, pb)]) = pile_touching_pair();
+    let (a, b) = ((&cube, sa, &pa), (&cube, sb, &pb));
     let r64 = overlap_pair(&mut PairWorkspace::<f64>::boxed(), a, b).expect("f64");
     let r32 = overlap_pair(&mut PairWorkspace::<f32>::boxed(), a, b).expect("f32");
     let mixed = overlap_pair_mixed(

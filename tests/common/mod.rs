@@ -474,3 +474,44 @@ dir = "out"
         root.join("meshes/walls/box_open_top.stl").display()
     )
 }
+
+/// Two cubes of a poured pile (12 mm generator cubes at scales 0.920 and 1.021, turned) that
+/// touch along a sliver thinner than the dual hull resolves in f64 (docs/contact.md §5): the
+/// template, then each body's scale and pose, to the last bit as the run reported them.
+#[allow(dead_code)]
+pub fn pile_touching_pair() -> (ConvexTemplate, [(f64, Isometry3<f64>); 2]) {
+    let pose = |x: [f64; 3], q: [f64; 4]| {
+        Isometry3::from_parts(
+            nalgebra::Translation3::new(x[0], x[1], x[2]),
+            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])),
+        )
+    };
+    let cube = Generator::parse("cube", 0.012).unwrap().build().unwrap();
+    let a = pose(
+        [
+            -0.028239433889745848,
+            0.02731255681625542,
+            0.010259968026271934,
+        ],
+        [
+            -0.23037576541399032,
+            0.668525998502521,
+            0.23037575758723522,
+            0.6685259952703657,
+        ],
+    );
+    let b = pose(
+        [
+            -0.030143005692809508,
+            0.029340879739901495,
+            0.00353726389911433,
+        ],
+        [
+            0.2874511062246991,
+            0.28745110812115565,
+            0.6460432342205854,
+            0.6460432349989607,
+        ],
+    );
+    (cube, [(0.9195573907383391, a), (1.0211201337892601, b)])
+}
