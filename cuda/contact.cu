@@ -155,19 +155,28 @@ PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const
     kin.inverse_inertia_b = v3(1.0 / ib.x, 1.0 / ib.y, 1.0 / ib.z);
     kin.sphere_radius_a = PD_SPHERES ? p.radius[a] : 0.0;
     kin.sphere_radius_b = PD_SPHERES ? p.radius[b] : 0.0;
+    kin.split_a = mass_share(p.contacts[a]);
+    kin.split_b = mass_share(p.contacts[b]);
 #if PD_SPHERES
     // The lens's centroid is on the line of centres: no lever arm, no rotational term.
     kin.effective_mass = 1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b]);
+    kin.dashpot_mass = 1.0 / (kin.split_a / p.mass[a] + kin.split_b / p.mass[b]);
 #else
     double area = norm(ov.dv_dxb);
     if (area > 0.0) {
         V3<double> nrm = (-ov.dv_dxb) / area;
-        double inverse = 0.0;
-        inverse += inverse_mass_term(p.mass[a], ia, qa, xa, ov.centroid, nrm);
-        inverse += inverse_mass_term(p.mass[b], ib, qb, xb, ov.centroid, nrm);
+        double inverse = 0.0, split = 0.0;
+        double term_a = inverse_mass_term(p.mass[a], ia, qa, xa, ov.centroid, nrm);
+        inverse += term_a;
+        split += kin.split_a * term_a;
+        double term_b = inverse_mass_term(p.mass[b], ib, qb, xb, ov.centroid, nrm);
+        inverse += term_b;
+        split += kin.split_b * term_b;
         kin.effective_mass = 1.0 / inverse;
+        kin.dashpot_mass = 1.0 / split;
     } else {
         kin.effective_mass = min_(p.mass[a], p.mass[b]);
+        kin.dashpot_mass = min_(p.mass[a] / kin.split_a, p.mass[b] / kin.split_b);
     }
 #endif
     // The whole history is read with or without friction: the damping's reference speed is

@@ -26,7 +26,15 @@ struct ContactKinematics {
     Quat<double> q_a, q_b;
     V3<double> inverse_inertia_a, inverse_inertia_b; // zero for a wall
     double sphere_radius_a, sphere_radius_b;          // zero for a polyhedron or a wall
+    // The dashpot caps' mass splitting (law.rs ContactKinematics::split_a, dashpot_mass): each
+    // body's share (its contacts at the last evaluation, at least 1; 1 for a wall) and the
+    // effective mass with each body's term multiplied by it.
+    double split_a, split_b;
+    double dashpot_mass;
 };
+
+// A body's share of the dashpot caps' mass splitting (law.rs `mass_share`).
+PD_HD double mass_share(unsigned int contacts) { return (double)(contacts > 1u ? contacts : 1u); }
 
 // The history of one contact (history.rs `ContactState`), PD_HISTORY_WIDTH doubles in memory.
 struct ContactHistoryRecord {
@@ -89,13 +97,14 @@ PD_HD ContactForces no_contact_forces() {
     return f;
 }
 
-// ContactKinematics::inverse_inertia_about: u·(I_A⁻¹ + I_B⁻¹)u for the unit axis u.
-PD_HD double inverse_inertia_about(const ContactKinematics& kin, V3<double> u) {
+// ContactKinematics::split_inverse_inertia_about: u·(k_A I_A⁻¹ + k_B I_B⁻¹)u for the unit axis
+// u, k the bodies' shares of the caps' mass splitting.
+PD_HD double split_inverse_inertia_about(const ContactKinematics& kin, V3<double> u) {
     V3<double> ba = rotate_inverse(kin.q_a, u);
     V3<double> bb = rotate_inverse(kin.q_b, u);
     V3<double> sa = v3(ba.x * kin.inverse_inertia_a.x, ba.y * kin.inverse_inertia_a.y, ba.z * kin.inverse_inertia_a.z);
     V3<double> sb = v3(bb.x * kin.inverse_inertia_b.x, bb.y * kin.inverse_inertia_b.y, bb.z * kin.inverse_inertia_b.z);
-    return dot(sa, ba) + dot(sb, bb);
+    return kin.split_a * dot(sa, ba) + kin.split_b * dot(sb, bb);
 }
 
 // U(V) = (3/4) c V^{4/3} for V > 0 (law.rs `potential`).
@@ -198,7 +207,7 @@ PD_HD NormalForce normal_force(const ContactParameters& params, const ContactKin
     out.c_n = params.damping * out.f_elastic / v_ref;
     double f_damp = -out.c_n * vn;
     if (dt > 0.0) {
-        double limit = share * kin.effective_mass * abs_(vn) / dt;
+        double limit = share * kin.dashpot_mass * abs_(vn) / dt;
         f_damp = min_(max_(f_damp, -limit), limit);
     }
     out.f_normal = max_(out.f_elastic + f_damp, 0.0);
@@ -341,7 +350,7 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     double rocking = norm(w_perp);
     if (params.rocking && c_n > 0.0 && rocking > 0.0) {
         double c_roll = 0.25 * c_n * disk;
-        double inverse = inverse_inertia_about(kin, w_perp / rocking);
+        double inverse = split_inverse_inertia_about(kin, w_perp / rocking);
         if (dt > 0.0 && inverse > 0.0) {
             c_roll = min_(c_roll, share / (dt * inverse));
         }
@@ -350,7 +359,7 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     if (params.friction > 0.0) {
         double k_tw = 0.5 * k_t * disk;
         double c_tw = 0.5 * c_t * disk;
-        double inverse = inverse_inertia_about(kin, n);
+        double inverse = split_inverse_inertia_about(kin, n);
         if (dt > 0.0 && inverse > 0.0) {
             c_tw = min_(c_tw, 1.0 / (dt * inverse));
         }

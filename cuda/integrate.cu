@@ -236,6 +236,7 @@ extern "C" __global__ void reduce_and_kick(ReduceKickParams args) {
     const double* mass = args.mass;
     const double* inertia = args.inertia;
     const double* orientation = args.orientation;
+    const unsigned int* pair_contact = args.pair_contact;
     const double gx = args.gravity[0], gy = args.gravity[1], gz = args.gravity[2];
     const double dt = args.dt;
     int ii = blockIdx.x * blockDim.x + threadIdx.x;
@@ -244,9 +245,14 @@ extern "C" __global__ void reduce_and_kick(ReduceKickParams args) {
     }
     size_t i = (size_t)ii;
     V3<double> f = zero3<double>(), t = zero3<double>();
+    // The particle's contacts, which the next evaluation's dashpot caps split its mass among
+    // (pipeline/reduction.rs reduce_forces); a ghost's partial count is replaced by its
+    // owner's through the halo before it is read.
+    unsigned int contacts = 0u;
     for (unsigned int m = ref_offset[i]; m < ref_offset[i + 1]; ++m) {
         unsigned int r = refs[m];
         size_t k = r >> 1;
+        contacts += pair_contact[k] != 0u ? 1u : 0u;
         if (r & 1u) {
             f += load3(pair_forces, 3 * k);
             t += load3(pair_forces, 3 * k + 2);
@@ -258,12 +264,16 @@ extern "C" __global__ void reduce_and_kick(ReduceKickParams args) {
 #if PD_WALLS
     f += load3(wall_force, i);
     t += load3(wall_torque, i);
+    for (int w = 0; w < args.n_walls; ++w) {
+        contacts += args.wall_contact[i * (size_t)args.n_walls + w] != 0u ? 1u : 0u;
+    }
 #else
     (void)wall_force;
     (void)wall_torque;
 #endif
     store3(force, i, f);
     store3(torque, i, t);
+    args.contacts[i] = contacts;
     if (kick && !is_ghost(ghost, ii)) {
         V3<double> v, w;
         half_kick_particle(ii, velocity, angular_velocity, f, t, mass, inertia, orientation, v3(gx, gy, gz), dt, &v,

@@ -97,6 +97,7 @@ struct ParticleView {
     const double* ct;          // E / (2 (1 + ν) R): tangential stiffness term
     const unsigned int* tmpl;  // template index
     const unsigned int* material;
+    const unsigned int* contacts; // contacts at the last evaluation (the dashpot caps' mass splitting)
 };
 #ifdef PD_SIZEOF_PARTICLE_VIEW
 PD_CHECK_SIZE(ParticleView, PARTICLE_VIEW);
@@ -112,6 +113,7 @@ PD_CHECK_OFFSET(ParticleView, cn, PARTICLE_VIEW);
 PD_CHECK_OFFSET(ParticleView, ct, PARTICLE_VIEW);
 PD_CHECK_OFFSET(ParticleView, tmpl, PARTICLE_VIEW);
 PD_CHECK_OFFSET(ParticleView, material, PARTICLE_VIEW);
+PD_CHECK_OFFSET(ParticleView, contacts, PARTICLE_VIEW);
 #endif
 
 // Per-pair outputs (layout.rs `PairOutputs`): force on B, torque on A, torque on B (nine
@@ -274,6 +276,11 @@ struct ReduceKickParams {
     const double* mass;
     const double* inertia;
     const double* orientation;
+    const unsigned int* pair_contact; // the pair slots' contact flags
+    const unsigned int* wall_contact; // the wall slots' contact flags (particle-major), null without walls
+    unsigned int* contacts;           // out: each particle's contacts, pairs and walls
+    int n_walls;
+    int pad;
     double gravity[3];
     double dt;
 };
@@ -294,6 +301,10 @@ PD_CHECK_OFFSET(ReduceKickParams, angular_velocity, REDUCE_KICK_PARAMS);
 PD_CHECK_OFFSET(ReduceKickParams, mass, REDUCE_KICK_PARAMS);
 PD_CHECK_OFFSET(ReduceKickParams, inertia, REDUCE_KICK_PARAMS);
 PD_CHECK_OFFSET(ReduceKickParams, orientation, REDUCE_KICK_PARAMS);
+PD_CHECK_OFFSET(ReduceKickParams, pair_contact, REDUCE_KICK_PARAMS);
+PD_CHECK_OFFSET(ReduceKickParams, wall_contact, REDUCE_KICK_PARAMS);
+PD_CHECK_OFFSET(ReduceKickParams, contacts, REDUCE_KICK_PARAMS);
+PD_CHECK_OFFSET(ReduceKickParams, n_walls, REDUCE_KICK_PARAMS);
 PD_CHECK_OFFSET(ReduceKickParams, gravity, REDUCE_KICK_PARAMS);
 PD_CHECK_OFFSET(ReduceKickParams, dt, REDUCE_KICK_PARAMS);
 #endif

@@ -363,14 +363,20 @@ extern "C" __global__ void wall_contacts(WallContactsParams args) {
         kin.inverse_inertia_b = zero3<double>();
         kin.sphere_radius_a = PD_SPHERES ? p.radius[i] : 0.0;
         kin.sphere_radius_b = 0.0;
+        kin.split_a = mass_share(p.contacts[i]);
+        kin.split_b = 1.0;
         double area = norm(world.dv_dxb);
         if (area > 0.0) {
             V3<double> nrm = (-world.dv_dxb) / area;
-            double inverse = 0.0;
-            inverse += inverse_mass_term(p.mass[i], ip, qp, xp, c, nrm);
+            double inverse = 0.0, split = 0.0;
+            double term = inverse_mass_term(p.mass[i], ip, qp, xp, c, nrm);
+            inverse += term;
+            split += kin.split_a * term;
             kin.effective_mass = 1.0 / inverse;
+            kin.dashpot_mass = 1.0 / split;
         } else {
             kin.effective_mass = p.mass[i];
+            kin.dashpot_mass = p.mass[i] / kin.split_a;
         }
         ContactHistoryRecord history = load_history(spring_in, slot);
         ContactForces f = contact_forces(params, pm, world, kin, &history, dt);

@@ -67,6 +67,11 @@ pub struct Particles {
     pub mass: Vec<f64>,
     /// Principal moments of inertia (body frame).
     pub inertia: Vec<Vector3<f64>>,
+    /// Contacts (particles and walls) of the last force evaluation: the number the dashpot
+    /// caps of the next one split the particle's mass among ([`crate::contact::law`],
+    /// docs/contact.md §2). Not stored in checkpoints: [`Particles::count_contacts`] recovers
+    /// it from the contact history, which holds exactly those contacts.
+    pub contacts: Vec<u32>,
 }
 
 impl Particles {
@@ -105,6 +110,7 @@ impl Particles {
         self.mass.push(density * template.volume * scale.powi(3));
         self.inertia
             .push(template.principal_inertia * (density * scale.powi(5)));
+        self.contacts.push(0);
     }
 
     /// The particles at local indices `which`, in that order.
@@ -123,7 +129,8 @@ impl Particles {
             force,
             torque,
             mass,
-            inertia
+            inertia,
+            contacts
         )
     }
 
@@ -141,6 +148,7 @@ impl Particles {
         self.torque.extend_from_slice(&other.torque);
         self.mass.extend_from_slice(&other.mass);
         self.inertia.extend_from_slice(&other.inertia);
+        self.contacts.extend_from_slice(&other.contacts);
     }
 
     /// Keeps the first `n` particles.
@@ -156,6 +164,34 @@ impl Particles {
         self.torque.truncate(n);
         self.mass.truncate(n);
         self.inertia.truncate(n);
+        self.contacts.truncate(n);
+    }
+
+    /// Sets [`Particles::contacts`] from a contact history: each particle's count of the
+    /// entries it is a member of (an entry's members that are not here are skipped). The
+    /// history holds exactly the contacts of the evaluation that wrote it, so this recovers the
+    /// counts that evaluation left (a restart continues bitwise).
+    pub fn count_contacts(&mut self, history: &crate::contact::ContactHistory) {
+        let mut by_id: Vec<(u64, usize)> = self.id.iter().copied().zip(0..).collect();
+        by_id.sort_unstable();
+        let find = |id: u64| {
+            by_id
+                .binary_search_by_key(&id, |e| e.0)
+                .ok()
+                .map(|k| by_id[k].1)
+        };
+        let mut counts = vec![0u32; self.len()];
+        for (key, _) in history.entries() {
+            if let Some(i) = find(key.a) {
+                counts[i] += 1;
+            }
+            if key.wall_index().is_none()
+                && let Some(j) = find(key.b)
+            {
+                counts[j] += 1;
+            }
+        }
+        self.contacts = counts;
     }
 
     /// The local indices of the first `n` particles in global id order, or `None` when they

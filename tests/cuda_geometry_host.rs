@@ -1144,8 +1144,8 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         want.push(l);
     }
     writeln!(text, "law {n}").unwrap();
-    // window, first-touch share, inside, sliding, twist cap, sphere, exit
-    let mut branches = [0usize; 7];
+    // window, first-touch share, inside, sliding, twist cap, sphere, exit, split caps
+    let mut branches = [0usize; 8];
     for i in 0..n {
         let sphere = i % 4 == 3;
         let e = if i % 5 == 0 {
@@ -1217,7 +1217,24 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             },
             sphere_radius_a: if sphere { 0.005 } else { 0.0 },
             sphere_radius_b: if sphere && i % 8 == 3 { 0.004 } else { 0.0 },
+            split_a: 1.0,
+            split_b: 1.0,
+            dashpot_mass: 0.0,
         };
+        // The caps' mass splitting: single contacts (shares 1, the dashpot mass the effective
+        // one) and bodies with up to 26 contacts each.
+        if i % 4 == 1 {
+            kin.split_a = ((i * 31) % 26 + 1) as f64;
+            kin.split_b = if kin.inverse_inertia_b == Vector3::zeros() {
+                1.0
+            } else {
+                ((i * 17) % 26 + 1) as f64
+            };
+            kin.dashpot_mass =
+                kin.effective_mass / rng.range(1.0, 0.5 * (kin.split_a + kin.split_b));
+        } else {
+            kin.dashpot_mass = kin.effective_mass;
+        }
         // Bodies moving together: the normal speed is exactly 0 (the reference speed's
         // branch for a contact at rest).
         if i % 29 == 11 {
@@ -1282,6 +1299,9 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         hex3(&mut text, &kin.inverse_inertia_b);
         hex(&mut text, kin.sphere_radius_a);
         hex(&mut text, kin.sphere_radius_b);
+        hex(&mut text, kin.split_a);
+        hex(&mut text, kin.split_b);
+        hex(&mut text, kin.dashpot_mass);
         hex3(&mut text, &state.spring);
         hex(&mut text, state.approach_speed);
         hex(&mut text, state.twist);
@@ -1322,6 +1342,19 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
                 ),
         );
         branches[5] += usize::from(sphere);
+        // The caps' mass splitting changed the outcome (the same contact with whole masses).
+        let whole = ContactKinematics {
+            split_a: 1.0,
+            split_b: 1.0,
+            dashpot_mass: kin.effective_mass,
+            ..kin
+        };
+        let f_whole = contact_forces(&params, &overlap, &whole, &mut state.clone(), dt);
+        branches[7] += usize::from(
+            f_whole.force_b != f.force_b
+                || f_whole.torque_a != f.torque_a
+                || f_whole.torque_b != f.torque_b,
+        );
         let mut l = format!("W {i}");
         hex3(&mut l, &f.force_b);
         hex3(&mut l, &f.torque_a);
@@ -1335,8 +1368,8 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
     let mismatches = harness_mismatches("--law", "cuda-law-host", text, &want);
     println!(
         "{} cases ({n} sin/cos, {n} cbrt, {n} ln/exp/pow, {n} law; law branches: window {}, \
-         first-touch share {}, inside {}, sliding {}, twist capped {}, spheres {}, exit {}), {} \
-         differ",
+         first-touch share {}, inside {}, sliding {}, twist capped {}, spheres {}, exit {}, \
+         split caps {}), {} differ",
         want.len(),
         branches[0],
         branches[1],
@@ -1345,6 +1378,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         branches[4],
         branches[5],
         branches[6],
+        branches[7],
         mismatches.len()
     );
     for (k, what) in [
@@ -1355,6 +1389,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         "twist cap",
         "spheres",
         "exit",
+        "split caps",
     ]
     .iter()
     .enumerate()

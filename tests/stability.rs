@@ -420,6 +420,9 @@ fn a_body_wholly_inside_another_is_pushed_out_along_the_line_of_centres() {
             inverse_inertia_b: Vector3::repeat(1.0),
             sphere_radius_a: 0.0,
             sphere_radius_b: 0.0,
+            split_a: 1.0,
+            split_b: 1.0,
+            dashpot_mass: 1.0,
         };
         let f = contact_forces(&params, &o, &kin, &mut ContactState::default(), 1e-5);
         // c V^{1/3} · V^{2/3} = c V, on B away from A.

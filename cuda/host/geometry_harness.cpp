@@ -267,6 +267,9 @@ int run_law(const char* path) {
         kin.inverse_inertia_b = read_v3();
         kin.sphere_radius_a = read_f64();
         kin.sphere_radius_b = read_f64();
+        kin.split_a = read_f64();
+        kin.split_b = read_f64();
+        kin.dashpot_mass = read_f64();
         pd::ContactHistoryRecord h;
         h.spring = read_v3();
         h.approach_speed = read_f64();

@@ -7,6 +7,6 @@ pub mod restitution;
 pub mod wall;
 
 pub use history::{ContactHistory, ContactKey, ContactState, WALL_BIT};
-pub use law::{ContactForces, ContactKinematics, ContactParameters, contact_forces};
+pub use law::{ContactForces, ContactKinematics, ContactParameters, contact_forces, mass_share};
 pub use restitution::hunt_crossley_alpha;
 pub use wall::WallMesh;

@@ -109,12 +109,14 @@ fn write_ghost(w: &mut Writer, p: &Particles, i: usize, o: &[i8; 3]) {
     write_motion(w, p, i);
 }
 
-/// What changes from step to step.
+/// What changes from step to step: the motion, and the contact count of the last evaluation
+/// (the dashpot caps' mass splitting needs the whole count, contacts on other ranks included).
 fn write_motion(w: &mut Writer, p: &Particles, i: usize) {
     w.v3(&p.position[i]);
     w.v3(&p.velocity[i]);
     w.quat(&p.orientation[i]);
     w.v3(&p.angular_velocity[i]);
+    w.u32(p.contacts[i]);
 }
 
 /// Appends a ghost read from a full record.
@@ -124,6 +126,7 @@ fn read_ghost(r: &mut Reader, scene: &Scene, g: &mut Ghosts) {
     let o = r.u32().to_le_bytes();
     let scale = r.f64();
     let (x, v, q, w) = (r.v3(), r.v3(), r.quat(), r.v3());
+    let contacts = r.u32();
     let ty = &scene.particle_types[kind as usize];
     let density = scene.materials[ty.material].density;
     let p = &mut g.particles;
@@ -139,12 +142,13 @@ fn read_ghost(r: &mut Reader, scene: &Scene, g: &mut Ghosts) {
     let i = p.len() - 1;
     p.velocity[i] = v;
     p.angular_velocity[i] = w;
+    p.contacts[i] = contacts;
     g.images.push([o[0] as i8, o[1] as i8, o[2] as i8]);
 }
 
 /// Ghost payload bytes per particle at a rebuild and between rebuilds.
-pub const GHOST_BYTES_FULL: usize = 8 + 4 + 4 + 8 + 13 * 8;
-pub const GHOST_BYTES_MOTION: usize = 13 * 8;
+pub const GHOST_BYTES_FULL: usize = 8 + 4 + 4 + 8 + GHOST_BYTES_MOTION;
+pub const GHOST_BYTES_MOTION: usize = 13 * 8 + 4;
 
 /// Exchanges the halo with the neighbours: each gets the records `write` makes of the plan's
 /// particles for it (`bytes` each); returns what every neighbour sent, in the plan's order,
@@ -214,6 +218,7 @@ pub fn refresh_ghosts(
             p.velocity[k] = r.v3();
             p.orientation[k] = r.quat();
             p.angular_velocity[k] = r.v3();
+            p.contacts[k] = r.u32();
             k += 1;
         }
     }

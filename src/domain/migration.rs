@@ -25,6 +25,7 @@ pub fn write_particle(w: &mut Writer, p: &Particles, i: usize) {
     w.v3(&p.torque[i]);
     w.f64(p.mass[i]);
     w.v3(&p.inertia[i]);
+    w.u32(p.contacts[i]);
 }
 
 /// Reads a particle written by [`write_particle`] and appends it.
@@ -40,6 +41,7 @@ pub fn read_particle(r: &mut Reader, p: &mut Particles) {
     p.torque.push(r.v3());
     p.mass.push(r.f64());
     p.inertia.push(r.v3());
+    p.contacts.push(r.u32());
 }
 
 fn write_entry(w: &mut Writer, (k, s): &(ContactKey, ContactState)) {

@@ -463,7 +463,7 @@ fn decode_payload(r: &mut Reader, version: u32) -> Result<Checkpoint, ReadFail> 
     // Smallest per-particle record: 8+4+8+24·6+32+8 bytes.
     let n = r.count(204, "particle count")?;
     let v3 = |r: &mut Reader, w: &str| r.v3(w);
-    let particles = Particles {
+    let mut particles = Particles {
         id: r.vec(n, "id", |r, w| r.u64(w))?,
         kind: r.vec(n, "kind", |r, w| r.u32(w))?,
         scale: r.vec(n, "scale", |r, w| r.f64(w))?,
@@ -479,6 +479,7 @@ fn decode_payload(r: &mut Reader, version: u32) -> Result<Checkpoint, ReadFail> 
         torque: r.vec(n, "torque", v3)?,
         mass: r.vec(n, "mass", |r, w| r.f64(w))?,
         inertia: r.vec(n, "inertia", v3)?,
+        contacts: Vec::new(),
     };
     let per_contact = if version >= 2 { 56 } else { 40 };
     let m = r.count(per_contact, "contact count")?;
@@ -504,6 +505,7 @@ fn decode_payload(r: &mut Reader, version: u32) -> Result<Checkpoint, ReadFail> 
         return Err(ReadFail::Bad("contact history is not sorted by key".into()));
     }
     let history = ContactHistory::from_entries(entries);
+    particles.count_contacts(&history);
     let len = r.count(1, "inserter length")?;
     let inserter = r.take(len, "inserter state")?.to_vec();
     let count = r.count(16, "extra entry count")?;

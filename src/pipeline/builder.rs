@@ -212,6 +212,8 @@ impl Simulation {
         self.step = step;
         // A state that cannot be stepped (or owned by any rank) is refused, not carried.
         self.check_restored()?;
+        // The contact counts the last evaluation left, which the checkpoint's history holds.
+        self.particles.count_contacts(&history);
         self.history = history;
         self.inserter = inserter;
         self.time = time;

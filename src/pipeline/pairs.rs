@@ -6,6 +6,7 @@
 use super::{Simulation, SimulationError};
 use crate::contact::{
     ContactForces, ContactKey, ContactKinematics, ContactParameters, ContactState, contact_forces,
+    mass_share,
 };
 use crate::geometry::Overlap;
 use crate::geometry::pair::{PairWorkspace, axis_separates, overlap_pair};
@@ -228,6 +229,16 @@ impl Simulation {
                 let params = self.contact_parameters(a, Some(b), 0);
                 let key = ContactKey::particles(p.id[a], p.id[b]);
                 let mut state = self.history.get(&key).copied().unwrap_or_default();
+                let (split_a, split_b) = (mass_share(p.contacts[a]), mass_share(p.contacts[b]));
+                // A lens's centroid is on the line of centres: no rotational term.
+                let (effective_mass, dashpot_mass) = if spheres {
+                    (
+                        1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b]),
+                        1.0 / (split_a / p.mass[a] + split_b / p.mass[b]),
+                    )
+                } else {
+                    normal_effective_mass(p, &[(a, p.position[a]), (b, xb)], &overlap)
+                };
                 let kin = ContactKinematics {
                     x_a: p.position[a],
                     x_b: xb,
@@ -235,18 +246,16 @@ impl Simulation {
                     v_b: p.velocity[b],
                     w_a: p.angular_velocity[a],
                     w_b: p.angular_velocity[b],
-                    // A lens's centroid is on the line of centres: no rotational term.
-                    effective_mass: if spheres {
-                        1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b])
-                    } else {
-                        normal_effective_mass(p, &[(a, p.position[a]), (b, xb)], &overlap)
-                    },
+                    effective_mass,
+                    dashpot_mass,
                     q_a: p.orientation[a],
                     q_b: p.orientation[b],
                     inverse_inertia_a: p.inertia[a].map(|x| 1.0 / x),
                     inverse_inertia_b: p.inertia[b].map(|x| 1.0 / x),
                     sphere_radius_a: if spheres { self.radius[a] } else { 0.0 },
                     sphere_radius_b: if spheres { self.radius[b] } else { 0.0 },
+                    split_a,
+                    split_b,
                 };
                 let forces = contact_forces(&params, &overlap, &kin, &mut state, dt);
                 Ok(PairOutcome {
@@ -285,24 +294,30 @@ pub(super) fn with_workspace<R>(f: impl FnOnce(&mut PairWorkspace<f64>) -> R) ->
 /// is scaled with it, so that the prescribed restitution holds for eccentric impacts too, where
 /// the contact point also turns the body (seed Eq. 15 uses the translational mass only, which
 /// over-damps such impacts: 4 % too little spin after the cylinder–wall impact at 75°).
+/// Returned with the dashpot caps' `m̃*`, each body's term multiplied by its share
+/// ([`mass_share`] of its contact count; [`crate::contact::law::DASHPOT_STEP_FRACTION`]).
 pub(super) fn normal_effective_mass(
     p: &Particles,
     bodies: &[(usize, Vector3<f64>)],
     o: &Overlap<f64>,
-) -> f64 {
+) -> (f64, f64) {
     let Some(n) = o.normal() else {
-        return bodies
-            .iter()
-            .map(|&(i, _)| p.mass[i])
-            .fold(f64::MAX, f64::min);
+        let fold =
+            |f: &dyn Fn(usize) -> f64| bodies.iter().map(|&(i, _)| f(i)).fold(f64::MAX, f64::min);
+        return (
+            fold(&|i| p.mass[i]),
+            fold(&|i| p.mass[i] / mass_share(p.contacts[i])),
+        );
     };
-    let mut inverse = 0.0;
+    let (mut inverse, mut split) = (0.0, 0.0);
     for &(i, x) in bodies {
         let arm = (o.centroid - x).cross(&n);
         let body = p.orientation[i].inverse_transform_vector(&arm);
-        inverse += 1.0 / p.mass[i] + body.component_div(&p.inertia[i]).dot(&body);
+        let term = 1.0 / p.mass[i] + body.component_div(&p.inertia[i]).dot(&body);
+        inverse += term;
+        split += mass_share(p.contacts[i]) * term;
     }
-    1.0 / inverse
+    (1.0 / inverse, 1.0 / split)
 }
 
 /// A body of a failed pair query as `polydem probe overlap` takes it (launch/probe/README.md):

@@ -29,20 +29,25 @@ impl Simulation {
     }
 
     /// Each particle's force and torque: its pairs in the list's per-particle order (by
-    /// partner id), then its walls.
+    /// partner id), then its walls; and its contacts, pairs and walls, which the next
+    /// evaluation's dashpot caps split its mass among.
     fn reduce_forces(&mut self, outcomes: &[PairOutcome], wall_outcomes: &[WallOutcome]) {
         let pairs = &self.pairs;
         let p = &mut self.particles;
         p.force
             .par_iter_mut()
             .zip(p.torque.par_iter_mut())
+            .zip(p.contacts.par_iter_mut())
             .enumerate()
             .with_min_len(crate::par::SEARCH)
-            .for_each(|(i, (f, t))| {
+            .for_each(|(i, ((f, t), c))| {
                 let mut force = Vector3::zeros();
                 let mut torque = Vector3::zeros();
+                let mut contacts = 0u32;
                 for r in pairs.of(i) {
-                    let o = &outcomes[r.pair as usize].forces;
+                    let o = &outcomes[r.pair as usize];
+                    contacts += u32::from(o.state.is_some());
+                    let o = &o.forces;
                     if r.is_b {
                         force += o.force_b;
                         torque += o.torque_b;
@@ -54,9 +59,11 @@ impl Simulation {
                 if let Some(w) = wall_outcomes.get(i) {
                     force += w.force;
                     torque += w.torque;
+                    contacts += w.states.len() as u32;
                 }
                 *f = force;
                 *t = torque;
+                *c = contacts;
             });
     }
 

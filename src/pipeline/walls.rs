@@ -3,7 +3,7 @@
 
 use super::pairs::{normal_effective_mass, with_workspace};
 use super::{Simulation, SimulationError};
-use crate::contact::{ContactKey, ContactKinematics, ContactState, contact_forces};
+use crate::contact::{ContactKey, ContactKinematics, ContactState, contact_forces, mass_share};
 use crate::geometry::{Overlap, PosedPolytope};
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
@@ -111,6 +111,8 @@ impl Simulation {
                         let key = ContactKey::wall(p.id[i], k);
                         let mut state = self.history.get(&key).copied().unwrap_or_default();
                         let c = world.centroid;
+                        let (effective_mass, dashpot_mass) =
+                            normal_effective_mass(p, &[(i, p.position[i])], &world);
                         let kin = ContactKinematics {
                             x_a: p.position[i],
                             x_b: c,
@@ -118,13 +120,16 @@ impl Simulation {
                             v_b: s.walls[k].motion.velocity_at(t, &c),
                             w_a: p.angular_velocity[i],
                             w_b: s.walls[k].motion.angular_velocity(),
-                            effective_mass: normal_effective_mass(p, &[(i, p.position[i])], &world),
+                            effective_mass,
+                            dashpot_mass,
                             q_a: p.orientation[i],
                             q_b: nalgebra::UnitQuaternion::identity(),
                             inverse_inertia_a: p.inertia[i].map(|x| 1.0 / x),
                             inverse_inertia_b: Vector3::zeros(),
                             sphere_radius_a: if tmpl.sphere { self.radius[i] } else { 0.0 },
                             sphere_radius_b: 0.0,
+                            split_a: mass_share(p.contacts[i]),
+                            split_b: 1.0,
                         };
                         let f = contact_forces(&params, &world, &kin, &mut state, dt);
                         let depth = world.volume / self.equivalent_volume(i);

@@ -22,8 +22,9 @@ use crate::domain::Parallel;
 use cudarc::driver::{CudaEvent, CudaSlice, PinnedHostSlice};
 use std::time::Instant;
 
-/// Doubles of one motion record (`cuda/halo.cu: PD_MOTION_DOUBLES`).
-const MOTION: usize = 13;
+/// Doubles of one motion record (`cuda/halo.cu: PD_MOTION_DOUBLES`): the motion and the
+/// contact count.
+const MOTION: usize = 14;
 
 /// A decomposed run's halo on the device: the buffers of the current plan (from one rebuild
 /// to the next), and whether this step's refresh is still due.
@@ -131,7 +132,7 @@ impl HaloStage {
         }
         let st = &gpu.stream;
         let nsi = n_send as i32;
-        // SAFETY: the slots are below n and `send_device` holds 13 doubles per slot.
+        // SAFETY: the slots are below n and `send_device` holds 14 doubles per slot.
         unsafe {
             gpu.k.pack_motion(
                 st,
@@ -142,6 +143,7 @@ impl HaloStage {
                 &p.velocity,
                 &p.orientation,
                 &p.angular_velocity,
+                &p.contacts,
                 &mut h.send_device,
             )?;
         }
@@ -205,7 +207,7 @@ impl HaloStage {
             st.memcpy_htod(&h.recv_host, &mut h.recv_device)?;
             h.received = Some(st.record_event(None)?);
             let ngi = h.n_ghosts as i32;
-            // SAFETY: the ghost slots are below n and `recv_device` holds 13 doubles per ghost.
+            // SAFETY: the ghost slots are below n and `recv_device` holds 14 doubles per ghost.
             unsafe {
                 gpu.k.unpack_motion(
                     st,
@@ -217,6 +219,7 @@ impl HaloStage {
                     &mut p.velocity,
                     &mut p.orientation,
                     &mut p.angular_velocity,
+                    &mut p.contacts,
                 )?;
             }
         }

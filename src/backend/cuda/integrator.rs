@@ -103,7 +103,8 @@ impl Integrator {
 
     /// Stage 8 and the second half kick (`kick`): the pair forces of `pairs` summed per
     /// particle in the order of its references, then the wall sums, stored as the particles'
-    /// forces and torques, then the half kick with them.
+    /// forces and torques, with its contacts (pairs and walls, for the next evaluation's
+    /// dashpot caps), then the half kick with them.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn reduce_and_kick(
         &self,
@@ -117,9 +118,14 @@ impl Integrator {
     ) -> Result<(), CudaError> {
         let st = &gpu.stream;
         // Without walls the wall sums are not read (PD_WALLS 0): null pointers.
-        let (wf, wt) = match walls {
-            Some(w) => (ptr(&w.force, st), ptr(&w.torque, st)),
-            None => (0u64, 0u64),
+        let (wf, wt, wc, nw) = match walls {
+            Some(w) => (
+                ptr(&w.force, st),
+                ptr(&w.torque, st),
+                ptr(&w.contact, st),
+                w.n as i32,
+            ),
+            None => (0u64, 0u64, 0u64, 0),
         };
         let args = ReduceKickParams {
             n: p.n as i32,
@@ -137,12 +143,18 @@ impl Integrator {
             mass: ptr(&p.mass, st),
             inertia: ptr(&p.inertia, st),
             orientation: ptr(&p.orientation, st),
+            pair_contact: ptr(&pairs.contact, st),
+            wall_contact: wc,
+            contacts: ptr(&p.contacts, st),
+            n_walls: nw,
+            pad: 0,
             gravity: gravity.into(),
             dt,
         };
         // SAFETY: `ref_offset` holds n + 1 offsets into `refs`, whose pair slots index `forces`
-        // (nine values each); the wall sums hold 3n values when walls exist; the particle
-        // buffers 3n (4n) values. Each thread writes only its own particle's slots.
+        // (nine values each) and `contact`; the wall sums hold 3n values and the wall flags
+        // n·n_walls when walls exist; the particle buffers 3n (4n, n) values. Each thread
+        // writes only its own particle's slots.
         unsafe { gpu.k.reduce_and_kick(st, cfg(p.n), &args)? };
         Ok(())
     }

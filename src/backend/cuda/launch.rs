@@ -271,6 +271,7 @@ kernel_table! {
             velocity: &CudaSlice<f64>,
             orientation: &CudaSlice<f64>,
             angular_velocity: &CudaSlice<f64>,
+            contacts: &CudaSlice<u32>,
             out: &mut CudaSlice<f64>,
         );
         UnpackMotion unpack_motion(
@@ -281,6 +282,7 @@ kernel_table! {
             velocity: &mut CudaSlice<f64>,
             orientation: &mut CudaSlice<f64>,
             angular_velocity: &mut CudaSlice<f64>,
+            contacts: &mut CudaSlice<u32>,
         );
     }
 }

@@ -151,8 +151,10 @@ pub struct ParticleView {
     pub ct: DevPtr,
     pub tmpl: DevPtr,
     pub material: DevPtr,
+    /// Contacts at the last evaluation (u32; the dashpot caps' mass splitting).
+    pub contacts: DevPtr,
 }
-// SAFETY: twelve device pointers, laid out as the C struct.
+// SAFETY: thirteen device pointers, laid out as the C struct.
 unsafe impl DeviceRepr for ParticleView {}
 
 /// Per-pair outputs (`cuda/layout.cuh: PairOutputs`): nine force and torque values, the
@@ -276,6 +278,14 @@ pub struct ReduceKickParams {
     pub mass: DevPtr,
     pub inertia: DevPtr,
     pub orientation: DevPtr,
+    /// The pair slots' contact flags (u32).
+    pub pair_contact: DevPtr,
+    /// The wall slots' contact flags (u32, particle-major); null without walls.
+    pub wall_contact: DevPtr,
+    /// Out: each particle's contacts, pairs and walls (u32).
+    pub contacts: DevPtr,
+    pub n_walls: i32,
+    pub pad: i32,
     pub gravity: [f64; 3],
     pub dt: f64,
 }
@@ -429,7 +439,7 @@ checked_layouts! {
     }
     ParticleView => "PARTICLE_VIEW" {
         position, velocity, angular_velocity, orientation, mass, inertia, scale, radius, cn, ct,
-        tmpl, material,
+        tmpl, material, contacts,
     }
     PairOutputs => "PAIR_OUTPUTS" { forces, energy, contact }
     PairArgs => "PAIR_ARGS" {
@@ -447,7 +457,8 @@ checked_layouts! {
     }
     ReduceKickParams => "REDUCE_KICK_PARAMS" {
         n, kick, ref_offset, refs, pair_forces, wall_force, wall_torque, force, torque, ghost,
-        velocity, angular_velocity, mass, inertia, orientation, gravity, dt,
+        velocity, angular_velocity, mass, inertia, orientation, pair_contact, wall_contact,
+        contacts, n_walls, pad, gravity, dt,
     }
     PairSearchParams => "PAIR_SEARCH_PARAMS" {
         n, part, position, radius, id, ghost, cell_start, grid, skin,

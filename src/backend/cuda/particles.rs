@@ -34,6 +34,8 @@ macro_rules! particle_fields {
                 kind: 1,
                 // 1 for a ghost (a neighbour rank's particle), 0 for an owned one.
                 ghost: 1,
+                // Contacts at the last evaluation (the dashpot caps' mass splitting).
+                contacts: 1,
             }
             u64 gather_u64s {
                 id: 1,
@@ -199,6 +201,7 @@ impl DeviceParticles {
             ct: ptr(&self.ct, st),
             tmpl: ptr(&self.tmpl, st),
             material: ptr(&self.material, st),
+            contacts: ptr(&self.contacts, st),
         }
     }
 }

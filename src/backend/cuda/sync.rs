@@ -40,6 +40,9 @@ impl CudaSimulation {
         let mut mass = get(&self.particles.mass)?;
         mass.truncate(n);
         p.mass = mass;
+        let mut contacts = st.clone_dtoh(&self.particles.contacts)?;
+        contacts.truncate(n);
+        p.contacts = contacts;
         p.position = vec3(get(&self.particles.position)?);
         p.velocity = vec3(get(&self.particles.velocity)?);
         p.angular_velocity = vec3(get(&self.particles.angular_velocity)?);

@@ -134,6 +134,7 @@ impl CudaSimulation {
                 material,
                 kind: p.kind.clone(),
                 ghost,
+                contacts: p.contacts.clone(),
                 id: p.id.clone(),
             },
         )
