@@ -359,6 +359,45 @@ fn domains_too_large_for_f64_are_refused() {
     parse(&domain("-1e3", "1e3")).unwrap();
 }
 
+/// A periodic axis shorter than twice the reach of a contact (`4 r_max`) is refused with the
+/// numbers: a particle there could touch two images of another, and the minimum-image pair
+/// list finds one (a periodic 2 × 2 × 2 lattice of compressed cubes flew apart).
+#[test]
+fn periodic_axes_shorter_than_two_contact_reaches_are_refused() {
+    let r_max = parse(BASE).unwrap().max_bounding_radius();
+    let need = 4.0 * r_max;
+    // Periodic along x over `width`, with no insertion (which the narrow box could not hold).
+    let domain = |width: f64| {
+        let h = 0.5 * width;
+        replace(
+            "min = [-0.5, -0.5, -0.1]\nmax = [0.5, 0.5, 0.5]",
+            &format!(
+                "min = [{:?}, -0.5, -0.1]\nmax = [{h:?}, 0.5, 0.5]\nperiodic = [true, false, false]",
+                -h
+            ),
+        )
+        .replace(
+            "[[insertions]]\ntype = \"grain\"\nregion = { kind = \"box\", min = [-0.1, -0.1, 0.1], max = [0.1, 0.1, 0.3] }\ncount = 20\n",
+            "",
+        )
+    };
+    let short = 0.999 * need;
+    let msg = error_naming(&domain(short), "domain.max");
+    let short = 0.5 * short - (-0.5 * short); // the width as the scene's bounds give it
+    assert!(
+        msg.contains(&format!(
+            "the domain is periodic along x over {short:.6e} m, less than twice the reach of a \
+             contact (2 × 2 r_max = {need:.6e} m, r_max = {r_max:.6e} m"
+        )),
+        "{msg}"
+    );
+    assert!(
+        msg.contains(&format!("a periodic extent of at least {need:.6e} m")),
+        "{msg}"
+    );
+    parse(&domain(1.001 * need)).unwrap();
+}
+
 /// A missing section is named as the top-level key it is, without a line: a file with only
 /// `[simulation]` reported `simulation.domain`, one with only `[domain]` `domain.simulation`.
 #[test]

@@ -64,6 +64,7 @@ impl Validator<'_> {
             );
         }
         self.domain_resolution(&scene);
+        self.periodic_extent(&scene);
         let ts = critical_time_step(&scene);
         self.wall_speeds(&scene, ts.dt);
         if raw_output.series_interval.is_none() {
@@ -111,6 +112,37 @@ impl Validator<'_> {
                     need / f64::EPSILON
                 ),
             );
+        }
+    }
+
+    /// Refuses a periodic axis shorter than twice the reach of a contact, `2 × 2 r_max` (`r_max`
+    /// the largest circumscribed radius): below it a particle can touch two images of another
+    /// (or its own), and the minimum-image pair list holds one of them, so the other contact is
+    /// lost. A periodic 2 × 2 × 2 lattice of compressed cubes, each pushed by its neighbour's
+    /// image on one side only, flew apart.
+    pub(super) fn periodic_extent(&mut self, scene: &Scene) {
+        let reach = 2.0 * scene.max_bounding_radius();
+        if !reach.is_finite() {
+            return;
+        }
+        let d = &scene.domain;
+        for (k, axis) in ["x", "y", "z"].into_iter().enumerate() {
+            let width = d.max[k] - d.min[k];
+            if d.periodic[k] && width < 2.0 * reach {
+                self.err(
+                    "domain.max",
+                    format!(
+                        "the domain is periodic along {axis} over {width:.6e} m, less than twice \
+                         the reach of a contact (2 × 2 r_max = {:.6e} m, r_max = {:.6e} m the \
+                         largest circumscribed radius): a particle could touch two images of \
+                         another and only one would be found; allowed: a periodic extent of at \
+                         least {:.6e} m, or a non-periodic axis",
+                        2.0 * reach,
+                        0.5 * reach,
+                        2.0 * reach
+                    ),
+                );
+            }
         }
     }
 
