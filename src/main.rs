@@ -289,7 +289,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
             out: out_dir,
             cases,
         } => {
-            if scene.as_os_str() == "accuracy" && !scene.exists() {
+            if scene.as_os_str() == "accuracy" && !scene.is_file() {
                 use polydem::accuracy::{AccuracyOptions, FULL_FRACTIONS, SHORT_FRACTIONS};
                 let devices = polydem::accuracy::devices(backend, gpu_precision)?;
                 let fractions = fractions.unwrap_or_else(|| {

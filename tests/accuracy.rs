@@ -65,3 +65,34 @@ fn every_reference_case_is_within_one_percent_at_the_default_step() {
     let svg = std::fs::read_to_string(out.join("accuracy.svg")).unwrap();
     assert!(svg.contains("<svg") && svg.contains("restitution (cpu)"));
 }
+
+/// `polydem bench accuracy` run twice in a folder outside the repository: its default output
+/// folder (`./accuracy`) is not taken for a scene named `accuracy` the second time (it was:
+/// "cannot read the scene file: Is a directory"), and the cases' wall meshes written there are
+/// found (they were looked for under the repository root: "cannot read mesh file").
+#[test]
+fn bench_accuracy_runs_twice_in_the_same_folder() {
+    let dir = common::temp_dir("accuracy-twice");
+    for run in 0..2 {
+        let out = std::process::Command::new(common::polydem_bin())
+            .current_dir(&dir)
+            .args([
+                "bench",
+                "accuracy",
+                "--backend",
+                "cpu",
+                "--cases",
+                "sphere_oblique",
+                "--fractions",
+                "0.1",
+            ])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "run {run}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(dir.join("accuracy/accuracy.csv").is_file(), "run {run}");
+    }
+}

@@ -81,6 +81,11 @@ impl CaseRunner {
         let dir = out.join("cases");
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
+        // Absolute: the cases' scenes name their meshes from here, and are read relative to
+        // the repository root, not the working folder (a relative `--out`, the default, named
+        // meshes that did not exist outside the repository).
+        let dir = std::path::absolute(&dir)
+            .with_context(|| format!("{}: cannot resolve", dir.display()))?;
         write_plane(&dir.join("plane.stl"), 1.0, 1)?;
         write_plane(&dir.join("mesh_coarse.stl"), 0.2, 8)?; // λ = 0.5 for the 2.5 cm cuboid
         write_plane(&dir.join("mesh_fine.stl"), 0.2, 64)?; // λ = 4
