@@ -12,7 +12,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 
 impl CaseRunner {
     pub(super) fn elastic_energy(&self, device: Device, f: f64) -> Result<(f64, u64, String)> {
-        let side = 0.033;
+        let side = 0.035;
         let types = "[[particle_types]]\nname = \"p\"\nmaterial = \"m\"\n\
                      generator = { kind = \"cuboid\", a = 0.01, b = 0.01, c = 0.01 }\nscale = 1.0\n";
         let mut sim = self.simulation(&Spec {
