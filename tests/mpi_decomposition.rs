@@ -434,6 +434,24 @@ fn gpu_ranks_match_one_gpu() {
     }
 }
 
+/// The sheared lattice restarted from its single-rank checkpoint at step 1638 ends bitwise as
+/// the uninterrupted run: the contact counts the caps read are not in the checkpoint but
+/// recovered from its contact history (reading them as zero instead diverged).
+#[test]
+fn sheared_lattice_restarts_bitwise() {
+    let one = reference("launch/mpi/lattice.toml");
+    let dir = temp_dir("mpi-lattice-restart");
+    let ckpt = one.join("checkpoints/step_0000001638.ckpt");
+    run_ok(
+        1,
+        "launch/mpi/lattice.toml",
+        &dir,
+        &["--restart", ckpt.to_str().unwrap()],
+    );
+    same_checkpoint(&one, &dir, "step_0000003275.ckpt", "lattice, restarted");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// The sheared lattice on 4 GPU ranks (double): bitwise the CPU's single-rank run, the ghosts'
 /// contact counts travelling in the device's halo records.
 #[test]
