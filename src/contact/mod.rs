@@ -1,8 +1,10 @@
-//! Contact physics: the contact law, its history store, and wall contacts.
+//! Contact physics: the contact law and its elastic potential, its history store, and wall
+//! contacts.
 
 mod facet_grid;
 pub mod history;
 pub mod law;
+pub mod potential;
 pub mod restitution;
 pub mod wall;
 
