@@ -97,14 +97,14 @@ PD_HD ContactForces no_contact_forces() {
     return f;
 }
 
-// ContactKinematics::split_inverse_inertia_about: u·(k_A I_A⁻¹ + k_B I_B⁻¹)u for the unit axis
-// u, k the bodies' shares of the caps' mass splitting.
-PD_HD double split_inverse_inertia_about(const ContactKinematics& kin, V3<double> u) {
+// ContactKinematics::inverse_inertia_about (k_a = k_b = 1) and split_inverse_inertia_about (k the
+// bodies' shares of the caps' mass splitting): u·(k_A I_A⁻¹ + k_B I_B⁻¹)u for the unit axis u.
+PD_HD double weighted_inverse_inertia(const ContactKinematics& kin, V3<double> u, double k_a, double k_b) {
     V3<double> ba = rotate_inverse(kin.q_a, u);
     V3<double> bb = rotate_inverse(kin.q_b, u);
     V3<double> sa = v3(ba.x * kin.inverse_inertia_a.x, ba.y * kin.inverse_inertia_a.y, ba.z * kin.inverse_inertia_a.z);
     V3<double> sb = v3(bb.x * kin.inverse_inertia_b.x, bb.y * kin.inverse_inertia_b.y, bb.z * kin.inverse_inertia_b.z);
-    return kin.split_a * dot(sa, ba) + kin.split_b * dot(sb, bb);
+    return k_a * dot(sa, ba) + k_b * dot(sb, bb);
 }
 
 // U(V) = (3/4) c V^{4/3} for V > 0 (law.rs `potential`).
@@ -200,14 +200,14 @@ struct NormalForce {
     double f_elastic, c_n, f_normal;
 };
 
-PD_HD NormalForce normal_force(const ContactParameters& params, const ContactKinematics& kin, double pressure,
-                               double area, double v_ref, double share, double vn, double dt) {
+PD_HD NormalForce normal_force(const ContactParameters& params, double cap_mass, double pressure, double area,
+                               double v_ref, double share, double vn, double dt) {
     NormalForce out;
     out.f_elastic = pressure * area;
     out.c_n = params.damping * out.f_elastic / v_ref;
     double f_damp = -out.c_n * vn;
     if (dt > 0.0) {
-        double limit = share * kin.dashpot_mass * abs_(vn) / dt;
+        double limit = share * cap_mass * abs_(vn) / dt;
         f_damp = min_(max_(f_damp, -limit), limit);
     }
     out.f_normal = max_(out.f_elastic + f_damp, 0.0);
@@ -296,16 +296,19 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     double energy = resolved_potential(stiffness, volume, resolved);
     double cycle = abs_(state->approach_speed), floor_speed = sqrt_(2.0 * energy / kin.effective_mass);
     double v_ref = max_(cycle, floor_speed);
-    // The share of the relative speed a dashpot may take per step (law.rs DASHPOT_STEP_FRACTION
-    // where the floor sets the damping).
-    double share = floor_speed > cycle ? 0.5 : 1.0;
-    NormalForce nf = normal_force(params, kin, pressure, area, v_ref, share, vn, dt);
+    // The caps' share of the relative speed: the whole of it for an impact, half where the floor
+    // sets the damping, and there against the masses split among the bodies' contacts.
+    bool at_floor = floor_speed > cycle;
+    double share = at_floor ? 0.5 : 1.0;
+    double cap_mass = at_floor ? kin.dashpot_mass : kin.effective_mass;
+    double cap_a = at_floor ? kin.split_a : 1.0, cap_b = at_floor ? kin.split_b : 1.0;
+    NormalForce nf = normal_force(params, cap_mass, pressure, area, v_ref, share, vn, dt);
     // The exit (law.rs): a separating contact that the coming drift carries apart.
     if (windowed && vn > 0.0 && dt > 0.0) {
         double exit = 0.5 * (vn + nf.f_normal * dt / kin.effective_mass) * dt;
         if (local.depth - 2.0 * exit <= 0.0 && local.depth - exit > 0.0) {
             pressure += resolved_potential(stiffness, local_volume_at(local, -exit), resolved) / (2.0 * exit * area);
-            nf = normal_force(params, kin, pressure, area, v_ref, share, vn, dt);
+            nf = normal_force(params, cap_mass, pressure, area, v_ref, share, vn, dt);
         }
     }
     double f_elastic = nf.f_elastic;
@@ -350,7 +353,7 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     double rocking = norm(w_perp);
     if (params.rocking && c_n > 0.0 && rocking > 0.0) {
         double c_roll = 0.25 * c_n * disk;
-        double inverse = split_inverse_inertia_about(kin, w_perp / rocking);
+        double inverse = weighted_inverse_inertia(kin, w_perp / rocking, cap_a, cap_b);
         if (dt > 0.0 && inverse > 0.0) {
             c_roll = min_(c_roll, share / (dt * inverse));
         }
@@ -359,7 +362,7 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     if (params.friction > 0.0) {
         double k_tw = 0.5 * k_t * disk;
         double c_tw = 0.5 * c_t * disk;
-        double inverse = split_inverse_inertia_about(kin, n);
+        double inverse = weighted_inverse_inertia(kin, n, cap_a, cap_b);
         if (dt > 0.0 && inverse > 0.0) {
             c_tw = min_(c_tw, 1.0 / (dt * inverse));
         }

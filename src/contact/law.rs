@@ -213,21 +213,22 @@ pub fn contact_point(
 /// The largest share of its relative speed that the normal or rocking dashpot of a contact
 /// damped by the floor `√(2W/m*)` (at rest, or loaded slowly) may take in one explicit step:
 /// `c Δt/m̃* ≤ 1/2`; a contact damped to its cycle's approach speed (an impact) keeps the
-/// whole speed, `c Δt/m̃* ≤ 1`, as its restitution needs at low `e` and coarse steps (a vertex
-/// at e = 0.1 and t_c/40 rebounds at 0.12 with 1/2).
+/// whole speed and the whole effective mass, `c Δt/m* ≤ 1`, as its restitution needs at low
+/// `e` and coarse steps (a vertex at e = 0.1 and t_c/40 rebounds at 0.12 with 1/2; a grain
+/// rocking onto neighbours that rest on others needs the whole mass).
 ///
-/// `m̃*` is the effective mass with each body's mass split among its contacts (mass
-/// splitting): `1/m̃* = Σ k (1/m + (r × n)·I⁻¹(r × n))` over the two bodies, `k` a body's
-/// contacts at the last evaluation ([`ContactKinematics::dashpot_mass`]; the moments of
-/// inertia alike for the rocking and twisting caps). A particle's contacts are evaluated apart,
-/// so their dashpots add up on it unseen by each other, and at the floor a low restitution's
-/// damping is far overcritical (`ᾱ/2` of critical at the regularized face's `ω Δt = 1/2`: 5
-/// for e = 0.1). Capped against the whole `m*` each, the caps of a particle's `k` contacts took
-/// up to `k` times its speed per step: a cube of e = 0.1 resting on four others kept
-/// oscillating, and a periodic lattice of 64 compressed cubes (26 contacts each) at e = 0.1
-/// heated from 2e-4 to 1.5e-2 m/s. With the mass split, the caps of all a particle's contacts
-/// together take at most the share of its speed, and a network of them is damped without
-/// overshoot (the Jacobi iteration with mass splitting of rigid-body solvers).
+/// `m̃*` is the effective mass with each body's mass split among its contacts (mass splitting):
+/// `1/m̃* = Σ k (1/m + (r × n)·I⁻¹(r × n))` over the two bodies, `k` a body's contacts at the last
+/// evaluation ([`ContactKinematics::dashpot_mass`]; the moments of inertia alike for the rocking
+/// and twisting caps at the floor). A particle's contacts are evaluated apart, so their dashpots
+/// add up on it unseen by each other, and at the floor a low restitution's damping is far
+/// overcritical (`ᾱ/2` of critical at the regularized face's `ω Δt = 1/2`: 5 for e = 0.1). Capped
+/// against the whole `m*` each, the caps of a particle's `k` contacts took up to `k` times its
+/// speed per step: a cube of e = 0.1 resting on four others kept oscillating, and a periodic
+/// lattice of 64 compressed cubes (26 contacts each) at e = 0.1 heated from 2e-4 to 1.5e-2 m/s.
+/// With the mass split, the caps of all a particle's contacts together take at most the share of
+/// its speed, and a network of them is damped without overshoot (the Jacobi iteration with mass
+/// splitting of rigid-body solvers).
 pub const DASHPOT_STEP_FRACTION: f64 = 0.5;
 
 /// The Hunt–Crossley reference speed a contact carries into the next step, given the stored
@@ -330,11 +331,20 @@ pub fn contact_forces(
     let v_ref = cycle.max(floor);
     // The share of the relative speed a dashpot may take per step: the whole of it for a
     // contact damped to its cycle's approach speed (an impact), DASHPOT_STEP_FRACTION where the
-    // floor sets the damping (a contact at rest or loaded slowly, overcritical at low e).
-    let share = if floor > cycle {
-        DASHPOT_STEP_FRACTION
+    // floor sets the damping (a contact at rest or loaded slowly, overcritical at low e), and
+    // there against the bodies' masses split among their contacts (DASHPOT_STEP_FRACTION).
+    let at_floor = floor > cycle;
+    let (share, cap_mass) = if at_floor {
+        (DASHPOT_STEP_FRACTION, kin.dashpot_mass)
     } else {
-        1.0
+        (1.0, kin.effective_mass)
+    };
+    let cap_inverse_inertia = |u: &Vector3<f64>| {
+        if at_floor {
+            kin.split_inverse_inertia_about(u)
+        } else {
+            kin.inverse_inertia_about(u)
+        }
     };
     let normal = |pressure: f64| {
         let f_elastic = pressure * area;
@@ -343,7 +353,7 @@ pub fn contact_forces(
         // An explicit step's dashpot impulse takes at most `share` of the normal approach
         // speed: never reverses it on its own.
         if dt > 0.0 {
-            let limit = share * kin.dashpot_mass * vn.abs() / dt;
+            let limit = share * cap_mass * vn.abs() / dt;
             f_damp = f_damp.clamp(-limit, limit);
         }
         // The contact pushes, never pulls.
@@ -419,7 +429,7 @@ pub fn contact_forces(
     let rocking = w_perp.norm();
     if params.rocking && c_n > 0.0 && rocking > 0.0 {
         let mut c_roll = 0.25 * c_n * disk;
-        let inverse = kin.split_inverse_inertia_about(&(w_perp / rocking));
+        let inverse = cap_inverse_inertia(&(w_perp / rocking));
         if dt > 0.0 && inverse > 0.0 {
             c_roll = c_roll.min(share / (dt * inverse));
         }
@@ -428,7 +438,7 @@ pub fn contact_forces(
     if params.friction > 0.0 {
         let k_tw = 0.5 * k_t * disk;
         let mut c_tw = 0.5 * c_t * disk;
-        let inverse = kin.split_inverse_inertia_about(&n);
+        let inverse = cap_inverse_inertia(&n);
         if dt > 0.0 && inverse > 0.0 {
             c_tw = c_tw.min(1.0 / (dt * inverse));
         }
