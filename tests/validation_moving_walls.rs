@@ -711,7 +711,7 @@ fn compressed_cube_lattice(device: Device) -> (f64, u64, polydem::state::Particl
 /// contacts are damped at the floor, far overcritically, and were each capped against the
 /// whole effective mass, so that together they took up to 13 times a cube's speed per step. The
 /// lattice then heated itself from 1e-4 m/s to 0.56 m/s within 50 ms and broke apart (346
-/// contacts of 832 left). With the split it stays below its initial speeds (measured 2.8e-5
+/// contacts of 832 left). With the split it stays below its initial speeds (measured 2.6e-5
 /// m/s over 10–50 ms) and intact (832 contacts).
 #[test]
 fn a_compressed_lattice_of_low_restitution_cubes_does_not_heat_itself() {
