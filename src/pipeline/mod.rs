@@ -162,13 +162,13 @@ impl Simulation {
         let min = self.bounds.min;
         let max = min + (self.bounds.max - min) * factor;
         // As scene validation requires: no particle may touch two images of another.
-        let reach = 2.0 * self.scene.max_bounding_radius();
-        if let Some(k) = (0..3).find(|&k| max[k] - min[k] < 2.0 * reach) {
+        let least = self.scene.least_periodic_extent();
+        if let Some(k) = (0..3).find(|&k| max[k] - min[k] < least) {
             return refuse(format!(
                 "the box would be {:.6e} m along axis {k}, less than twice the reach of a \
                  contact ({:.6e} m): a particle could touch two images of another",
                 max[k] - min[k],
-                2.0 * reach
+                least
             ));
         }
         for x in self.particles.position.iter_mut() {

@@ -302,12 +302,12 @@ pub(super) fn normal_effective_mass(
     o: &Overlap<f64>,
 ) -> (f64, f64) {
     let Some(n) = o.normal() else {
-        let fold =
-            |f: &dyn Fn(usize) -> f64| bodies.iter().map(|&(i, _)| f(i)).fold(f64::MAX, f64::min);
-        return (
-            fold(&|i| p.mass[i]),
-            fold(&|i| p.mass[i] / mass_share(p.contacts[i])),
-        );
+        let (mut mass, mut split) = (f64::MAX, f64::MAX);
+        for &(i, _) in bodies {
+            mass = mass.min(p.mass[i]);
+            split = split.min(p.mass[i] / mass_share(p.contacts[i]));
+        }
+        return (mass, split);
     };
     let (mut inverse, mut split) = (0.0, 0.0);
     for &(i, x) in bodies {

@@ -38,6 +38,13 @@ impl Scene {
         self.cutoff_with_skin(self.simulation.neighbor.skin)
     }
 
+    /// The least length of a periodic axis, twice the reach of a contact: `2 × 2 r_max`
+    /// (`r_max` the largest circumscribed radius). Below it a particle can touch two images of
+    /// another (or its own), and the minimum-image pair list holds only one of them.
+    pub fn least_periodic_extent(&self) -> f64 {
+        4.0 * self.max_bounding_radius()
+    }
+
     /// How far outside an insertion region a particle can still stop a new one placed in it:
     /// two bounding radii (a new particle's bounding sphere lies inside its region), widened
     /// by a relative 1e-9 and 1e-12 m so that rounding never leaves a touching one out.

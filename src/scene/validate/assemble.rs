@@ -115,20 +115,19 @@ impl Validator<'_> {
         }
     }
 
-    /// Refuses a periodic axis shorter than twice the reach of a contact, `2 × 2 r_max` (`r_max`
-    /// the largest circumscribed radius): below it a particle can touch two images of another
-    /// (or its own), and the minimum-image pair list holds one of them, so the other contact is
-    /// lost. A periodic 2 × 2 × 2 lattice of compressed cubes, each pushed by its neighbour's
-    /// image on one side only, flew apart.
+    /// Refuses a periodic axis shorter than [`Scene::least_periodic_extent`]: below it a
+    /// particle can touch two images of another (or its own), and the minimum-image pair list
+    /// holds one of them, so the other contact is lost. A periodic 2 × 2 × 2 lattice of
+    /// compressed cubes, each pushed by its neighbour's image on one side only, flew apart.
     pub(super) fn periodic_extent(&mut self, scene: &Scene) {
-        let reach = 2.0 * scene.max_bounding_radius();
-        if !reach.is_finite() {
+        let least = scene.least_periodic_extent();
+        if !least.is_finite() {
             return;
         }
         let d = &scene.domain;
         for (k, axis) in ["x", "y", "z"].into_iter().enumerate() {
             let width = d.max[k] - d.min[k];
-            if d.periodic[k] && width < 2.0 * reach {
+            if d.periodic[k] && width < least {
                 self.err(
                     "domain.max",
                     format!(
@@ -137,9 +136,9 @@ impl Validator<'_> {
                          largest circumscribed radius): a particle could touch two images of \
                          another and only one would be found; allowed: a periodic extent of at \
                          least {:.6e} m, or a non-periodic axis",
-                        2.0 * reach,
-                        0.5 * reach,
-                        2.0 * reach
+                        least,
+                        0.25 * least,
+                        least
                     ),
                 );
             }
