@@ -56,6 +56,11 @@ PD_DEVICE TemplateView template_view(unsigned int t) {
 // Where a geometry error happened: a pair of the list, or a particle against the walls.
 #define PD_ERROR_PAIR 0ull
 #define PD_ERROR_WALL 1ull
+// A contact flag (pair `contact`, `wall_contact`) of a contact whose geometry failed, with the
+// status in its low byte: the host names the failure of the smallest global ids among those
+// flagged (backend/cuda/forces.rs geometry_error, pipeline/error.rs FailureKey), as the CPU
+// does, whatever the device's particle order. A live contact's flag is 1.
+#define PD_CONTACT_FAILED 0x100u
 
 // Records a geometry error for the host: of all errors of a step, the one of the smallest key
 // (source, index, status), pairs before walls as the CPU evaluates them, whatever the order in
@@ -221,6 +226,7 @@ PD_DEVICE bool pair_geometry_outcome(const PairArgs& q, size_t k, int status, co
         report_error(q.error, PD_ERROR_PAIR, status, (unsigned int)k);
         store3(q.axes, k, zero3<double>());
         clear_pair(q, k);
+        q.out.contact[k] = PD_CONTACT_FAILED | (unsigned int)(status & 0xff);
         return false;
     }
     if (g.overlap.volume <= 0.0) {

@@ -252,7 +252,7 @@ extern "C" __global__ void reduce_and_kick(ReduceKickParams args) {
     for (unsigned int m = ref_offset[i]; m < ref_offset[i + 1]; ++m) {
         unsigned int r = refs[m];
         size_t k = r >> 1;
-        contacts += pair_contact[k] != 0u ? 1u : 0u;
+        contacts += pair_contact[k] == 1u ? 1u : 0u;
         if (r & 1u) {
             f += load3(pair_forces, 3 * k);
             t += load3(pair_forces, 3 * k + 2);
@@ -265,7 +265,7 @@ extern "C" __global__ void reduce_and_kick(ReduceKickParams args) {
     f += load3(wall_force, i);
     t += load3(wall_torque, i);
     for (int w = 0; w < args.n_walls; ++w) {
-        contacts += args.wall_contact[i * (size_t)args.n_walls + w] != 0u ? 1u : 0u;
+        contacts += args.wall_contact[i * (size_t)args.n_walls + w] == 1u ? 1u : 0u;
     }
 #else
     (void)wall_force;

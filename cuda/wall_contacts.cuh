@@ -252,6 +252,8 @@ extern "C" __global__ void wall_facet_overlaps(WallOverlapsParams args) {
     if (status != STATUS_OK) {
         report_error(error, PD_ERROR_WALL, status, item.x); // particle · walls + wall
         o = overlap_zero<double>();
+        // Marked for wall_contacts, which flags the particle and wall (PD_CONTACT_FAILED).
+        o.volume = -(double)status;
     }
 #endif
     out[0] = o.volume;
@@ -306,8 +308,14 @@ extern "C" __global__ void wall_contacts(WallContactsParams args) {
         Overlap<double> total = overlap_zero<double>();
         V3<double> first_moment = zero3<double>();
         V3<double> moment_origin = zero3<double>();
+        unsigned int failed = 0u;
         for (; m < m_end && items[m].x == (unsigned int)slot; ++m) {
             const double* q = overlaps + 12 * (size_t)m;
+            // A facet whose prism overlap failed (wall_facet_overlaps): the first, in facet
+            // order, as the CPU's WallMesh::contact stops at it.
+            if (q[0] < 0.0 && failed == 0u) {
+                failed = PD_CONTACT_FAILED | ((unsigned int)(-q[0]) & 0xffu);
+            }
             Overlap<double> o;
             o.volume = q[0];
             o.centroid = load3(q + 1, 0);
@@ -323,6 +331,10 @@ extern "C" __global__ void wall_contacts(WallContactsParams args) {
                 total.depth = max_(total.depth, o.depth);
                 total.thickness = max_(total.thickness, o.thickness);
             }
+        }
+        if (failed != 0u) {
+            wall_contact[slot] = failed;
+            continue;
         }
         if (!(total.volume > 0.0)) continue;
         Quat<double> qw = wall_rotation(s);

@@ -91,3 +91,91 @@ impl From<ExchangeError> for SimulationError {
         }
     }
 }
+
+/// Which contact a failed evaluation names: of all whose geometry failed in one step, the one of
+/// the smallest key. A particle pair's key is its global ids, lower first; a particle–wall
+/// contact's is the particle's id and the wall's index. Keys are global, not positions in a
+/// list, so the CPU, the GPU (whose list builds reorder the particles) and any local order name
+/// the same contact. Pairs are evaluated before walls, and a pair's failure is reported first.
+pub type FailureKey = (u64, u64);
+
+/// The [`FailureKey`] of the pair of particles with global ids `a` and `b`.
+pub fn pair_failure_key(a: u64, b: u64) -> FailureKey {
+    (a.min(b), a.max(b))
+}
+
+/// The outcome of every contact of a stage, or the error of its failure of the smallest key
+/// ([`FailureKey`]) if any failed, whatever the threads' timing and the list's order.
+pub(crate) fn first_failure<T>(
+    outcomes: Vec<Result<T, (FailureKey, SimulationError)>>,
+) -> Result<Vec<T>, SimulationError> {
+    if outcomes.iter().all(Result::is_ok) {
+        return Ok(outcomes.into_iter().filter_map(Result::ok).collect());
+    }
+    let failure = outcomes
+        .into_iter()
+        .filter_map(Result::err)
+        .min_by_key(|(key, _)| *key)
+        .map(|(_, error)| error);
+    Err(failure.expect("one outcome failed"))
+}
+
+/// Of the failures a list-ordered scan found, (position, key) each, the position of the one
+/// [`first_failure`] reports: for a backend that learns of its failures by scanning flags.
+pub fn first_failure_position(
+    failures: impl IntoIterator<Item = (usize, FailureKey)>,
+) -> Option<usize> {
+    failures
+        .into_iter()
+        .min_by_key(|&(_, key)| key)
+        .map(|(position, _)| position)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn failed(step: u64, a: u64, b: u64) -> Result<u8, (FailureKey, SimulationError)> {
+        Err((
+            pair_failure_key(a, b),
+            SimulationError::Geometry {
+                step,
+                what: format!("particles {a} and {b}"),
+                message: String::new(),
+            },
+        ))
+    }
+
+    #[test]
+    fn the_failure_of_the_smallest_ids_is_reported_whatever_the_list_order() {
+        // In list order the pair (9, 4) comes first; by ids (2, 7) is smaller, and a list
+        // built in another particle order would have listed it first.
+        let outcomes = vec![
+            Ok(1),
+            failed(0, 9, 4),
+            Ok(2),
+            failed(0, 7, 2),
+            failed(0, 2, 8),
+        ];
+        match first_failure(outcomes) {
+            Err(SimulationError::Geometry { what, .. }) => assert_eq!(what, "particles 7 and 2"),
+            other => panic!("expected the pair (2, 7), got {other:?}"),
+        }
+        let reversed = vec![
+            failed(0, 2, 8),
+            failed(0, 7, 2),
+            Ok(2),
+            failed(0, 9, 4),
+            Ok(1),
+        ];
+        match first_failure(reversed) {
+            Err(SimulationError::Geometry { what, .. }) => assert_eq!(what, "particles 7 and 2"),
+            other => panic!("expected the pair (2, 7), got {other:?}"),
+        }
+        assert_eq!(first_failure::<u8>(vec![Ok(1), Ok(2)]).unwrap(), vec![1, 2]);
+        // The flag scan of the GPU picks the same one.
+        let flags = [(0, (4, 9)), (3, (2, 7)), (4, (2, 8))];
+        assert_eq!(first_failure_position(flags), Some(3));
+        assert_eq!(first_failure_position([]), None);
+    }
+}

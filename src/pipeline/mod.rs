@@ -32,7 +32,9 @@ mod walls;
 
 pub use crate::state::StepStats;
 pub use builder::{RestoredState, SimulationBuilder};
-pub use error::{SimulationError, StageTimers};
+pub use error::{
+    FailureKey, SimulationError, StageTimers, first_failure_position, pair_failure_key,
+};
 
 use crate::contact::{ContactHistory, WallMesh};
 use crate::domain::Parallel;

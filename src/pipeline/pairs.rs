@@ -3,6 +3,7 @@
 //! law, one rayon job per candidate pair; and what the pair and wall stages share (contact
 //! parameters, the effective mass, the per-thread workspace).
 
+use super::error::{first_failure, pair_failure_key};
 use super::{Simulation, SimulationError};
 use crate::contact::{
     ContactForces, ContactKey, ContactKinematics, ContactParameters, ContactState, contact_forces,
@@ -149,7 +150,8 @@ impl Simulation {
     }
 
     /// Stages 3–7 for every candidate pair of the list, in list order (ghosts joined after the
-    /// owned particles): the outcome per pair, or the first pair whose geometry failed.
+    /// owned particles): the outcome per pair, or the failed pair of the smallest ids
+    /// ([`FailureKey`](super::error::FailureKey)).
     pub(super) fn pair_contacts(&self, dt: f64) -> Result<Vec<PairOutcome>, SimulationError> {
         let p = &self.particles;
         let s = &self.scene;
@@ -157,7 +159,8 @@ impl Simulation {
         let spheres = s.spheres_only();
         let periodic = self.bounds.periodic.iter().any(|&k| k);
         let bounds = self.bounds;
-        self.pairs
+        let outcomes = self
+            .pairs
             .pairs
             .par_iter()
             .zip(self.separating_axes.par_iter())
@@ -207,7 +210,7 @@ impl Simulation {
                     // Stages 4–5: the narrow phase (GJK where the Chebyshev centre proves no
                     // intersection), then the overlap.
                     let g = with_workspace(|ws| overlap_pair(ws, body_a, body_b)).map_err(|e| {
-                        SimulationError::Geometry {
+                        let error = SimulationError::Geometry {
                             step,
                             what: format!("particles {} and {}", p.id[a], p.id[b]),
                             message: format!(
@@ -215,7 +218,8 @@ impl Simulation {
                                 probe_body(ta, p.scale[a], &pose_a),
                                 probe_body(tb, p.scale[b], &pose_b)
                             ),
-                        }
+                        };
+                        (pair_failure_key(p.id[a], p.id[b]), error)
                     })?;
                     if g.overlap.volume <= 0.0 {
                         return Ok(PairOutcome {
@@ -266,10 +270,8 @@ impl Simulation {
                         / self.equivalent_volume(a).min(self.equivalent_volume(b)),
                 })
             })
-            .collect::<Vec<_>>()
-            // The first failing pair in list order, whatever the threads' timing.
-            .into_iter()
-            .collect()
+            .collect::<Vec<_>>();
+        first_failure(outcomes)
     }
 }
 

@@ -1,6 +1,7 @@
 //! Stage 6: per particle, the facet contacts with every wall near it and the contact law, one
 //! rayon job per particle, in the wall's own frame.
 
+use super::error::first_failure;
 use super::pairs::{normal_effective_mass, with_workspace};
 use super::{Simulation, SimulationError};
 use crate::contact::{ContactKey, ContactKinematics, ContactState, contact_forces, mass_share};
@@ -56,7 +57,8 @@ impl Simulation {
     }
 
     /// Stage 6 for every owned particle, in index order: its contacts with the walls, or the
-    /// first particle whose wall geometry failed. No walls, no work.
+    /// failed contact of the smallest particle id and wall
+    /// ([`FailureKey`](super::error::FailureKey)). No walls, no work.
     pub(super) fn wall_contacts(&self, dt: f64) -> Result<Vec<WallOutcome>, SimulationError> {
         if self.walls.is_empty() {
             return Ok(Vec::new());
@@ -65,7 +67,7 @@ impl Simulation {
         let s = &self.scene;
         let (t, step) = (self.time, self.step);
         let poses: Vec<Isometry3<f64>> = s.walls.iter().map(|w| w.motion.transform(t)).collect();
-        (0..p.len())
+        let outcomes = (0..p.len())
             .into_par_iter()
             .with_min_len(crate::par::CONTACT)
             .map_init(Vec::new, |facets, i| {
@@ -86,13 +88,16 @@ impl Simulation {
                             let body: &mut PosedPolytope<f64> = &mut ws.a;
                             body.place(tmpl, p.scale[i], &local, &Vector3::zeros());
                             mesh.contact(&mut ws.overlap, body, (tmpl, p.scale[i], &local), facets)
-                                .map_err(|e| SimulationError::Geometry {
-                                    step,
-                                    what: format!(
-                                        "particle {} and wall {}",
-                                        p.id[i], s.walls[k].name
-                                    ),
-                                    message: e.to_string(),
+                                .map_err(|e| {
+                                    let error = SimulationError::Geometry {
+                                        step,
+                                        what: format!(
+                                            "particle {} and wall {}",
+                                            p.id[i], s.walls[k].name
+                                        ),
+                                        message: e.to_string(),
+                                    };
+                                    ((p.id[i], k as u64), error)
                                 })?
                         };
                         if o.volume <= 0.0 {
@@ -145,9 +150,7 @@ impl Simulation {
                     Ok(out)
                 })
             })
-            .collect::<Vec<_>>()
-            // The first failing particle in index order, whatever the threads' timing.
-            .into_iter()
-            .collect()
+            .collect::<Vec<_>>();
+        first_failure(outcomes)
     }
 }

@@ -4,9 +4,10 @@
 //! fused with the second half kick ([`super::integrator`]); then the step's geometry errors.
 
 use super::error::CudaError;
+use super::layout::CONTACT_FAILED;
 use super::pairs::ListSource;
 use super::simulation::CudaSimulation;
-use crate::pipeline::SimulationError;
+use crate::pipeline::{SimulationError, first_failure_position, pair_failure_key};
 use std::time::Instant;
 
 impl CudaSimulation {
@@ -203,47 +204,73 @@ impl CudaSimulation {
         Ok(t0.elapsed().as_secs_f64())
     }
 
-    /// The geometry error the kernels recorded (`report_error` of cuda/contact.cu): of all
-    /// that failed this step, the pair of the smallest list index, else the particle–wall
-    /// item of the smallest particle slot and wall, named by global ids as the CPU names them.
+    /// The geometry error the kernels recorded (`report_error` of cuda/contact.cu): a failed
+    /// pair if any failed, else a failed particle–wall contact; of those, the one of the
+    /// smallest global ids ([`FailureKey`](crate::pipeline::FailureKey)), found from the
+    /// contact flags the kernels set on failure (`PD_CONTACT_FAILED`), so the CPU and the GPU,
+    /// whatever its particle order, name the same contact.
     fn geometry_error(&self, error: [u32; 3]) -> SimulationError {
         let key = !(u64::from(error[0]) | (u64::from(error[1]) << 32));
+        // The error word's own choice (smallest list slot), should the flags not be readable.
         let (source, index, status) = (key >> 40, (key >> 8) & 0xffff_ffff, key & 0xff);
         let step = self.host.step;
-        let message = format!("geometry status {status} (cuda/polytope.cuh status codes)");
         let st = &self.gpu.stream;
         let ids = st.clone_dtoh(&self.particles.id).unwrap_or_default();
         let id = |slot: usize| {
             ids.get(slot)
                 .map_or(format!("slot {slot}"), |g| g.to_string())
         };
-        let what = if source == 0 {
-            let pair = self
-                .pairs
-                .list
-                .as_ref()
-                .and_then(|p| st.clone_dtoh(&p.pairs).ok())
-                .and_then(|pr| {
-                    Some((
-                        *pr.get(2 * index as usize)?,
-                        *pr.get(2 * index as usize + 1)?,
-                    ))
+        let failed = |flag: u32| (flag & CONTACT_FAILED != 0).then_some(flag & 0xff);
+        let (what, status) = if source == 0 {
+            let flagged = self.pairs.list.as_ref().and_then(|p| {
+                let pairs = st.clone_dtoh(&p.pairs).ok()?;
+                let flags = st.clone_dtoh(&p.contact).ok()?;
+                let slots = |k: usize| (pairs[2 * k] as usize, pairs[2 * k + 1] as usize);
+                let failures = (0..p.n).filter(|&k| failed(flags[k]).is_some()).map(|k| {
+                    let (a, b) = slots(k);
+                    let key = match (ids.get(a), ids.get(b)) {
+                        (Some(&ia), Some(&ib)) => pair_failure_key(ia, ib),
+                        _ => (u64::MAX, k as u64),
+                    };
+                    (k, key)
                 });
-            match pair {
-                Some((a, b)) => format!("particles {} and {}", id(a as usize), id(b as usize)),
-                None => format!("pair slot {index}"),
+                let k = first_failure_position(failures)?;
+                let (a, b) = slots(k);
+                Some((a, b, failed(flags[k])?))
+            });
+            match flagged {
+                Some((a, b, status)) => (
+                    format!("particles {} and {}", id(a), id(b)),
+                    u64::from(status),
+                ),
+                None => (format!("pair slot {index}"), status),
             }
         } else {
             let walls = self.host.scene.walls.len().max(1);
-            let (i, k) = (index as usize / walls, index as usize % walls);
+            let flagged = self.walls.as_ref().and_then(|w| {
+                let flags = st.clone_dtoh(&w.contact).ok()?;
+                let n = self.particles.n * walls;
+                let failures = (0..n.min(flags.len()))
+                    .filter(|&s| failed(flags[s]).is_some())
+                    .map(|s| {
+                        let particle = ids.get(s / walls).copied().unwrap_or(u64::MAX);
+                        (s, (particle, (s % walls) as u64))
+                    });
+                let s = first_failure_position(failures)?;
+                Some((s, failed(flags[s])?))
+            });
+            let (slot, status) =
+                flagged.map_or((index, status), |(s, st)| (s as u64, u64::from(st)));
+            let (i, k) = (slot as usize / walls, slot as usize % walls);
             let name = self
                 .host
                 .scene
                 .walls
                 .get(k)
                 .map_or("?", |w| w.name.as_str());
-            format!("particle {} and wall {name}", id(i))
+            (format!("particle {} and wall {name}", id(i)), status)
         };
+        let message = format!("geometry status {status} (cuda/polytope.cuh status codes)");
         SimulationError::Geometry {
             step,
             what,

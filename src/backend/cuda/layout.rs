@@ -50,6 +50,13 @@ impl GridParams {
 /// `cuda/contact_law.cuh: PD_HISTORY_WIDTH`).
 pub const HISTORY_WIDTH: usize = 5;
 
+/// The contact flag (pair `contact`, `wall_contact`) of a live contact.
+pub const CONTACT_LIVE: u32 = 1;
+
+/// The bit of a contact flag whose geometry failed this step, its status in the low byte
+/// (`PD_CONTACT_FAILED` of cuda/contact.cu).
+pub const CONTACT_FAILED: u32 = 0x100;
+
 /// The history record of `state`, in the device's layout.
 pub fn history_record(state: &crate::contact::ContactState) -> [f64; HISTORY_WIDTH] {
     let s = &state.spring;

@@ -3,7 +3,7 @@
 //! pair slots and per-particle wall slots, and the step statistics.
 
 use super::error::CudaError;
-use super::layout::{HISTORY_WIDTH, history_state};
+use super::layout::{CONTACT_LIVE, HISTORY_WIDTH, history_state};
 use super::simulation::CudaSimulation;
 use super::upload::{flat_quats, flat3};
 use crate::contact::{ContactHistory, ContactKey};
@@ -91,7 +91,7 @@ impl CudaSimulation {
                     let (ia, ib) = (p.id[a], p.id[b]);
                     pair_energy.push((ia.min(ib), ia.max(ib), e[k]));
                 }
-                if contact[k] != 0 {
+                if contact[k] == CONTACT_LIVE {
                     contacts += u64::from(counted);
                     entries.push((
                         ContactKey::particles(p.id[a], p.id[b]),
@@ -119,7 +119,7 @@ impl CudaSimulation {
                 energy += e[i];
                 for (k, wf) in wall_forces.iter_mut().enumerate() {
                     let s = i * w.n + k;
-                    if contact[s] != 0 {
+                    if contact[s] == CONTACT_LIVE {
                         wall_contacts += 1;
                         *wf += Vector3::new(f[3 * s], f[3 * s + 1], f[3 * s + 2]);
                         entries.push((
@@ -230,7 +230,7 @@ impl CudaSimulation {
                 .clone_dtoh(s)?
                 .iter()
                 .take(n)
-                .filter(|&&c| c != 0)
+                .filter(|&&c| c == CONTACT_LIVE)
                 .count() as u64)
         };
         let pairs = match &self.pairs.list {
