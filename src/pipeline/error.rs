@@ -121,7 +121,7 @@ pub(crate) fn first_failure<T>(
 }
 
 /// Of the failures a list-ordered scan found, (position, key) each, the position of the one
-/// [`first_failure`] reports: for a backend that learns of its failures by scanning flags.
+/// the CPU stages report (smallest key): for a backend that learns of its failures by scanning flags.
 pub fn first_failure_position(
     failures: impl IntoIterator<Item = (usize, FailureKey)>,
 ) -> Option<usize> {
