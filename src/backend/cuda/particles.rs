@@ -5,43 +5,96 @@
 use super::error::CudaError;
 use super::launch::{Kernels, cfg, ptr, zeros};
 use super::layout::ParticleView;
+use crate::state::Particles;
 use cudarc::driver::{CudaSlice, CudaStream, DeviceRepr, ValidAsZeroBits};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use std::sync::Arc;
 
 /// The field table of the device particle arrays: per element type, the method that reorders
 /// that group at a list build, then each field with its values per particle (xyz-interleaved
-/// vectors, quaternions as x, y, z, w). `$m!` receives the table.
+/// vectors, quaternions as x, y, z, w) and where it comes from: `host`, a field of
+/// [`Particles`] of that name, copied both ways; `device`, derived at the upload from the
+/// scene (or the rank's ghosts) and never copied back. `$m!` receives the table.
 macro_rules! particle_fields {
     ($m:ident) => {
         $m! {
             f64 gather_f64s {
-                scale: 1,
-                radius: 1,
-                cn: 1,
-                ct: 1,
-                mass: 1,
-                position: 3,
-                velocity: 3,
-                angular_velocity: 3,
-                orientation: 4,
-                force: 3,
-                torque: 3,
-                inertia: 3,
+                scale: 1 host,
+                radius: 1 device,
+                cn: 1 device,
+                ct: 1 device,
+                mass: 1 host,
+                position: 3 host,
+                velocity: 3 host,
+                angular_velocity: 3 host,
+                orientation: 4 host,
+                force: 3 host,
+                torque: 3 host,
+                inertia: 3 host,
             }
             u32 gather_u32s {
-                tmpl: 1,
-                material: 1,
-                kind: 1,
+                tmpl: 1 device,
+                material: 1 device,
+                kind: 1 host,
                 // 1 for a ghost (a neighbour rank's particle), 0 for an owned one.
-                ghost: 1,
+                ghost: 1 device,
                 // Contacts at the last evaluation (the dashpot caps' mass splitting).
-                contacts: 1,
+                contacts: 1 host,
             }
             u64 gather_u64s {
-                id: 1,
+                id: 1 host,
             }
         }
     };
+}
+
+/// A [`Particles`] field in the device's flat layout: `width` values per particle.
+trait FlatField {
+    type Value;
+    /// The first `n` particles' values from `flat`.
+    fn from_flat(flat: &[Self::Value], n: usize) -> Self;
+}
+
+macro_rules! flat_scalars {
+    ($($t:ty),*) => {$(
+        impl FlatField for Vec<$t> {
+            type Value = $t;
+            fn from_flat(flat: &[$t], n: usize) -> Self {
+                flat[..n].to_vec()
+            }
+        }
+    )*};
+}
+
+flat_scalars!(f64, u32, u64);
+
+impl FlatField for Vec<Vector3<f64>> {
+    type Value = f64;
+    fn from_flat(flat: &[f64], n: usize) -> Self {
+        flat.chunks_exact(3)
+            .take(n)
+            .map(|c| Vector3::new(c[0], c[1], c[2]))
+            .collect()
+    }
+}
+
+impl FlatField for Vec<UnitQuaternion<f64>> {
+    type Value = f64;
+    fn from_flat(flat: &[f64], n: usize) -> Self {
+        // Stored x, y, z, w; the device keeps them unit (`integrate.cu` renormalises).
+        flat.chunks_exact(4)
+            .take(n)
+            .map(|c| UnitQuaternion::new_unchecked(Quaternion::new(c[3], c[0], c[1], c[2])))
+            .collect()
+    }
+}
+
+/// `$particles.$field` set from `$arrays.$field` for a `host` field; nothing for a `device` one.
+macro_rules! copy_host_field {
+    (host $particles:ident $arrays:ident $field:ident $n:ident) => {
+        $particles.$field = FlatField::from_flat(&$arrays.$field, $n);
+    };
+    (device $particles:ident $arrays:ident $field:ident $n:ident) => {};
 }
 
 /// An element type of the particle arrays, reordered by its gather kernel.
@@ -119,7 +172,9 @@ fn at_least_one<T: Default>(mut v: Vec<T>) -> Vec<T> {
 }
 
 macro_rules! declare_particles {
-    ($($ty:ident $gather:ident { $($field:ident: $width:literal),* $(,)? })*) => {
+    ($($ty:ident $gather:ident {
+        $($field:ident: $width:literal $origin:ident),* $(,)?
+    })*) => {
         /// Particle arrays on the device: `n` slots (at least one value per buffer).
         pub(super) struct DeviceParticles {
             /// Slots in use (owned particles, then a decomposed run's ghosts).
@@ -157,6 +212,21 @@ macro_rules! declare_particles {
                 })
             }
 
+            /// Every array copied down, `width · n` values each.
+            pub(super) fn download(
+                &self,
+                st: &Arc<CudaStream>,
+            ) -> Result<HostParticleArrays, CudaError> {
+                let n = self.n;
+                Ok(HostParticleArrays {
+                    $($($field: {
+                        let mut v = st.clone_dtoh(&self.$field)?;
+                        v.truncate($width * n);
+                        v
+                    },)*)*
+                })
+            }
+
             /// Bytes of device memory held by the arrays.
             pub(super) fn bytes(&self) -> usize {
                 0 $($(+ self.$field.len() * std::mem::size_of::<$ty>())*)*
@@ -183,6 +253,21 @@ macro_rules! declare_particles {
 }
 
 particle_fields!(declare_particles);
+
+impl HostParticleArrays {
+    /// The `host` fields of the table written into `particles`, `n` of them (the `device`
+    /// fields, derived at the upload, are dropped).
+    pub(super) fn copy_into(&self, particles: &mut Particles, n: usize) {
+        macro_rules! copy_all {
+            ($($ty:ident $gather:ident {
+                $($field:ident: $width:literal $origin:ident),* $(,)?
+            })*) => {
+                $($(copy_host_field!($origin particles self $field n);)*)*
+            };
+        }
+        particle_fields!(copy_all);
+    }
+}
 
 impl DeviceParticles {
     /// The device pointers the contact kernels read, valid until the arrays are reallocated

@@ -62,14 +62,37 @@ pub struct ProbeFacetResult {
     pub overlap: Overlap<f64>,
 }
 
+/// A kernel of `cuda/probe.cu`; each takes the case count, the template table, the cases'
+/// inputs and their outputs ([`GeometryProbe`]'s `launch`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum ProbeKernel {
+    /// GJK and the overlap of posed pairs, in f64 and f32, and `axis_separates`.
+    Pairs,
+    /// The facet-prism overlap of posed bodies, in f64 and f32.
+    Facets,
+}
+
+impl ProbeKernel {
+    /// Every probe kernel, in the order [`GeometryProbe`] holds them.
+    const ALL: [ProbeKernel; 2] = [ProbeKernel::Pairs, ProbeKernel::Facets];
+
+    /// The kernel's name in `cuda/probe.cu`.
+    fn name(self) -> &'static str {
+        match self {
+            ProbeKernel::Pairs => "probe_pairs",
+            ProbeKernel::Facets => "probe_facets",
+        }
+    }
+}
+
 /// The probe kernels, compiled once for templates of up to `max_vertices` vertices and
 /// `max_faces` faces.
 pub struct GeometryProbe {
     /// Device name.
     pub device: String,
     stream: Arc<CudaStream>,
-    pairs: CudaFunction,
-    facets: CudaFunction,
+    /// The kernels of [`ProbeKernel::ALL`], in its order.
+    kernels: Vec<CudaFunction>,
     max_vertices: usize,
     max_faces: usize,
     _ctx: Arc<CudaContext>,
@@ -144,8 +167,10 @@ impl GeometryProbe {
         Ok(GeometryProbe {
             device: ctx.name().unwrap_or_else(|_| format!("GPU {ordinal}")),
             stream,
-            pairs: module.load_function("probe_pairs")?,
-            facets: module.load_function("probe_facets")?,
+            kernels: ProbeKernel::ALL
+                .iter()
+                .map(|k| module.load_function(k.name()))
+                .collect::<Result<_, _>>()?,
             max_vertices,
             max_faces,
             _ctx: ctx,
@@ -171,7 +196,7 @@ impl GeometryProbe {
     /// Runs `kernel` over `n` cases of `stride_in` inputs, returning `stride_out` values each.
     fn launch(
         &self,
-        kernel: &CudaFunction,
+        kernel: ProbeKernel,
         templates: &[&ConvexTemplate],
         input: &[f64],
         n: usize,
@@ -211,7 +236,7 @@ impl GeometryProbe {
         // write `stride_out` values per case into `d_out`; the template table outlives the launch
         // (the stream is synchronised by the copy back).
         unsafe {
-            st.launch_builder(kernel)
+            st.launch_builder(&self.kernels[kernel as usize])
                 .arg(&ni)
                 .arg(&table)
                 .arg(&d_in)
@@ -236,7 +261,7 @@ impl GeometryProbe {
             push_body(&mut input, &c.b);
             input.extend_from_slice(&[c.axis.x, c.axis.y, c.axis.z, c.margin]);
         }
-        let out = self.launch(&self.pairs, templates, &input, cases.len(), 35)?;
+        let out = self.launch(ProbeKernel::Pairs, templates, &input, cases.len(), 35)?;
         Ok(out
             .chunks_exact(35)
             .map(|v| (pair_from(&v[0..17]), pair_from(&v[17..34]), v[34] != 0.0))
@@ -257,7 +282,7 @@ impl GeometryProbe {
                 input.extend_from_slice(v.as_slice());
             }
         }
-        let out = self.launch(&self.facets, templates, &input, cases.len(), 28)?;
+        let out = self.launch(ProbeKernel::Facets, templates, &input, cases.len(), 28)?;
         Ok(out
             .chunks_exact(28)
             .map(|v| (facet_from(&v[0..14]), facet_from(&v[14..28])))

@@ -9,7 +9,7 @@ use super::upload::{flat_quats, flat3};
 use crate::contact::{ContactHistory, ContactKey};
 use crate::pipeline::Simulation;
 use cudarc::driver::CudaSlice;
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 
 impl CudaSimulation {
     /// Copies the device state into [`CudaSimulation::host`] (particles in the device's
@@ -21,54 +21,15 @@ impl CudaSimulation {
         let st = &self.gpu.stream;
         let n = self.particles.n;
         let get = |s: &CudaSlice<f64>| st.clone_dtoh(s);
-        let vec3 = |v: Vec<f64>| -> Vec<Vector3<f64>> {
-            v.chunks_exact(3)
-                .take(n)
-                .map(|c| Vector3::new(c[0], c[1], c[2]))
-                .collect()
-        };
         let p = &mut self.host.particles;
-        let mut id = st.clone_dtoh(&self.particles.id)?;
-        id.truncate(n);
-        p.id = id;
-        let mut kind = st.clone_dtoh(&self.particles.kind)?;
-        kind.truncate(n);
-        p.kind = kind;
-        let mut scale = get(&self.particles.scale)?;
-        scale.truncate(n);
-        p.scale = scale;
-        let mut mass = get(&self.particles.mass)?;
-        mass.truncate(n);
-        p.mass = mass;
-        let mut contacts = st.clone_dtoh(&self.particles.contacts)?;
-        contacts.truncate(n);
-        p.contacts = contacts;
-        p.position = vec3(get(&self.particles.position)?);
-        p.velocity = vec3(get(&self.particles.velocity)?);
-        p.angular_velocity = vec3(get(&self.particles.angular_velocity)?);
-        p.force = vec3(get(&self.particles.force)?);
-        p.torque = vec3(get(&self.particles.torque)?);
-        p.inertia = vec3(get(&self.particles.inertia)?);
-        p.orientation = get(&self.particles.orientation)?
-            .chunks_exact(4)
-            .take(n)
-            .map(|c| {
-                UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(c[3], c[0], c[1], c[2]))
-            })
-            .collect();
+        // Every array of the field table; the host's fields go into `p`.
+        let arrays = self.particles.download(st)?;
+        arrays.copy_into(p, n);
         // History and statistics from the last evaluation (springs are in `spring_in` after
         // the swap at its end).
         // A rank of a decomposed run holds ghosts too: they are left out of the host copy, and
         // a pair counts in the statistics where its lower-id member (the first) is owned.
-        let ghost: Vec<bool> = if self.host.parallel.is_some() {
-            st.clone_dtoh(&self.particles.ghost)?
-                .iter()
-                .take(n)
-                .map(|&g| g != 0)
-                .collect()
-        } else {
-            vec![false; n]
-        };
+        let ghost: Vec<bool> = arrays.ghost.iter().map(|&g| g != 0).collect();
         let mut entries = Vec::new();
         let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
         // The elastic energy and the walls' forces are summed in global id order: each pair
