@@ -223,19 +223,19 @@ impl CudaSimulation {
         let failed = |flag: u32| (flag & CONTACT_FAILED != 0).then_some(flag & 0xff);
         let (what, status) = if source == 0 {
             let flagged = self.pairs.list.as_ref().and_then(|p| {
-                let pairs = st.clone_dtoh(&p.pairs).ok()?;
-                let flags = st.clone_dtoh(&p.contact).ok()?;
-                let slots = |k: usize| (pairs[2 * k] as usize, pairs[2 * k + 1] as usize);
-                let failures = (0..p.n).filter(|&k| failed(flags[k]).is_some()).map(|k| {
-                    let (a, b) = slots(k);
-                    let key = match (ids.get(a), ids.get(b)) {
-                        (Some(&ia), Some(&ib)) => pair_failure_key(ia, ib),
-                        _ => (u64::MAX, k as u64),
-                    };
-                    (k, key)
-                });
+                let (slots, flags) = p.flags(st).ok()?;
+                let failures = (0..slots.len())
+                    .filter(|&k| failed(flags[k]).is_some())
+                    .map(|k| {
+                        let [a, b] = slots[k];
+                        let key = match (ids.get(a), ids.get(b)) {
+                            (Some(&ia), Some(&ib)) => pair_failure_key(ia, ib),
+                            _ => (u64::MAX, k as u64),
+                        };
+                        (k, key)
+                    });
                 let k = first_failure_position(failures)?;
-                let (a, b) = slots(k);
+                let [a, b] = slots[k];
                 Some((a, b, failed(flags[k])?))
             });
             match flagged {
@@ -248,7 +248,7 @@ impl CudaSimulation {
         } else {
             let walls = self.host.scene.walls.len().max(1);
             let flagged = self.walls.as_ref().and_then(|w| {
-                let flags = st.clone_dtoh(&w.contact).ok()?;
+                let flags = w.flags(st).ok()?;
                 let n = self.particles.n * walls;
                 let failures = (0..n.min(flags.len()))
                     .filter(|&s| failed(flags[s]).is_some())

@@ -12,7 +12,8 @@ use super::particles::DeviceParticles;
 use super::walls::WallStage;
 use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
 use crate::neighbor::SlotList;
-use cudarc::driver::CudaSlice;
+use cudarc::driver::{CudaSlice, CudaStream};
+use std::sync::Arc;
 
 /// Plane-count buckets of the lean pair passes: counts 0..=ENUM_MAX_PLANES (`PD_PLANE_BUCKETS`).
 pub(super) const PLANE_BUCKETS: usize = ENUM_MAX_PLANES + 1;
@@ -50,7 +51,57 @@ pub(super) struct PairList {
     pub(super) bucket_fill: CudaSlice<u32>,
 }
 
+/// The last evaluation's outcome of every listed pair, copied down: the members' slots, the
+/// contact flag ([`CONTACT_LIVE`](super::layout::CONTACT_LIVE), `CONTACT_FAILED` | status, or
+/// 0), the spring ([`HISTORY_WIDTH`] values) and the elastic energy.
+pub(super) struct PairOutcomes {
+    pub(super) slots: Vec<[usize; 2]>,
+    pub(super) contact: Vec<u32>,
+    pub(super) spring: Vec<f64>,
+    pub(super) energy: Vec<f64>,
+}
+
+impl PairOutcomes {
+    /// Pair `k`'s spring.
+    pub(super) fn spring(&self, k: usize) -> &[f64] {
+        &self.spring[HISTORY_WIDTH * k..HISTORY_WIDTH * (k + 1)]
+    }
+}
+
 impl PairList {
+    /// The members' slots and contact flags of the listed pairs (for the step's geometry
+    /// errors).
+    pub(super) fn flags(
+        &self,
+        st: &Arc<CudaStream>,
+    ) -> Result<(Vec<[usize; 2]>, Vec<u32>), CudaError> {
+        let pairs = st.clone_dtoh(&self.pairs)?;
+        let slots = pairs
+            .chunks_exact(2)
+            .take(self.n)
+            .map(|ab| [ab[0] as usize, ab[1] as usize])
+            .collect();
+        let mut contact = st.clone_dtoh(&self.contact)?;
+        contact.truncate(self.n);
+        Ok((slots, contact))
+    }
+
+    /// The last evaluation's outcomes, copied down (its springs are in `spring_in` after the
+    /// swap that ends a step).
+    pub(super) fn outcomes(&self, st: &Arc<CudaStream>) -> Result<PairOutcomes, CudaError> {
+        let (slots, contact) = self.flags(st)?;
+        let mut spring = st.clone_dtoh(&self.spring_in)?;
+        spring.truncate(HISTORY_WIDTH * self.n);
+        let mut energy = st.clone_dtoh(&self.energy)?;
+        energy.truncate(self.n);
+        Ok(PairOutcomes {
+            slots,
+            contact,
+            spring,
+            energy,
+        })
+    }
+
     /// Bytes of device memory held by the list and its per-pair buffers.
     fn bytes(&self) -> usize {
         fn b<T>(s: &CudaSlice<T>) -> usize {

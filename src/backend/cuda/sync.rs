@@ -3,7 +3,7 @@
 //! pair slots and per-particle wall slots, and the step statistics.
 
 use super::error::CudaError;
-use super::layout::{CONTACT_LIVE, HISTORY_WIDTH, history_state};
+use super::layout::{CONTACT_LIVE, history_state};
 use super::simulation::CudaSimulation;
 use super::upload::{flat_quats, flat3};
 use crate::contact::{ContactHistory, ContactKey};
@@ -20,7 +20,6 @@ impl CudaSimulation {
         }
         let st = &self.gpu.stream;
         let n = self.particles.n;
-        let get = |s: &CudaSlice<f64>| st.clone_dtoh(s);
         let p = &mut self.host.particles;
         // Every array of the field table; the host's fields go into `p`.
         let arrays = self.particles.download(st)?;
@@ -40,23 +39,19 @@ impl CudaSimulation {
         // in their last bits from run to run while the trajectory did not.
         let mut pair_energy: Vec<(u64, u64, f64)> = Vec::new();
         if let Some(pairs) = &self.pairs.list {
-            let pr = st.clone_dtoh(&pairs.pairs)?;
-            let contact = st.clone_dtoh(&pairs.contact)?;
-            let spring = get(&pairs.spring_in)?;
-            let e = get(&pairs.energy)?;
-            pair_energy.reserve(pairs.n);
-            for k in 0..pairs.n {
-                let (a, b) = (pr[2 * k] as usize, pr[2 * k + 1] as usize);
+            let out = pairs.outcomes(st)?;
+            pair_energy.reserve(out.slots.len());
+            for (k, &[a, b]) in out.slots.iter().enumerate() {
                 let counted = !ghost[a];
                 if counted {
                     let (ia, ib) = (p.id[a], p.id[b]);
-                    pair_energy.push((ia.min(ib), ia.max(ib), e[k]));
+                    pair_energy.push((ia.min(ib), ia.max(ib), out.energy[k]));
                 }
-                if contact[k] == CONTACT_LIVE {
+                if out.contact[k] == CONTACT_LIVE {
                     contacts += u64::from(counted);
                     entries.push((
                         ContactKey::particles(p.id[a], p.id[b]),
-                        history_state(&spring[HISTORY_WIDTH * k..HISTORY_WIDTH * (k + 1)]),
+                        history_state(out.spring(k)),
                     ));
                 }
             }
@@ -67,26 +62,20 @@ impl CudaSimulation {
         }
         let mut wall_forces = vec![Vector3::zeros(); self.walls.as_ref().map_or(0, |w| w.n)];
         if let Some(w) = &self.walls {
-            let contact = st.clone_dtoh(&w.contact)?;
-            let spring = get(&w.spring_in)?;
-            let e = get(&w.energy)?;
-            let f = get(&w.per_wall_force)?;
+            let out = w.outcomes(st)?;
             let order = p.id_order(n);
             for j in 0..n {
                 let i = order.as_ref().map_or(j, |o| o[j]);
                 if ghost[i] {
                     continue;
                 }
-                energy += e[i];
+                energy += out.energy[i];
                 for (k, wf) in wall_forces.iter_mut().enumerate() {
-                    let s = i * w.n + k;
-                    if contact[s] == CONTACT_LIVE {
+                    let s = out.slot(i, k);
+                    if out.contact[s] == CONTACT_LIVE {
                         wall_contacts += 1;
-                        *wf += Vector3::new(f[3 * s], f[3 * s + 1], f[3 * s + 2]);
-                        entries.push((
-                            ContactKey::wall(p.id[i], k),
-                            history_state(&spring[HISTORY_WIDTH * s..HISTORY_WIDTH * (s + 1)]),
-                        ));
+                        *wf += out.force(s);
+                        entries.push((ContactKey::wall(p.id[i], k), history_state(out.spring(s))));
                     }
                 }
             }

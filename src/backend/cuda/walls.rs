@@ -41,6 +41,35 @@ pub(super) struct WallList {
 }
 
 /// Wall meshes, the wall list and the per-particle wall outputs.
+/// [`WallStage::outcomes`]: per particle slot `i` and wall `k`, at `s = i · walls + k`.
+pub(super) struct WallOutcomes {
+    pub(super) walls: usize,
+    /// [`CONTACT_LIVE`](super::layout::CONTACT_LIVE), `CONTACT_FAILED` | status, or 0.
+    pub(super) contact: Vec<u32>,
+    pub(super) spring: Vec<f64>,
+    /// Per particle.
+    pub(super) energy: Vec<f64>,
+    pub(super) per_wall_force: Vec<f64>,
+}
+
+impl WallOutcomes {
+    /// The slot of particle `i` and wall `k`.
+    pub(super) fn slot(&self, i: usize, k: usize) -> usize {
+        i * self.walls + k
+    }
+
+    /// The spring of slot `s`.
+    pub(super) fn spring(&self, s: usize) -> &[f64] {
+        &self.spring[HISTORY_WIDTH * s..HISTORY_WIDTH * (s + 1)]
+    }
+
+    /// The force on the wall of slot `s`.
+    pub(super) fn force(&self, s: usize) -> Vector3<f64> {
+        let f = &self.per_wall_force[3 * s..3 * s + 3];
+        Vector3::new(f[0], f[1], f[2])
+    }
+}
+
 pub(super) struct WallStage {
     pub(super) n: usize,
     pub(super) info: CudaSlice<WallInfo>,
@@ -160,6 +189,25 @@ impl WallStage {
         self.contact = st.alloc_zeros::<u32>(nw)?;
         self.list = None;
         Ok(())
+    }
+
+    /// The contact flags per particle slot and wall (slot `i · n + k`; for the step's geometry
+    /// errors).
+    pub(super) fn flags(&self, st: &Arc<CudaStream>) -> Result<Vec<u32>, CudaError> {
+        Ok(st.clone_dtoh(&self.contact)?)
+    }
+
+    /// The last evaluation's outcome per particle slot and wall (slot `i · n + k`), copied
+    /// down: the contact flags, springs (after the step's swap), the forces on each wall, and
+    /// per particle the elastic energy of its wall contacts.
+    pub(super) fn outcomes(&self, st: &Arc<CudaStream>) -> Result<WallOutcomes, CudaError> {
+        Ok(WallOutcomes {
+            walls: self.n,
+            contact: self.flags(st)?,
+            spring: st.clone_dtoh(&self.spring_in)?,
+            energy: st.clone_dtoh(&self.energy)?,
+            per_wall_force: st.clone_dtoh(&self.per_wall_force)?,
+        })
     }
 
     /// Bytes of device memory held by the meshes, the outputs and the list.
