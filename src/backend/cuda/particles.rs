@@ -5,6 +5,7 @@
 use super::error::CudaError;
 use super::launch::{Kernels, cfg, ptr, zeros};
 use super::layout::ParticleView;
+use super::upload::{flat_quats, flat3};
 use crate::state::Particles;
 use cudarc::driver::{CudaSlice, CudaStream, DeviceRepr, ValidAsZeroBits};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -13,8 +14,9 @@ use std::sync::Arc;
 /// The field table of the device particle arrays: per element type, the method that reorders
 /// that group at a list build, then each field with its values per particle (xyz-interleaved
 /// vectors, quaternions as x, y, z, w) and where it comes from: `host`, a field of
-/// [`Particles`] of that name, copied both ways; `device`, derived at the upload from the
-/// scene (or the rank's ghosts) and never copied back. `$m!` receives the table.
+/// [`Particles`] of that name, copied both ways; `motion`, such a field that an edit of the
+/// motion alone uploads ([`DeviceParticles::upload_motion`]); `device`, derived at the upload
+/// from the scene (or the rank's ghosts) and never copied back. `$m!` receives the table.
 macro_rules! particle_fields {
     ($m:ident) => {
         $m! {
@@ -24,12 +26,12 @@ macro_rules! particle_fields {
                 cn: 1 device,
                 ct: 1 device,
                 mass: 1 host,
-                position: 3 host,
-                velocity: 3 host,
-                angular_velocity: 3 host,
-                orientation: 4 host,
-                force: 3 host,
-                torque: 3 host,
+                position: 3 motion,
+                velocity: 3 motion,
+                angular_velocity: 3 motion,
+                orientation: 4 motion,
+                force: 3 motion,
+                torque: 3 motion,
                 inertia: 3 host,
             }
             u32 gather_u32s {
@@ -53,6 +55,8 @@ trait FlatField {
     type Value;
     /// The first `n` particles' values from `flat`.
     fn from_flat(flat: &[Self::Value], n: usize) -> Self;
+    /// The values in the flat layout.
+    fn to_flat(&self) -> Vec<Self::Value>;
 }
 
 macro_rules! flat_scalars {
@@ -61,6 +65,9 @@ macro_rules! flat_scalars {
             type Value = $t;
             fn from_flat(flat: &[$t], n: usize) -> Self {
                 flat[..n].to_vec()
+            }
+            fn to_flat(&self) -> Vec<$t> {
+                self.clone()
             }
         }
     )*};
@@ -76,6 +83,9 @@ impl FlatField for Vec<Vector3<f64>> {
             .map(|c| Vector3::new(c[0], c[1], c[2]))
             .collect()
     }
+    fn to_flat(&self) -> Vec<f64> {
+        flat3(self)
+    }
 }
 
 impl FlatField for Vec<UnitQuaternion<f64>> {
@@ -87,14 +97,27 @@ impl FlatField for Vec<UnitQuaternion<f64>> {
             .map(|c| UnitQuaternion::new_unchecked(Quaternion::new(c[3], c[0], c[1], c[2])))
             .collect()
     }
+    fn to_flat(&self) -> Vec<f64> {
+        flat_quats(self)
+    }
 }
 
-/// `$particles.$field` set from `$arrays.$field` for a `host` field; nothing for a `device` one.
+/// `$particles.$field` set from `$arrays.$field` for a `host` or `motion` field; nothing for a
+/// `device` one.
 macro_rules! copy_host_field {
-    (host $particles:ident $arrays:ident $field:ident $n:ident) => {
+    (device $particles:ident $arrays:ident $field:ident $n:ident) => {};
+    ($origin:ident $particles:ident $arrays:ident $field:ident $n:ident) => {
         $particles.$field = FlatField::from_flat(&$arrays.$field, $n);
     };
-    (device $particles:ident $arrays:ident $field:ident $n:ident) => {};
+}
+
+/// The upload of `$particles.$field` into `$device.$field` for a `motion` field; nothing for
+/// the others.
+macro_rules! upload_motion_field {
+    (motion $st:ident $particles:ident $device:ident $field:ident) => {
+        $st.memcpy_htod(&FlatField::to_flat(&$particles.$field), &mut $device.$field)?;
+    };
+    ($origin:ident $st:ident $particles:ident $device:ident $field:ident) => {};
 }
 
 /// An element type of the particle arrays, reordered by its gather kernel.
@@ -266,6 +289,27 @@ impl HostParticleArrays {
             };
         }
         particle_fields!(copy_all);
+    }
+}
+
+impl DeviceParticles {
+    /// The `motion` fields of the table uploaded from `particles`, which hold the device's
+    /// particles in its order (an edit that changed nothing else).
+    pub(super) fn upload_motion(
+        &mut self,
+        st: &Arc<CudaStream>,
+        particles: &Particles,
+    ) -> Result<(), CudaError> {
+        let device = self;
+        macro_rules! upload_all {
+            ($($ty:ident $gather:ident {
+                $($field:ident: $width:literal $origin:ident),* $(,)?
+            })*) => {
+                $($(upload_motion_field!($origin st particles device $field);)*)*
+            };
+        }
+        particle_fields!(upload_all);
+        Ok(())
     }
 }
 

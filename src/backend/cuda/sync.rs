@@ -5,10 +5,8 @@
 use super::error::CudaError;
 use super::layout::{CONTACT_LIVE, history_state};
 use super::simulation::CudaSimulation;
-use super::upload::{flat_quats, flat3};
 use crate::contact::{ContactHistory, ContactKey};
 use crate::pipeline::Simulation;
-use cudarc::driver::CudaSlice;
 use nalgebra::Vector3;
 
 impl CudaSimulation {
@@ -131,16 +129,7 @@ impl CudaSimulation {
         if !motion_only || self.particles.n == 0 || self.host.parallel.is_some() {
             return self.upload_from_host();
         }
-        let st = &self.gpu.stream;
-        st.memcpy_htod(&flat3(&p.position), &mut self.particles.position)?;
-        st.memcpy_htod(&flat3(&p.velocity), &mut self.particles.velocity)?;
-        st.memcpy_htod(
-            &flat3(&p.angular_velocity),
-            &mut self.particles.angular_velocity,
-        )?;
-        st.memcpy_htod(&flat3(&p.force), &mut self.particles.force)?;
-        st.memcpy_htod(&flat3(&p.torque), &mut self.particles.torque)?;
-        st.memcpy_htod(&flat_quats(&p.orientation), &mut self.particles.orientation)?;
+        self.particles.upload_motion(&self.gpu.stream, p)?;
         self.pairs.rebuild = true;
         Ok(())
     }
@@ -152,13 +141,12 @@ impl CudaSimulation {
             return Ok(Vec::new());
         };
         let st = &self.gpu.stream;
-        let pr = st.clone_dtoh(&pairs.pairs)?;
+        let (slots, _) = pairs.flags(st)?;
         let id = st.clone_dtoh(&self.particles.id)?;
-        let mut v: Vec<(u64, u64)> = pr
-            .chunks_exact(2)
-            .take(pairs.n)
-            .map(|c| {
-                let (x, y) = (id[c[0] as usize], id[c[1] as usize]);
+        let mut v: Vec<(u64, u64)> = slots
+            .iter()
+            .map(|&[a, b]| {
+                let (x, y) = (id[a], id[b]);
                 (x.min(y), x.max(y))
             })
             .collect();
@@ -175,20 +163,15 @@ impl CudaSimulation {
             return Ok((self.host.stats.contacts, self.host.stats.wall_contacts));
         }
         let st = &self.gpu.stream;
-        let count = |s: &CudaSlice<u32>, n: usize| -> Result<u64, CudaError> {
-            Ok(st
-                .clone_dtoh(s)?
-                .iter()
-                .take(n)
-                .filter(|&&c| c == CONTACT_LIVE)
-                .count() as u64)
+        let live = |flags: &[u32], n: usize| {
+            flags.iter().take(n).filter(|&&c| c == CONTACT_LIVE).count() as u64
         };
         let pairs = match &self.pairs.list {
-            Some(p) => count(&p.contact, p.n)?,
+            Some(p) => live(&p.flags(st)?.1, p.n),
             None => 0,
         };
         let walls = match &self.walls {
-            Some(w) => count(&w.contact, self.particles.n * w.n)?,
+            Some(w) => live(&w.flags(st)?, self.particles.n * w.n),
             None => 0,
         };
         Ok((pairs, walls))
