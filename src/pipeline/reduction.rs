@@ -75,8 +75,12 @@ impl Simulation {
         wall_outcomes: &[WallOutcome],
     ) {
         let pairs = &self.pairs;
-        let mut entries: Vec<(ContactKey, ContactState)> =
-            outcomes.iter().filter_map(|o| o.state).collect();
+        // The history's entries in key order as far as the loop below can give it: each owned
+        // particle in id order, its pairs as the lower-id member by partner id, then its walls
+        // (a wall's key sorts after every particle's). Only pairs whose lower-id member is a
+        // ghost come after, and the adaptive sort of `from_entries` merges that short tail
+        // instead of sorting every contact each step.
+        let mut entries: Vec<(ContactKey, ContactState)> = Vec::with_capacity(outcomes.len());
         let mut wall_forces = vec![Vector3::zeros(); self.walls.len()];
         // A pair across two ranks is evaluated on both; it counts where its lower-id member
         // (the pair's first) is owned, so that sums over ranks count it once.
@@ -100,8 +104,30 @@ impl Simulation {
             }
             for r in pairs.of(i) {
                 if !r.is_b && counted(r.pair as usize) {
-                    energy += outcomes[r.pair as usize].forces.elastic_energy;
+                    let o = &outcomes[r.pair as usize];
+                    energy += o.forces.elastic_energy;
+                    entries.extend(o.state);
                 }
+            }
+            if let Some(w) = wall_outcomes.get(i) {
+                entries.extend_from_slice(&w.states);
+            }
+        }
+        // Pairs whose lower-id member is a ghost (a decomposed run), and a particle past the
+        // listed ones (none has pairs, but its walls count).
+        entries.extend(
+            outcomes
+                .iter()
+                .enumerate()
+                .filter(|&(k, _)| !counted(k))
+                .filter_map(|(_, o)| o.state),
+        );
+        for j in 0..n {
+            let i = at(j);
+            if i >= listed
+                && let Some(w) = wall_outcomes.get(i)
+            {
+                entries.extend_from_slice(&w.states);
             }
         }
         let mut wall_contacts = 0;
@@ -111,7 +137,6 @@ impl Simulation {
             };
             energy += w.energy;
             wall_contacts += w.states.len() as u64;
-            entries.extend_from_slice(&w.states);
             for (k, f) in &w.per_wall {
                 wall_forces[*k] += f;
             }
