@@ -177,6 +177,7 @@ impl Simulation {
                 speed_scale: 0.0,
             },
             too_deep: None,
+            pair_outcomes: Vec::new(),
         };
         sim.restrict_walls();
         sim.exchange()?;

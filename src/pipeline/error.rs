@@ -120,6 +120,31 @@ pub(crate) fn first_failure<T>(
     Err(failure.expect("one outcome failed"))
 }
 
+/// The failure of the smallest key ([`FailureKey`]) offered by the jobs of a parallel stage,
+/// whatever the threads' timing: for a stage that writes its outcomes into a buffer it keeps
+/// (the pair stage) rather than collecting `Result`s.
+#[derive(Default)]
+pub(crate) struct FirstFailure(std::sync::Mutex<Option<(FailureKey, SimulationError)>>);
+
+impl FirstFailure {
+    /// Records a failure; the one of the smallest key is kept.
+    pub(crate) fn offer(&self, key: FailureKey, error: SimulationError) {
+        // A poisoned lock means a job panicked, which ends the run anyway.
+        let mut slot = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if slot.as_ref().is_none_or(|(k, _)| key < *k) {
+            *slot = Some((key, error));
+        }
+    }
+
+    /// `Ok` when nothing failed, else the kept failure.
+    pub(crate) fn into_result(self) -> Result<(), SimulationError> {
+        match self.0.into_inner().unwrap_or_else(|e| e.into_inner()) {
+            Some((_, error)) => Err(error),
+            None => Ok(()),
+        }
+    }
+}
+
 /// Of the failures a list-ordered scan found, (position, key) each, the position of the one
 /// the CPU stages report (smallest key): for a backend that learns of its failures by scanning flags.
 pub fn first_failure_position(
@@ -173,6 +198,24 @@ mod tests {
             other => panic!("expected the pair (2, 7), got {other:?}"),
         }
         assert_eq!(first_failure::<u8>(vec![Ok(1), Ok(2)]).unwrap(), vec![1, 2]);
+        // Offered in any order, the same one is kept.
+        for order in [[0, 1, 2], [2, 1, 0], [1, 2, 0]] {
+            let pairs = [(9, 4), (7, 2), (2, 8)];
+            let kept = FirstFailure::default();
+            for k in order {
+                let (a, b) = pairs[k];
+                if let Err((key, error)) = failed(0, a, b) {
+                    kept.offer(key, error);
+                }
+            }
+            match kept.into_result() {
+                Err(SimulationError::Geometry { what, .. }) => {
+                    assert_eq!(what, "particles 7 and 2")
+                }
+                other => panic!("expected the pair (2, 7), got {other:?}"),
+            }
+        }
+        assert!(FirstFailure::default().into_result().is_ok());
         // The flag scan of the GPU picks the same one.
         let flags = [(0, (4, 9)), (3, (2, 7)), (4, (2, 8))];
         assert_eq!(first_failure_position(flags), Some(3));

@@ -91,6 +91,9 @@ pub struct Simulation {
     /// The contact of the last force evaluation past the guard's overlap bound, if any:
     /// (particle index, what it overlaps, overlap volume, the smaller particle volume).
     too_deep: Option<(usize, String, f64, f64)>,
+    /// The pair stage's outcome buffer, kept between evaluations for its capacity
+    /// ([`Simulation::pair_stage`]).
+    pair_outcomes: Vec<pairs::PairOutcome>,
 }
 
 impl Simulation {
@@ -119,6 +122,7 @@ impl Simulation {
         let pair_outcomes = self.pair_stage(dt, owned)?; // 3–7 (ghosts dropped again)
         let wall_outcomes = self.wall_stage(dt)?; // 6
         self.reduce(owned, &pair_outcomes, &wall_outcomes); // 8
+        self.pair_outcomes = pair_outcomes;
         if let Some(par) = self.parallel.as_deref_mut() {
             par.cost += t_forces.elapsed().as_secs_f64();
         }

@@ -3,7 +3,7 @@
 //! law, one rayon job per candidate pair; and what the pair and wall stages share (contact
 //! parameters, the effective mass, the per-thread workspace).
 
-use super::error::{first_failure, pair_failure_key};
+use super::error::{FirstFailure, pair_failure_key};
 use super::{Simulation, SimulationError};
 use crate::contact::{
     ContactForces, ContactKey, ContactKinematics, ContactParameters, ContactState, contact_forces,
@@ -85,10 +85,11 @@ impl Simulation {
         owned: usize,
     ) -> Result<Vec<PairOutcome>, SimulationError> {
         let t0 = Instant::now();
-        let outcomes = self.pair_contacts(dt);
+        let mut outcomes = std::mem::take(&mut self.pair_outcomes);
+        let done = self.pair_contacts(dt, &mut outcomes);
         self.particles.truncate(owned);
         self.radius.truncate(owned);
-        let outcomes = outcomes?;
+        done?;
         for (axis, o) in self.separating_axes.iter_mut().zip(&outcomes) {
             *axis = o.separating_axis;
         }
@@ -152,15 +153,19 @@ impl Simulation {
     /// Stages 3–7 for every candidate pair of the list, in list order (ghosts joined after the
     /// owned particles): the outcome per pair, or the failed pair of the smallest ids
     /// ([`FailureKey`](super::error::FailureKey)).
-    pub(super) fn pair_contacts(&self, dt: f64) -> Result<Vec<PairOutcome>, SimulationError> {
+    pub(super) fn pair_contacts(
+        &self,
+        dt: f64,
+        outcomes: &mut Vec<PairOutcome>,
+    ) -> Result<(), SimulationError> {
         let p = &self.particles;
         let s = &self.scene;
         let step = self.step;
         let spheres = s.spheres_only();
         let periodic = self.bounds.periodic.iter().any(|&k| k);
         let bounds = self.bounds;
-        let outcomes = self
-            .pairs
+        let failure = FirstFailure::default();
+        self.pairs
             .pairs
             .par_iter()
             .zip(self.separating_axes.par_iter())
@@ -180,14 +185,14 @@ impl Simulation {
                 let reach = self.radius[a] + self.radius[b];
                 // Stage 3: bounding spheres.
                 if d.norm_squared() >= reach * reach {
-                    return Ok(PairOutcome::default());
+                    return PairOutcome::default();
                 }
                 let overlap = if spheres {
                     // Stages 4–5 for spheres: the lens in closed form.
                     let o =
                         sphere_lens(self.radius[a], self.radius[b], &d).to_world(&p.position[a]);
                     if o.volume <= 0.0 {
-                        return Ok(PairOutcome::default());
+                        return PairOutcome::default();
                     }
                     o
                 } else {
@@ -202,30 +207,34 @@ impl Simulation {
                     if *axis != Vector3::zeros()
                         && axis_separates(body_a, body_b, axis, 1e-9 * reach)
                     {
-                        return Ok(PairOutcome {
+                        return PairOutcome {
                             separating_axis: *axis,
                             ..PairOutcome::default()
-                        });
+                        };
                     }
                     // Stages 4–5: the narrow phase (GJK where the Chebyshev centre proves no
                     // intersection), then the overlap.
-                    let g = with_workspace(|ws| overlap_pair(ws, body_a, body_b)).map_err(|e| {
-                        let error = SimulationError::Geometry {
-                            step,
-                            what: format!("particles {} and {}", p.id[a], p.id[b]),
-                            message: format!(
-                                "{e}; to reproduce with `polydem probe overlap`: A {}, B {}",
-                                probe_body(ta, p.scale[a], &pose_a),
-                                probe_body(tb, p.scale[b], &pose_b)
-                            ),
-                        };
-                        (pair_failure_key(p.id[a], p.id[b]), error)
-                    })?;
+                    let g = match with_workspace(|ws| overlap_pair(ws, body_a, body_b)) {
+                        Ok(g) => g,
+                        Err(e) => {
+                            let error = SimulationError::Geometry {
+                                step,
+                                what: format!("particles {} and {}", p.id[a], p.id[b]),
+                                message: format!(
+                                    "{e}; to reproduce with `polydem probe overlap`: A {}, B {}",
+                                    probe_body(ta, p.scale[a], &pose_a),
+                                    probe_body(tb, p.scale[b], &pose_b)
+                                ),
+                            };
+                            failure.offer(pair_failure_key(p.id[a], p.id[b]), error);
+                            return PairOutcome::default();
+                        }
+                    };
                     if g.overlap.volume <= 0.0 {
-                        return Ok(PairOutcome {
+                        return PairOutcome {
                             separating_axis: g.separating_axis.unwrap_or_default(),
                             ..PairOutcome::default()
-                        });
+                        };
                     }
                     g.overlap
                 };
@@ -262,16 +271,18 @@ impl Simulation {
                     split_b,
                 };
                 let forces = contact_forces(&params, &overlap, &kin, &mut state, dt);
-                Ok(PairOutcome {
+                PairOutcome {
                     separating_axis: Vector3::zeros(),
                     forces,
                     state: Some((key, state)),
                     penetration: overlap.volume
                         / self.equivalent_volume(a).min(self.equivalent_volume(b)),
-                })
+                }
             })
-            .collect::<Vec<_>>();
-        first_failure(outcomes)
+            // Into the buffer of the last evaluation: its pages are already mapped, where a
+            // fresh vector of this size (tens of MB) faults them in again every step.
+            .collect_into_vec(outcomes);
+        failure.into_result()
     }
 }
 
