@@ -121,7 +121,9 @@ PD_CHECK_OFFSET(ParticleView, contacts, PARTICLE_VIEW);
 struct PairOutputs {
     double* forces;
     double* energy;
-    unsigned int* contact; // 1 when the pair is in contact (its spring is live history)
+    // 1 when the pair is in contact (its spring is live history); PD_CONTACT_FAILED | status
+    // when its geometry failed this step (contact.cu); else 0.
+    unsigned int* contact;
 };
 #ifdef PD_SIZEOF_PAIR_OUTPUTS
 PD_CHECK_SIZE(PairOutputs, PAIR_OUTPUTS);

@@ -312,7 +312,9 @@ extern "C" __global__ void wall_contacts(WallContactsParams args) {
         for (; m < m_end && items[m].x == (unsigned int)slot; ++m) {
             const double* q = overlaps + 12 * (size_t)m;
             // A facet whose prism overlap failed (wall_facet_overlaps): the first, in facet
-            // order, as the CPU's WallMesh::contact stops at it.
+            // order, as the CPU's WallMesh::contact stops at it. A negative volume means only
+            // that: a prism overlap's volume is never negative (overlap.cuh turns a volume at
+            // or below zero into no overlap; sphere_facet's is positive or zero).
             if (q[0] < 0.0 && failed == 0u) {
                 failed = PD_CONTACT_FAILED | ((unsigned int)(-q[0]) & 0xffu);
             }

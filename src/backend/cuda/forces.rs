@@ -223,7 +223,7 @@ impl CudaSimulation {
         let failed = |flag: u32| (flag & CONTACT_FAILED != 0).then_some(flag & 0xff);
         let (what, status) = if source == 0 {
             let flagged = self.pairs.list.as_ref().and_then(|p| {
-                let (slots, flags) = p.flags(st).ok()?;
+                let (slots, flags) = (p.slots(st).ok()?, p.flags(st).ok()?);
                 let failures = (0..slots.len())
                     .filter(|&k| failed(flags[k]).is_some())
                     .map(|k| {
@@ -249,9 +249,12 @@ impl CudaSimulation {
             let walls = self.host.scene.walls.len().max(1);
             let flagged = self.walls.as_ref().and_then(|w| {
                 let flags = w.flags(st).ok()?;
+                // The CPU evaluates the walls of its owned particles only: a decomposed run's
+                // ghosts, whose walls the device evaluates too, are their owners' to name.
+                let ghost = st.clone_dtoh(&self.particles.ghost).ok()?;
                 let n = self.particles.n * walls;
                 let failures = (0..n.min(flags.len()))
-                    .filter(|&s| failed(flags[s]).is_some())
+                    .filter(|&s| failed(flags[s]).is_some() && ghost.get(s / walls) == Some(&0))
                     .map(|s| {
                         let particle = ids.get(s / walls).copied().unwrap_or(u64::MAX);
                         (s, (particle, (s % walls) as u64))

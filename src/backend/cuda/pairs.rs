@@ -69,27 +69,27 @@ impl PairOutcomes {
 }
 
 impl PairList {
-    /// The members' slots and contact flags of the listed pairs (for the step's geometry
-    /// errors).
-    pub(super) fn flags(
-        &self,
-        st: &Arc<CudaStream>,
-    ) -> Result<(Vec<[usize; 2]>, Vec<u32>), CudaError> {
+    /// The members' slots of the listed pairs.
+    pub(super) fn slots(&self, st: &Arc<CudaStream>) -> Result<Vec<[usize; 2]>, CudaError> {
         let pairs = st.clone_dtoh(&self.pairs)?;
-        let slots = pairs
+        Ok(pairs
             .chunks_exact(2)
             .take(self.n)
             .map(|ab| [ab[0] as usize, ab[1] as usize])
-            .collect();
+            .collect())
+    }
+
+    /// The contact flags of the listed pairs.
+    pub(super) fn flags(&self, st: &Arc<CudaStream>) -> Result<Vec<u32>, CudaError> {
         let mut contact = st.clone_dtoh(&self.contact)?;
         contact.truncate(self.n);
-        Ok((slots, contact))
+        Ok(contact)
     }
 
     /// The last evaluation's outcomes, copied down (its springs are in `spring_in` after the
     /// swap that ends a step).
     pub(super) fn outcomes(&self, st: &Arc<CudaStream>) -> Result<PairOutcomes, CudaError> {
-        let (slots, contact) = self.flags(st)?;
+        let (slots, contact) = (self.slots(st)?, self.flags(st)?);
         let mut spring = st.clone_dtoh(&self.spring_in)?;
         spring.truncate(HISTORY_WIDTH * self.n);
         let mut energy = st.clone_dtoh(&self.energy)?;

@@ -111,6 +111,19 @@ macro_rules! copy_host_field {
     };
 }
 
+/// `$device.$field` copied down (`$len` values) for a `host` or `motion` field; empty for a
+/// `device` one.
+macro_rules! download_field {
+    (device $st:ident $device:ident $field:ident $len:expr) => {
+        Vec::new()
+    };
+    ($origin:ident $st:ident $device:ident $field:ident $len:expr) => {{
+        let mut v = $st.clone_dtoh(&$device.$field)?;
+        v.truncate($len);
+        v
+    }};
+}
+
 /// The upload of `$particles.$field` into `$device.$field` for a `motion` field; nothing for
 /// the others.
 macro_rules! upload_motion_field {
@@ -235,18 +248,15 @@ macro_rules! declare_particles {
                 })
             }
 
-            /// Every array copied down, `width · n` values each.
+            /// The `host` and `motion` arrays copied down, `width · n` values each; the
+            /// `device` ones, derived at the upload, are left empty.
             pub(super) fn download(
                 &self,
                 st: &Arc<CudaStream>,
             ) -> Result<HostParticleArrays, CudaError> {
                 let n = self.n;
                 Ok(HostParticleArrays {
-                    $($($field: {
-                        let mut v = st.clone_dtoh(&self.$field)?;
-                        v.truncate($width * n);
-                        v
-                    },)*)*
+                    $($($field: download_field!($origin st self $field ($width * n)),)*)*
                 })
             }
 

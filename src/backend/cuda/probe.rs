@@ -73,9 +73,6 @@ enum ProbeKernel {
 }
 
 impl ProbeKernel {
-    /// Every probe kernel, in the order [`GeometryProbe`] holds them.
-    const ALL: [ProbeKernel; 2] = [ProbeKernel::Pairs, ProbeKernel::Facets];
-
     /// The kernel's name in `cuda/probe.cu`.
     fn name(self) -> &'static str {
         match self {
@@ -91,8 +88,9 @@ pub struct GeometryProbe {
     /// Device name.
     pub device: String,
     stream: Arc<CudaStream>,
-    /// The kernels of [`ProbeKernel::ALL`], in its order.
-    kernels: Vec<CudaFunction>,
+    /// The kernels of [`ProbeKernel::Pairs`] and [`ProbeKernel::Facets`].
+    pairs: CudaFunction,
+    facets: CudaFunction,
     max_vertices: usize,
     max_faces: usize,
     _ctx: Arc<CudaContext>,
@@ -167,10 +165,8 @@ impl GeometryProbe {
         Ok(GeometryProbe {
             device: ctx.name().unwrap_or_else(|_| format!("GPU {ordinal}")),
             stream,
-            kernels: ProbeKernel::ALL
-                .iter()
-                .map(|k| module.load_function(k.name()))
-                .collect::<Result<_, _>>()?,
+            pairs: module.load_function(ProbeKernel::Pairs.name())?,
+            facets: module.load_function(ProbeKernel::Facets.name())?,
             max_vertices,
             max_faces,
             _ctx: ctx,
@@ -235,8 +231,12 @@ impl GeometryProbe {
         // SAFETY: `probe_pairs`/`probe_facets` of cuda/probe.cu read `n` cases from `d_in` and
         // write `stride_out` values per case into `d_out`; the template table outlives the launch
         // (the stream is synchronised by the copy back).
+        let function = match kernel {
+            ProbeKernel::Pairs => &self.pairs,
+            ProbeKernel::Facets => &self.facets,
+        };
         unsafe {
-            st.launch_builder(&self.kernels[kernel as usize])
+            st.launch_builder(function)
                 .arg(&ni)
                 .arg(&table)
                 .arg(&d_in)

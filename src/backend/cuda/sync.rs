@@ -19,14 +19,20 @@ impl CudaSimulation {
         let st = &self.gpu.stream;
         let n = self.particles.n;
         let p = &mut self.host.particles;
-        // Every array of the field table; the host's fields go into `p`.
+        // The host's fields of the table, into `p`.
         let arrays = self.particles.download(st)?;
         arrays.copy_into(p, n);
         // History and statistics from the last evaluation (springs are in `spring_in` after
         // the swap at its end).
         // A rank of a decomposed run holds ghosts too: they are left out of the host copy, and
         // a pair counts in the statistics where its lower-id member (the first) is owned.
-        let ghost: Vec<bool> = arrays.ghost.iter().map(|&g| g != 0).collect();
+        let ghost: Vec<bool> = if self.host.parallel.is_some() {
+            let mut g = st.clone_dtoh(&self.particles.ghost)?;
+            g.truncate(n);
+            g.iter().map(|&g| g != 0).collect()
+        } else {
+            vec![false; n]
+        };
         let mut entries = Vec::new();
         let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
         // The elastic energy and the walls' forces are summed in global id order: each pair
@@ -141,7 +147,7 @@ impl CudaSimulation {
             return Ok(Vec::new());
         };
         let st = &self.gpu.stream;
-        let (slots, _) = pairs.flags(st)?;
+        let slots = pairs.slots(st)?;
         let id = st.clone_dtoh(&self.particles.id)?;
         let mut v: Vec<(u64, u64)> = slots
             .iter()
@@ -167,7 +173,7 @@ impl CudaSimulation {
             flags.iter().take(n).filter(|&&c| c == CONTACT_LIVE).count() as u64
         };
         let pairs = match &self.pairs.list {
-            Some(p) => live(&p.flags(st)?.1, p.n),
+            Some(p) => live(&p.flags(st)?, p.n),
             None => 0,
         };
         let walls = match &self.walls {

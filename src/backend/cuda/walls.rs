@@ -40,7 +40,6 @@ pub(super) struct WallList {
     pub(super) poses: Vec<nalgebra::Isometry3<f64>>,
 }
 
-/// Wall meshes, the wall list and the per-particle wall outputs.
 /// [`WallStage::outcomes`]: per particle slot `i` and wall `k`, at `s = i · walls + k`.
 pub(super) struct WallOutcomes {
     pub(super) walls: usize,
@@ -70,6 +69,7 @@ impl WallOutcomes {
     }
 }
 
+/// Wall meshes, the wall list and the per-particle wall outputs.
 pub(super) struct WallStage {
     pub(super) n: usize,
     pub(super) info: CudaSlice<WallInfo>,
