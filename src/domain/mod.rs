@@ -43,6 +43,12 @@ pub struct ParallelTimers {
     pub insert: f64,
     /// Waiting for the slowest rank before the collective rebuild decision: the imbalance.
     pub wait: f64,
+    /// A GPU rank's rebuilds: copying the device state (particles, contact history and
+    /// statistics) to the host before the exchange.
+    pub device_download: f64,
+    /// A GPU rank's rebuilds: uploading the exchanged state (particles, ghosts, history and the
+    /// walls) after it.
+    pub device_upload: f64,
     /// Particles that migrated.
     pub migrated: u64,
     /// Times the boxes were redrawn.

@@ -312,15 +312,22 @@ impl CudaSimulation {
             let rebuild = par.comm.any(local) || pending;
             par.timers.wait += t_wait.elapsed().as_secs_f64();
             if rebuild {
+                let t_download = Instant::now();
                 self.sync_host()?;
+                let download = t_download.elapsed().as_secs_f64();
                 // A particle that left through a closed face stops every rank together, before
                 // the exchange's collectives (on the CPU backend the step checks it after the
                 // drift; here the host sees positions at rebuilds, which an exit forces).
                 let inside = self.host.check_inside();
                 self.host.agree(inside)?;
                 self.host.rebuild_exchange_on_host()?;
+                let t_upload = Instant::now();
                 self.upload_walls()?;
                 self.upload_from_host()?;
+                if let Some(par) = self.host.parallel.as_deref_mut() {
+                    par.timers.device_download += download;
+                    par.timers.device_upload += t_upload.elapsed().as_secs_f64();
+                }
             }
             // Ghosts were not integrated: between rebuilds their owners' motion comes through
             // the halo, overlapped with the pairs of owned particles ([`Self::forces`]).
