@@ -86,6 +86,15 @@ impl PairList {
         Ok(contact)
     }
 
+    /// Each particle's references into the list (`offset[i]..offset[i + 1]` of `refs`; a
+    /// reference `r` names pair `r >> 1`, whose second member the particle is when `r & 1`),
+    /// sorted by partner id.
+    pub(super) fn refs(&self, st: &Arc<CudaStream>) -> Result<(Vec<u32>, Vec<u32>), CudaError> {
+        let mut refs = st.clone_dtoh(&self.refs)?;
+        refs.truncate(2 * self.n);
+        Ok((st.clone_dtoh(&self.ref_offset)?, refs))
+    }
+
     /// The last evaluation's outcomes, copied down (its springs are in `spring_in` after the
     /// swap that ends a step).
     pub(super) fn outcomes(&self, st: &Arc<CudaStream>) -> Result<PairOutcomes, CudaError> {

@@ -33,53 +33,79 @@ impl CudaSimulation {
         } else {
             vec![false; n]
         };
-        let mut entries = Vec::new();
-        let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
+        let (mut contacts, mut wall_contacts) = (0u64, 0u64);
         // The elastic energy and the walls' forces are summed in global id order: each pair
         // under its first (lower-id) member by partner id, then each particle's walls, as the
         // CPU's reduction sums them (`Particles::id_order`). The device's order is that of the
         // last list build, which depends on who built it (the device, or the host in `cpu`,
         // `hybrid` and `auto` modes) and when: summed in that order, these diagnostics changed
-        // in their last bits from run to run while the trajectory did not.
-        let mut pair_energy: Vec<(u64, u64, f64)> = Vec::new();
+        // in their last bits from run to run while the trajectory did not. Every list names
+        // the lower-id member of a pair first, and each particle's references are sorted by
+        // partner id, so walking the particles in id order and their references as first
+        // member visits the pairs in that order without sorting them; the history's entries
+        // come out in key order too (a wall's key after the particle's pairs), except those of
+        // pairs whose first member is a ghost, a tail that `from_entries` merges.
+        let order = p.id_order(n);
+        let at = |j: usize| order.as_ref().map_or(j, |o| o[j]);
+        let walls = match &self.walls {
+            Some(w) => Some(w.outcomes(st)?),
+            None => None,
+        };
+        let mut entries = Vec::new();
+        let mut ghost_entries = Vec::new();
+        let mut energy = 0.0f64;
         if let Some(pairs) = &self.pairs.list {
             let out = pairs.outcomes(st)?;
-            pair_energy.reserve(out.slots.len());
-            for (k, &[a, b]) in out.slots.iter().enumerate() {
-                let counted = !ghost[a];
-                if counted {
-                    let (ia, ib) = (p.id[a], p.id[b]);
-                    pair_energy.push((ia.min(ib), ia.max(ib), out.energy[k]));
+            let (ref_offset, refs) = pairs.refs(st)?;
+            for j in 0..n {
+                let i = at(j);
+                let owned = !ghost[i];
+                for &r in &refs[ref_offset[i] as usize..ref_offset[i + 1] as usize] {
+                    if r & 1 != 0 {
+                        continue;
+                    }
+                    let k = (r >> 1) as usize;
+                    if owned {
+                        energy += out.energy[k];
+                    }
+                    if out.contact[k] == CONTACT_LIVE {
+                        contacts += u64::from(owned);
+                        let entry = (
+                            ContactKey::particles(p.id[i], p.id[out.slots[k][1]]),
+                            history_state(out.spring(k)),
+                        );
+                        if owned {
+                            entries.push(entry);
+                        } else {
+                            ghost_entries.push(entry);
+                        }
+                    }
                 }
-                if out.contact[k] == CONTACT_LIVE {
-                    contacts += u64::from(counted);
-                    entries.push((
-                        ContactKey::particles(p.id[a], p.id[b]),
-                        history_state(out.spring(k)),
-                    ));
+                if let Some(w) = walls.as_ref().filter(|_| owned) {
+                    for k in 0..w.walls {
+                        let s = w.slot(i, k);
+                        if w.contact[s] == CONTACT_LIVE {
+                            entries
+                                .push((ContactKey::wall(p.id[i], k), history_state(w.spring(s))));
+                        }
+                    }
                 }
             }
         }
-        pair_energy.sort_unstable_by_key(|&(a, b, _)| (a, b));
-        for (_, _, e) in &pair_energy {
-            energy += e;
-        }
-        let mut wall_forces = vec![Vector3::zeros(); self.walls.as_ref().map_or(0, |w| w.n)];
-        if let Some(w) = &self.walls {
-            let out = w.outcomes(st)?;
-            let order = p.id_order(n);
+        entries.append(&mut ghost_entries);
+        let mut wall_forces = vec![Vector3::zeros(); walls.as_ref().map_or(0, |w| w.walls)];
+        if let Some(w) = &walls {
             for j in 0..n {
-                let i = order.as_ref().map_or(j, |o| o[j]);
+                let i = at(j);
                 if ghost[i] {
                     continue;
                 }
-                energy += out.energy[i];
+                energy += w.energy[i];
                 for (k, wf) in wall_forces.iter_mut().enumerate() {
-                    let s = out.slot(i, k);
-                    if out.contact[s] == CONTACT_LIVE {
+                    let s = w.slot(i, k);
+                    if w.contact[s] == CONTACT_LIVE {
                         wall_contacts += 1;
-                        *wf += out.force(s);
-                        entries.push((ContactKey::wall(p.id[i], k), history_state(out.spring(s))));
+                        *wf += w.force(s);
                     }
                 }
             }

@@ -10,7 +10,6 @@ use super::simulation::CudaSimulation;
 use super::walls::WallStage;
 use cudarc::driver::{CudaModule, CudaStream, DeviceRepr};
 use nalgebra::{UnitQuaternion, Vector3};
-use std::collections::HashMap;
 use std::sync::Arc;
 
 /// Vectors as the kernels store them: xyz interleaved.
@@ -144,36 +143,64 @@ impl CudaSimulation {
                 Some(n * DeviceParticles::BYTES_PER_PARTICLE),
             )
         })?;
-        // History, as a CSR over the uploaded order, for the coming list build.
-        let index: HashMap<u64, usize> = p.id.iter().enumerate().map(|(i, &g)| (g, i)).collect();
-        let mut per: Vec<Vec<(u64, [f64; HISTORY_WIDTH])>> = vec![Vec::new(); n];
+        // History, as a CSR over the uploaded order, for the coming list build. The entries
+        // are sorted by key, so each one's slot comes from one merge with the ids sorted (no
+        // hash map), and each row lists its partners in key order. (An id held twice, by an
+        // owned particle and its own periodic image as a ghost, which boxes at least two halos
+        // wide rule out, would give the row to the owned slot.)
+        let entries = h.history.entries();
+        let mut by_id: Vec<(u64, u32)> =
+            p.id.iter()
+                .enumerate()
+                .map(|(i, &g)| (g, i as u32))
+                .collect();
+        by_id.sort_unstable();
+        let mut cursor = 0;
+        let slot_of: Vec<Option<usize>> = entries
+            .iter()
+            .map(|(key, _)| {
+                while cursor < by_id.len() && by_id[cursor].0 < key.a {
+                    cursor += 1;
+                }
+                by_id
+                    .get(cursor)
+                    .filter(|(g, _)| *g == key.a)
+                    .map(|&(_, i)| i as usize)
+            })
+            .collect();
         let n_walls = self.walls.as_ref().map_or(0, |w| w.n);
         let mut wall_spring = vec![0.0f64; (n * n_walls * HISTORY_WIDTH).max(1)];
-        for (key, state) in h.history.entries() {
-            let Some(&i) = index.get(&key.a) else {
+        let mut offset = vec![0u32; n + 1];
+        for ((key, _), slot) in entries.iter().zip(&slot_of) {
+            if let (Some(i), None) = (slot, key.wall_index()) {
+                offset[i + 1] += 1;
+            }
+        }
+        for i in 0..n {
+            offset[i + 1] += offset[i];
+        }
+        let pairs = offset[n] as usize;
+        let mut fill: Vec<u32> = offset[..n].to_vec();
+        let mut partner = vec![u64::MAX; pairs.max(1)];
+        let mut spring = vec![0.0f64; HISTORY_WIDTH * pairs.max(1)];
+        for ((key, state), slot) in entries.iter().zip(&slot_of) {
+            let Some(i) = *slot else {
                 continue;
             };
             match key.wall_index() {
                 Some(k) if k < n_walls => {
-                    let slot = (i * n_walls + k) * HISTORY_WIDTH;
-                    wall_spring[slot..slot + HISTORY_WIDTH].copy_from_slice(&history_record(state));
+                    let s = (i * n_walls + k) * HISTORY_WIDTH;
+                    wall_spring[s..s + HISTORY_WIDTH].copy_from_slice(&history_record(state));
                 }
                 Some(_) => {}
-                None => per[i].push((key.b, history_record(state))),
+                None => {
+                    let m = fill[i] as usize;
+                    fill[i] += 1;
+                    partner[m] = key.b;
+                    spring[HISTORY_WIDTH * m..HISTORY_WIDTH * (m + 1)]
+                        .copy_from_slice(&history_record(state));
+                }
             }
-        }
-        let mut offset = vec![0u32; n + 1];
-        let (mut partner, mut spring) = (Vec::new(), Vec::new());
-        for i in 0..n {
-            for (b, sp) in &per[i] {
-                partner.push(*b);
-                spring.extend_from_slice(sp);
-            }
-            offset[i + 1] = partner.len() as u32;
-        }
-        if partner.is_empty() {
-            partner.push(u64::MAX);
-            spring.extend_from_slice(&[0.0; HISTORY_WIDTH]);
         }
         let history = HistorySource {
             offset: st.clone_htod(&offset)?,
