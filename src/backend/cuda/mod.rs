@@ -7,13 +7,15 @@
 //! `pair_contacts`), the walls (`walls`), a decomposed run's halo (`halo`) and the time
 //! integration (`integrator`), over what they all share (`gpu`: context, streams, the kernels
 //! of `launch`, the scene's constants). `forces` runs stages 2–8 in order, `upload` and `sync`
-//! move the state between host and device.
+//! move the state between host and device, and `history` converts the contact history between
+//! the device's slots and the host's keys.
 
 mod backend;
 mod error;
 mod forces;
 mod gpu;
 mod halo;
+mod history;
 mod integrator;
 pub mod kernels;
 mod launch;

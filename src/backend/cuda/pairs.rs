@@ -6,6 +6,7 @@
 
 use super::error::{CudaError, HaloError};
 use super::gpu::Gpu;
+use super::history::PairOutcomes;
 use super::launch::{cfg, ptr, zeros};
 use super::layout::{GridParams, HISTORY_WIDTH, PairSearchParams, staged_planes_bytes};
 use super::particles::DeviceParticles;
@@ -51,23 +52,6 @@ pub(super) struct PairList {
     pub(super) bucket_fill: CudaSlice<u32>,
 }
 
-/// The last evaluation's outcome of every listed pair, copied down: the members' slots, the
-/// contact flag ([`CONTACT_LIVE`](super::layout::CONTACT_LIVE), `CONTACT_FAILED` | status, or
-/// 0), the spring ([`HISTORY_WIDTH`] values) and the elastic energy.
-pub(super) struct PairOutcomes {
-    pub(super) slots: Vec<[usize; 2]>,
-    pub(super) contact: Vec<u32>,
-    pub(super) spring: Vec<f64>,
-    pub(super) energy: Vec<f64>,
-}
-
-impl PairOutcomes {
-    /// Pair `k`'s spring.
-    pub(super) fn spring(&self, k: usize) -> &[f64] {
-        &self.spring[HISTORY_WIDTH * k..HISTORY_WIDTH * (k + 1)]
-    }
-}
-
 impl PairList {
     /// The members' slots of the listed pairs.
     pub(super) fn slots(&self, st: &Arc<CudaStream>) -> Result<Vec<[usize; 2]>, CudaError> {
@@ -86,15 +70,6 @@ impl PairList {
         Ok(contact)
     }
 
-    /// Each particle's references into the list (`offset[i]..offset[i + 1]` of `refs`; a
-    /// reference `r` names pair `r >> 1`, whose second member the particle is when `r & 1`),
-    /// sorted by partner id.
-    pub(super) fn refs(&self, st: &Arc<CudaStream>) -> Result<(Vec<u32>, Vec<u32>), CudaError> {
-        let mut refs = st.clone_dtoh(&self.refs)?;
-        refs.truncate(2 * self.n);
-        Ok((st.clone_dtoh(&self.ref_offset)?, refs))
-    }
-
     /// The last evaluation's outcomes, copied down (its springs are in `spring_in` after the
     /// swap that ends a step).
     pub(super) fn outcomes(&self, st: &Arc<CudaStream>) -> Result<PairOutcomes, CudaError> {
@@ -103,11 +78,15 @@ impl PairList {
         spring.truncate(HISTORY_WIDTH * self.n);
         let mut energy = st.clone_dtoh(&self.energy)?;
         energy.truncate(self.n);
+        let mut refs = st.clone_dtoh(&self.refs)?;
+        refs.truncate(2 * self.n);
         Ok(PairOutcomes {
             slots,
             contact,
             spring,
             energy,
+            ref_offset: st.clone_dtoh(&self.ref_offset)?,
+            refs,
         })
     }
 

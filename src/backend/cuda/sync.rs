@@ -3,11 +3,10 @@
 //! pair slots and per-particle wall slots, and the step statistics.
 
 use super::error::CudaError;
-use super::layout::{CONTACT_LIVE, history_state};
+use super::history::gather_contacts;
+use super::layout::CONTACT_LIVE;
 use super::simulation::CudaSimulation;
-use crate::contact::{ContactHistory, ContactKey};
 use crate::pipeline::Simulation;
-use nalgebra::Vector3;
 
 impl CudaSimulation {
     /// Copies the device state into [`CudaSimulation::host`] (particles in the device's
@@ -33,83 +32,15 @@ impl CudaSimulation {
         } else {
             vec![false; n]
         };
-        let (mut contacts, mut wall_contacts) = (0u64, 0u64);
-        // The elastic energy and the walls' forces are summed in global id order: each pair
-        // under its first (lower-id) member by partner id, then each particle's walls, as the
-        // CPU's reduction sums them (`Particles::id_order`). The device's order is that of the
-        // last list build, which depends on who built it (the device, or the host in `cpu`,
-        // `hybrid` and `auto` modes) and when: summed in that order, these diagnostics changed
-        // in their last bits from run to run while the trajectory did not. Every list names
-        // the lower-id member of a pair first, and each particle's references are sorted by
-        // partner id, so walking the particles in id order and their references as first
-        // member visits the pairs in that order without sorting them; the history's entries
-        // come out in key order too (a wall's key after the particle's pairs), except those of
-        // pairs whose first member is a ghost, a tail that `from_entries` merges.
-        let order = p.id_order(n);
-        let at = |j: usize| order.as_ref().map_or(j, |o| o[j]);
+        let pairs = match &self.pairs.list {
+            Some(list) => Some(list.outcomes(st)?),
+            None => None,
+        };
         let walls = match &self.walls {
             Some(w) => Some(w.outcomes(st)?),
             None => None,
         };
-        let mut entries = Vec::new();
-        let mut ghost_entries = Vec::new();
-        let mut energy = 0.0f64;
-        if let Some(pairs) = &self.pairs.list {
-            let out = pairs.outcomes(st)?;
-            let (ref_offset, refs) = pairs.refs(st)?;
-            for j in 0..n {
-                let i = at(j);
-                let owned = !ghost[i];
-                for &r in &refs[ref_offset[i] as usize..ref_offset[i + 1] as usize] {
-                    if r & 1 != 0 {
-                        continue;
-                    }
-                    let k = (r >> 1) as usize;
-                    if owned {
-                        energy += out.energy[k];
-                    }
-                    if out.contact[k] == CONTACT_LIVE {
-                        contacts += u64::from(owned);
-                        let entry = (
-                            ContactKey::particles(p.id[i], p.id[out.slots[k][1]]),
-                            history_state(out.spring(k)),
-                        );
-                        if owned {
-                            entries.push(entry);
-                        } else {
-                            ghost_entries.push(entry);
-                        }
-                    }
-                }
-                if let Some(w) = walls.as_ref().filter(|_| owned) {
-                    for k in 0..w.walls {
-                        let s = w.slot(i, k);
-                        if w.contact[s] == CONTACT_LIVE {
-                            entries
-                                .push((ContactKey::wall(p.id[i], k), history_state(w.spring(s))));
-                        }
-                    }
-                }
-            }
-        }
-        entries.append(&mut ghost_entries);
-        let mut wall_forces = vec![Vector3::zeros(); walls.as_ref().map_or(0, |w| w.walls)];
-        if let Some(w) = &walls {
-            for j in 0..n {
-                let i = at(j);
-                if ghost[i] {
-                    continue;
-                }
-                energy += w.energy[i];
-                for (k, wf) in wall_forces.iter_mut().enumerate() {
-                    let s = w.slot(i, k);
-                    if w.contact[s] == CONTACT_LIVE {
-                        wall_contacts += 1;
-                        *wf += w.force(s);
-                    }
-                }
-            }
-        }
+        let gathered = gather_contacts(&p.id, &ghost, pairs.as_ref(), walls.as_ref());
         if ghost.iter().any(|&g| g) {
             let keep: Vec<usize> = (0..n).filter(|&i| !ghost[i]).collect();
             *p = p.select(&keep);
@@ -117,11 +48,11 @@ impl CudaSimulation {
         // Until the first evaluation after an upload (a restart, an insertion) the device has
         // no contact outputs: the history and statistics are still the uploaded host ones.
         if self.pairs.list.is_some() {
-            self.host.history = ContactHistory::from_entries(entries);
-            self.host.stats.contacts = contacts;
-            self.host.stats.wall_contacts = wall_contacts;
-            self.host.stats.elastic_energy = energy;
-            self.host.wall_forces = wall_forces;
+            self.host.history = gathered.history;
+            self.host.stats.contacts = gathered.contacts;
+            self.host.stats.wall_contacts = gathered.wall_contacts;
+            self.host.stats.elastic_energy = gathered.energy;
+            self.host.wall_forces = gathered.wall_forces;
         }
         self.host_current = true;
         Ok(&self.host)

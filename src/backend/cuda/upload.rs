@@ -3,7 +3,8 @@
 //! order, which the next list build carries over).
 
 use super::error::CudaError;
-use super::layout::{HISTORY_WIDTH, TemplateTables, history_record};
+use super::history::{HistoryRows, history_rows};
+use super::layout::TemplateTables;
 use super::pairs::HistorySource;
 use super::particles::{DeviceParticles, HostParticleArrays};
 use super::simulation::CudaSimulation;
@@ -143,65 +144,14 @@ impl CudaSimulation {
                 Some(n * DeviceParticles::BYTES_PER_PARTICLE),
             )
         })?;
-        // History, as a CSR over the uploaded order, for the coming list build. The entries
-        // are sorted by key, so each one's slot comes from one merge with the ids sorted (no
-        // hash map), and each row lists its partners in key order. (An id held twice, by an
-        // owned particle and its own periodic image as a ghost, which boxes at least two halos
-        // wide rule out, would give the row to the owned slot.)
-        let entries = h.history.entries();
-        let mut by_id: Vec<(u64, u32)> =
-            p.id.iter()
-                .enumerate()
-                .map(|(i, &g)| (g, i as u32))
-                .collect();
-        by_id.sort_unstable();
-        let mut cursor = 0;
-        let slot_of: Vec<Option<usize>> = entries
-            .iter()
-            .map(|(key, _)| {
-                while cursor < by_id.len() && by_id[cursor].0 < key.a {
-                    cursor += 1;
-                }
-                by_id
-                    .get(cursor)
-                    .filter(|(g, _)| *g == key.a)
-                    .map(|&(_, i)| i as usize)
-            })
-            .collect();
+        // History, as a CSR over the uploaded order, for the coming list build.
         let n_walls = self.walls.as_ref().map_or(0, |w| w.n);
-        let mut wall_spring = vec![0.0f64; (n * n_walls * HISTORY_WIDTH).max(1)];
-        let mut offset = vec![0u32; n + 1];
-        for ((key, _), slot) in entries.iter().zip(&slot_of) {
-            if let (Some(i), None) = (slot, key.wall_index()) {
-                offset[i + 1] += 1;
-            }
-        }
-        for i in 0..n {
-            offset[i + 1] += offset[i];
-        }
-        let pairs = offset[n] as usize;
-        let mut fill: Vec<u32> = offset[..n].to_vec();
-        let mut partner = vec![u64::MAX; pairs.max(1)];
-        let mut spring = vec![0.0f64; HISTORY_WIDTH * pairs.max(1)];
-        for ((key, state), slot) in entries.iter().zip(&slot_of) {
-            let Some(i) = *slot else {
-                continue;
-            };
-            match key.wall_index() {
-                Some(k) if k < n_walls => {
-                    let s = (i * n_walls + k) * HISTORY_WIDTH;
-                    wall_spring[s..s + HISTORY_WIDTH].copy_from_slice(&history_record(state));
-                }
-                Some(_) => {}
-                None => {
-                    let m = fill[i] as usize;
-                    fill[i] += 1;
-                    partner[m] = key.b;
-                    spring[HISTORY_WIDTH * m..HISTORY_WIDTH * (m + 1)]
-                        .copy_from_slice(&history_record(state));
-                }
-            }
-        }
+        let HistoryRows {
+            offset,
+            partner,
+            spring,
+            wall_spring,
+        } = history_rows(&p.id, &h.history, n_walls);
         let history = HistorySource {
             offset: st.clone_htod(&offset)?,
             partner: st.clone_htod(&partner)?,

@@ -6,6 +6,7 @@
 
 use super::error::CudaError;
 use super::gpu::Gpu;
+use super::history::WallOutcomes;
 use super::launch::{Kernels, cfg, ptr, zeros};
 use super::layout::{
     HISTORY_WIDTH, ParticleView, WallCandidatesParams, WallContactsParams, WallInfo,
@@ -38,35 +39,6 @@ pub(super) struct WallList {
     pub(super) reference: CudaSlice<f64>,
     /// The walls' poses at the build.
     pub(super) poses: Vec<nalgebra::Isometry3<f64>>,
-}
-
-/// [`WallStage::outcomes`]: per particle slot `i` and wall `k`, at `s = i · walls + k`.
-pub(super) struct WallOutcomes {
-    pub(super) walls: usize,
-    /// [`CONTACT_LIVE`](super::layout::CONTACT_LIVE), `CONTACT_FAILED` | status, or 0.
-    pub(super) contact: Vec<u32>,
-    pub(super) spring: Vec<f64>,
-    /// Per particle.
-    pub(super) energy: Vec<f64>,
-    pub(super) per_wall_force: Vec<f64>,
-}
-
-impl WallOutcomes {
-    /// The slot of particle `i` and wall `k`.
-    pub(super) fn slot(&self, i: usize, k: usize) -> usize {
-        i * self.walls + k
-    }
-
-    /// The spring of slot `s`.
-    pub(super) fn spring(&self, s: usize) -> &[f64] {
-        &self.spring[HISTORY_WIDTH * s..HISTORY_WIDTH * (s + 1)]
-    }
-
-    /// The force on the wall of slot `s`.
-    pub(super) fn force(&self, s: usize) -> Vector3<f64> {
-        let f = &self.per_wall_force[3 * s..3 * s + 3];
-        Vector3::new(f[0], f[1], f[2])
-    }
 }
 
 /// Wall meshes, the wall list and the per-particle wall outputs.
