@@ -199,13 +199,7 @@ impl Particles {
     /// from another backend's order or given migrants). Sums that must not depend on the local
     /// order, which a list build on the GPU, a restart or a migration changes, run in this one.
     pub fn id_order(&self, n: usize) -> Option<Vec<usize>> {
-        let ids = &self.id[..n];
-        if ids.windows(2).all(|w| w[0] < w[1]) {
-            return None;
-        }
-        let mut order: Vec<usize> = (0..n).collect();
-        order.sort_unstable_by_key(|&i| ids[i]);
-        Some(order)
+        id_order(&self.id[..n])
     }
 
     /// Removes the particles at the (sorted) local indices `remove`, keeping the others' order.
@@ -237,4 +231,15 @@ pub struct StepStats {
     pub elastic_energy: f64,
     /// Particles removed because they left a non-periodic domain, cumulative.
     pub removed: u64,
+}
+
+/// The indices of `ids` in increasing order of id, or `None` when they are in it already
+/// ([`Particles::id_order`]; also for id arrays copied from a device).
+pub fn id_order(ids: &[u64]) -> Option<Vec<usize>> {
+    if ids.windows(2).all(|w| w[0] < w[1]) {
+        return None;
+    }
+    let mut order: Vec<usize> = (0..ids.len()).collect();
+    order.sort_unstable_by_key(|&i| ids[i]);
+    Some(order)
 }

@@ -104,25 +104,8 @@ pub fn pair_failure_key(a: u64, b: u64) -> FailureKey {
     (a.min(b), a.max(b))
 }
 
-/// The outcome of every contact of a stage, or the error of its failure of the smallest key
-/// ([`FailureKey`]) if any failed, whatever the threads' timing and the list's order.
-pub(crate) fn first_failure<T>(
-    outcomes: Vec<Result<T, (FailureKey, SimulationError)>>,
-) -> Result<Vec<T>, SimulationError> {
-    if outcomes.iter().all(Result::is_ok) {
-        return Ok(outcomes.into_iter().filter_map(Result::ok).collect());
-    }
-    let failure = outcomes
-        .into_iter()
-        .filter_map(Result::err)
-        .min_by_key(|(key, _)| *key)
-        .map(|(_, error)| error);
-    Err(failure.expect("one outcome failed"))
-}
-
 /// The failure of the smallest key ([`FailureKey`]) offered by the jobs of a parallel stage,
-/// whatever the threads' timing: for a stage that writes its outcomes into a buffer it keeps
-/// (the pair stage) rather than collecting `Result`s.
+/// whatever the threads' timing and the list's order (the pair and wall stages).
 #[derive(Default)]
 pub(crate) struct FirstFailure(std::sync::Mutex<Option<(FailureKey, SimulationError)>>);
 
@@ -160,7 +143,7 @@ pub fn first_failure_position(
 mod tests {
     use super::*;
 
-    fn failed(step: u64, a: u64, b: u64) -> Result<u8, (FailureKey, SimulationError)> {
+    fn failed(step: u64, a: u64, b: u64) -> Result<(), (FailureKey, SimulationError)> {
         Err((
             pair_failure_key(a, b),
             SimulationError::Geometry {
@@ -175,29 +158,6 @@ mod tests {
     fn the_failure_of_the_smallest_ids_is_reported_whatever_the_list_order() {
         // In list order the pair (9, 4) comes first; by ids (2, 7) is smaller, and a list
         // built in another particle order would have listed it first.
-        let outcomes = vec![
-            Ok(1),
-            failed(0, 9, 4),
-            Ok(2),
-            failed(0, 7, 2),
-            failed(0, 2, 8),
-        ];
-        match first_failure(outcomes) {
-            Err(SimulationError::Geometry { what, .. }) => assert_eq!(what, "particles 7 and 2"),
-            other => panic!("expected the pair (2, 7), got {other:?}"),
-        }
-        let reversed = vec![
-            failed(0, 2, 8),
-            failed(0, 7, 2),
-            Ok(2),
-            failed(0, 9, 4),
-            Ok(1),
-        ];
-        match first_failure(reversed) {
-            Err(SimulationError::Geometry { what, .. }) => assert_eq!(what, "particles 7 and 2"),
-            other => panic!("expected the pair (2, 7), got {other:?}"),
-        }
-        assert_eq!(first_failure::<u8>(vec![Ok(1), Ok(2)]).unwrap(), vec![1, 2]);
         // Offered in any order, the same one is kept.
         for order in [[0, 1, 2], [2, 1, 0], [1, 2, 0]] {
             let pairs = [(9, 4), (7, 2), (2, 8)];

@@ -99,22 +99,21 @@ impl Simulation {
         let mut energy: f64 = 0.0;
         for j in 0..n {
             let i = at(j);
-            if i >= listed {
-                continue;
-            }
-            for r in pairs.of(i) {
-                if !r.is_b && counted(r.pair as usize) {
-                    let o = &outcomes[r.pair as usize];
-                    energy += o.forces.elastic_energy;
-                    entries.extend(o.state);
+            // A particle past the listed ones has no pairs, but its walls count.
+            if i < listed {
+                for r in pairs.of(i) {
+                    if !r.is_b && counted(r.pair as usize) {
+                        let o = &outcomes[r.pair as usize];
+                        energy += o.forces.elastic_energy;
+                        entries.extend(o.state);
+                    }
                 }
             }
             if let Some(w) = wall_outcomes.get(i) {
                 entries.extend_from_slice(&w.states);
             }
         }
-        // Pairs whose lower-id member is a ghost (a decomposed run), and a particle past the
-        // listed ones (none has pairs, but its walls count).
+        // Pairs whose lower-id member is a ghost (a decomposed run).
         entries.extend(
             outcomes
                 .iter()
@@ -122,14 +121,6 @@ impl Simulation {
                 .filter(|&(k, _)| !counted(k))
                 .filter_map(|(_, o)| o.state),
         );
-        for j in 0..n {
-            let i = at(j);
-            if i >= listed
-                && let Some(w) = wall_outcomes.get(i)
-            {
-                entries.extend_from_slice(&w.states);
-            }
-        }
         let mut wall_contacts = 0;
         for j in 0..n {
             let Some(w) = wall_outcomes.get(at(j)) else {

@@ -1,7 +1,7 @@
 //! Stage 6: per particle, the facet contacts with every wall near it and the contact law, one
 //! rayon job per particle, in the wall's own frame.
 
-use super::error::first_failure;
+use super::error::FirstFailure;
 use super::pairs::{normal_effective_mass, with_workspace};
 use super::{Simulation, SimulationError};
 use crate::contact::{ContactKey, ContactKinematics, ContactState, contact_forces, mass_share};
@@ -67,11 +67,12 @@ impl Simulation {
         let s = &self.scene;
         let (t, step) = (self.time, self.step);
         let poses: Vec<Isometry3<f64>> = s.walls.iter().map(|w| w.motion.transform(t)).collect();
+        let failure = FirstFailure::default();
         let outcomes = (0..p.len())
             .into_par_iter()
             .with_min_len(crate::par::CONTACT)
             .map_init(Vec::new, |facets, i| {
-                with_workspace(|ws| {
+                let outcome = with_workspace(|ws| {
                     let mut out = WallOutcome::default();
                     let tmpl = &s.templates[s.particle_types[p.kind[i] as usize].template];
                     let pose = Isometry3::from_parts(p.position[i].into(), p.orientation[i]);
@@ -148,9 +149,14 @@ impl Simulation {
                         out.states.push((key, state));
                     }
                     Ok(out)
+                });
+                outcome.unwrap_or_else(|(key, error)| {
+                    failure.offer(key, error);
+                    WallOutcome::default()
                 })
             })
             .collect::<Vec<_>>();
-        first_failure(outcomes)
+        failure.into_result()?;
+        Ok(outcomes)
     }
 }

@@ -11,6 +11,7 @@
 
 use super::layout::{CONTACT_LIVE, HISTORY_WIDTH, history_record, history_state};
 use crate::contact::{ContactHistory, ContactKey};
+use crate::state::id_order;
 use nalgebra::Vector3;
 
 /// The last evaluation's outcome of every listed pair, copied down: the members' slots (the
@@ -103,7 +104,7 @@ pub(super) fn gather_contacts(
     pairs: Option<&PairOutcomes>,
     walls: Option<&WallOutcomes>,
 ) -> GatheredContacts {
-    let order = id_order(ids);
+    let order = id_order(ids).unwrap_or_else(|| (0..ids.len()).collect());
     let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
     let mut entries = Vec::new();
     let mut ghost_entries = Vec::new();
@@ -158,15 +159,6 @@ pub(super) fn gather_contacts(
         energy,
         wall_forces,
     }
-}
-
-/// The slots in global id order.
-fn id_order(ids: &[u64]) -> Vec<usize> {
-    let mut order: Vec<usize> = (0..ids.len()).collect();
-    if !ids.windows(2).all(|w| w[0] < w[1]) {
-        order.sort_unstable_by_key(|&i| ids[i]);
-    }
-    order
 }
 
 /// The history laid out for the device: per slot its pairs as the key's first member
@@ -356,7 +348,7 @@ mod tests {
             energy += e;
         }
         let mut wall_forces = vec![Vector3::zeros(); walls.walls];
-        for i in id_order(ids) {
+        for i in id_order(ids).unwrap_or_else(|| (0..ids.len()).collect()) {
             if ghost[i] {
                 continue;
             }
