@@ -36,6 +36,13 @@ typedef uint32_t pd_u32;
 // backend::cuda::layout::HISTORY_WIDTH).
 #define PD_HISTORY_WIDTH 5
 
+// The contact flag of a pair or a particle–wall slot in contact, whose spring is live history
+// (Rust: backend::cuda::layout::CONTACT_LIVE).
+#define PD_CONTACT_LIVE 1u
+
+// No slot: a particle that had none on this rank before a decomposed run's rebuild.
+#define PD_NO_SLOT 0xffffffffu
+
 namespace pd {
 
 // Math wrappers with one overload per precision: the device math library's C++ overloads and

@@ -77,10 +77,16 @@ extern "C" __global__ void gather_u64(int n, const pd_u64* src, pd_u64* dst, con
     }
 }
 
-extern "C" __global__ void gather_u32(int n, const unsigned int* src, unsigned int* dst, const unsigned int* order) {
+// As gather_f64, for arrays of `width` unsigned ints per particle.
+extern "C" __global__ void gather_u32(int n, int width, const unsigned int* src, unsigned int* dst,
+                                      const unsigned int* order) {
     int k = blockIdx.x * blockDim.x + threadIdx.x;
-    if (k < n) {
-        dst[k] = src[order[k]];
+    if (k >= n) {
+        return;
+    }
+    unsigned int o = order[k];
+    for (int c = 0; c < width; ++c) {
+        dst[(size_t)k * width + c] = src[(size_t)o * width + c];
     }
 }
 
@@ -271,6 +277,62 @@ extern "C" __global__ void remap_history(int n_pairs, const int2* pairs, const p
         }
     }
     for (int c = 0; c < PD_HISTORY_WIDTH; ++c) spring[PD_HISTORY_WIDTH * (size_t)k + c] = s[c];
+}
+
+// After a decomposed run's rebuild on the device (src/backend/cuda/exchange.rs): the contact
+// history of each new pair (a, b), a the lower-id member, from the union the host round trip
+// would hold. First the rank's own list before the rebuild: the particle at slot a before the
+// build was at upload index order[a], and at old_slot[order[a]] before the exchange
+// (PD_NO_SLOT: it was not on this rank); its references there (old_ref_offset, old_refs, sorted
+// by partner id) name its old pairs, and a pair it was the first member of, with the same
+// partner id and in contact (old_contact live), gives its spring. Otherwise the entries that
+// migrating particles brought along, sorted by (recv_a, recv_b), are searched. A pair found in
+// neither starts with no spring, as on the CPU.
+extern "C" __global__ void remap_history_exchanged(int n_pairs, const int2* pairs, const pd_u64* id,
+                                                   const unsigned int* order, const unsigned int* old_slot,
+                                                   const unsigned int* old_ref_offset, const unsigned int* old_refs,
+                                                   const int2* old_pairs, const pd_u64* old_id,
+                                                   const unsigned int* old_contact, const double* old_spring,
+                                                   int n_recv, const pd_u64* recv_a, const pd_u64* recv_b,
+                                                   const double* recv_spring, double* spring) {
+    int k = blockIdx.x * blockDim.x + threadIdx.x;
+    if (k >= n_pairs) {
+        return;
+    }
+    int2 p = pairs[k];
+    pd_u64 a = id[p.x];
+    pd_u64 b = id[p.y];
+    const double* from = nullptr;
+    unsigned int s = old_slot[order[p.x]];
+    if (s != PD_NO_SLOT) {
+        for (unsigned int m = old_ref_offset[s]; m < old_ref_offset[s + 1]; ++m) {
+            unsigned int r = old_refs[m];
+            // Slot s is the pair's first member when the reference's low bit is clear.
+            if ((r & 1u) == 0u && old_id[old_pairs[r >> 1].y] == b) {
+                if (old_contact[r >> 1] == PD_CONTACT_LIVE) {
+                    from = old_spring + PD_HISTORY_WIDTH * (size_t)(r >> 1);
+                }
+                break;
+            }
+        }
+    }
+    if (from == nullptr && n_recv > 0) {
+        int lo = 0, hi = n_recv;
+        while (lo < hi) {
+            int mid = lo + (hi - lo) / 2;
+            if (recv_a[mid] < a || (recv_a[mid] == a && recv_b[mid] < b)) {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        if (lo < n_recv && recv_a[lo] == a && recv_b[lo] == b) {
+            from = recv_spring + PD_HISTORY_WIDTH * (size_t)lo;
+        }
+    }
+    for (int c = 0; c < PD_HISTORY_WIDTH; ++c) {
+        spring[PD_HISTORY_WIDTH * (size_t)k + c] = from != nullptr ? from[c] : 0.0;
+    }
 }
 
 // The hybrid list's consistency check (hybrid paper Eq. 2, operation B10 of its Fig. 1): `flag`

@@ -33,6 +33,10 @@ pub struct Tuning {
     /// `POLYDEM_MPI`: `0` or `1` overrides the guess whether an MPI launcher started the
     /// process.
     pub mpi: Option<bool>,
+    /// `POLYDEM_GPU_EXCHANGE`: `device` keeps a decomposed GPU run's rebuilds on the device,
+    /// `host` makes them the round trip of the whole rank state through the host; `None` when
+    /// unset (the backend's default). Both give bitwise the same run.
+    pub gpu_exchange_on_device: Option<bool>,
     /// `POLYDEM_ROOT`: the repository root (its `meshes/`) for `polydem bench accuracy`.
     pub root: Option<PathBuf>,
     /// What was set but not allowed, one line each (the default is kept).
@@ -87,6 +91,17 @@ impl Tuning {
                 None
             }
         };
+        t.gpu_exchange_on_device = match text("POLYDEM_GPU_EXCHANGE").as_deref() {
+            None => None,
+            Some("device") => Some(true),
+            Some("host") => Some(false),
+            Some(v) => {
+                t.rejected.push(format!(
+                    "POLYDEM_GPU_EXCHANGE={v:?} is not host or device; the default is used"
+                ));
+                None
+            }
+        };
         t.root = var("POLYDEM_ROOT").map(PathBuf::from);
         t
     }
@@ -121,6 +136,11 @@ impl Tuning {
             self.mpi_round_bytes.map(|x| x.to_string()),
         );
         put("POLYDEM_MPI", self.mpi.map(|x| u8::from(x).to_string()));
+        put(
+            "POLYDEM_GPU_EXCHANGE",
+            self.gpu_exchange_on_device
+                .map(|d| if d { "device" } else { "host" }.to_string()),
+        );
         put(
             "POLYDEM_ROOT",
             self.root.as_ref().map(|p| p.display().to_string()),
@@ -167,6 +187,7 @@ mod tests {
             ("POLYDEM_PTX_CACHE", "0"),
             ("POLYDEM_MPI", "1"),
             ("POLYDEM_MPI_ROUND_BYTES", "777"),
+            ("POLYDEM_GPU_EXCHANGE", "host"),
         ]);
         assert_eq!(t.cuda_block, Some(96));
         assert_eq!(t.wall_merge_cells, Some(0));
@@ -174,12 +195,18 @@ mod tests {
         assert_eq!(t.ptx_cache, Some(None));
         assert_eq!(t.mpi, Some(true));
         assert_eq!(t.mpi_round_bytes, Some(777));
+        assert_eq!(t.gpu_exchange_on_device, Some(false));
         assert_eq!(t.rejected.len(), 1, "{:?}", t.rejected);
         assert!(t.rejected[0].starts_with("POLYDEM_PAIR_MAX_REGISTERS=\"20\""));
-        let bad = from(&[("POLYDEM_CUDA_BLOCK", "100"), ("POLYDEM_MPI", "yes")]);
+        let bad = from(&[
+            ("POLYDEM_CUDA_BLOCK", "100"),
+            ("POLYDEM_MPI", "yes"),
+            ("POLYDEM_GPU_EXCHANGE", "gpu"),
+        ]);
         assert_eq!(bad.cuda_block, None);
         assert_eq!(bad.mpi, None);
-        assert_eq!(bad.rejected.len(), 2);
+        assert_eq!(bad.gpu_exchange_on_device, None);
+        assert_eq!(bad.rejected.len(), 3);
         assert!(t.set().contains(&"POLYDEM_CUDA_BLOCK=96".to_string()));
     }
 }

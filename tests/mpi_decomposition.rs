@@ -404,6 +404,56 @@ fn run_gpu(ranks: usize, scene: &str, out: &Path, precision: &str, extra: &[&str
     serde_json::from_slice(&o.stdout).expect("summary JSON")
 }
 
+/// GPU ranks: a rebuild that stays on the device (migration and the ghosts' choice from the
+/// centroids alone, the history carried over on the device) gives bitwise the run of the round
+/// trip of the whole state through the host (`POLYDEM_GPU_EXCHANGE=device` against `host`), on
+/// the pour (walls, insertions, which still take the round trip, and recursive bisection
+/// rebalanced) on 2 and 3 ranks, in double and mixed precision. Both make the same rebuilds
+/// and migrations; only the first makes any on the device.
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn gpu_rebuilds_on_the_device_are_the_host_round_trip() {
+    for (ranks, precision) in [(2, "double"), (3, "double"), (2, "mixed")] {
+        let host = temp_dir(&format!("mpi-gpu-exchange-host-{ranks}-{precision}"));
+        let mut cmd = command(ranks, "launch/mpi/pour.toml", &host, "cuda");
+        cmd.args(["--gpu-precision", precision])
+            .env("POLYDEM_GPU_EXCHANGE", "host");
+        let o = output(cmd);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let by_host: Value = serde_json::from_slice(&o.stdout).expect("summary JSON");
+        let dir = temp_dir(&format!("mpi-gpu-exchange-device-{ranks}-{precision}"));
+        let mut cmd = command(ranks, "launch/mpi/pour.toml", &dir, "cuda");
+        cmd.args(["--gpu-precision", precision])
+            .env("POLYDEM_GPU_EXCHANGE", "device");
+        let o = output(cmd);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let on_device: Value = serde_json::from_slice(&o.stdout).expect("summary JSON");
+        for step in ["step_0000001000.ckpt", "step_0000002000.ckpt"] {
+            same_checkpoint(
+                &host,
+                &dir,
+                step,
+                &format!("{ranks} GPU ranks, {precision}, rebuilds on the device"),
+            );
+        }
+        for key in ["rebuilds", "migrated", "rebalances"] {
+            assert_eq!(
+                per_rank_sum(&by_host, key),
+                per_rank_sum(&on_device, key),
+                "{key}"
+            );
+        }
+        let device = per_rank_sum(&on_device, "device_rebuilds");
+        let rebuilds = per_rank_sum(&on_device, "rebuilds");
+        println!("{ranks} GPU ranks, {precision}: {device} of {rebuilds} rebuilds on the device");
+        assert_eq!(per_rank_sum(&by_host, "device_rebuilds"), 0);
+        assert!(device > 0 && device < rebuilds, "{device} of {rebuilds}");
+        no_particle_lost_or_duplicated(&dir, 280);
+        let _ = std::fs::remove_dir_all(&host);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
 /// GPU ranks: the pour on 2 and 3 ranks sharing one GPU ends bitwise equal to one GPU, in
 /// double (and then to the CPU's single-rank run, which double on the GPU follows bit for bit)
 /// and in mixed precision, with the halo exchanged through the device and pinned buffers.

@@ -142,7 +142,7 @@ impl Parallel {
             return Ok(Exchanged::Refreshed);
         }
         let t0 = Instant::now();
-        let redrawn = par.rebalance_if_needed(particles)?;
+        let redrawn = par.rebalance_if_needed(&particles.position)?;
         par.timers.balance += t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
         let moved = migrate(&*par.comm, &par.subdomains, particles, history);
@@ -152,7 +152,7 @@ impl Parallel {
         par.plan = HaloPlan::new(&par.subdomains, par.rank(), &particles.position);
         par.ghosts = build_ghosts(&*par.comm, &par.plan, particles, scene);
         par.timers.rebuilds += 1;
-        par.check_ghosts(particles).map_err(domain_error)?;
+        par.check_ghosts(&particles.id).map_err(domain_error)?;
         par.timers.halo += t0.elapsed().as_secs_f64();
         Ok(Exchanged::Rebuilt { redrawn })
     }

@@ -98,6 +98,36 @@ impl HaloPlan {
     pub fn sent(&self) -> usize {
         self.sends.iter().map(Vec::len).sum()
     }
+
+    /// The particles the plan sends (to any neighbour or as an own image), each once and in
+    /// index order, and the same plan over them: entry `m` of that list is particle `m` of the
+    /// returned plan. [`build_ghosts`] with it and only these particles sends what it sends with
+    /// this plan and all of them (a GPU rank copies down only these).
+    pub fn compact(&self) -> (HaloPlan, Vec<u32>) {
+        let mut sent: Vec<u32> = self
+            .sends
+            .iter()
+            .flatten()
+            .chain(&self.self_images)
+            .map(|&(i, _)| i)
+            .collect();
+        sent.sort_unstable();
+        sent.dedup();
+        let renumber = |list: &[(u32, [i8; 3])]| -> Vec<(u32, [i8; 3])> {
+            list.iter()
+                .map(|(i, o)| {
+                    let m = sent.binary_search(i).expect("a sent particle is listed");
+                    (m as u32, *o)
+                })
+                .collect()
+        };
+        let plan = HaloPlan {
+            neighbours: self.neighbours.clone(),
+            sends: self.sends.iter().map(|l| renumber(l)).collect(),
+            self_images: renumber(&self.self_images),
+        };
+        (plan, sent)
+    }
 }
 
 /// Full ghost record of particle `i` at image `o`.
@@ -281,6 +311,16 @@ mod tests {
             assert!(plan.self_images.is_empty());
             // Every rank is sent something: x wraps around, y has two rows.
             assert!(plan.sent() > 100);
+            // The compact plan names the same particles through its list, each listed once.
+            let (compact, list) = plan.compact();
+            assert!(list.windows(2).all(|w| w[0] < w[1]));
+            assert!(list.len() < x.len(), "the inner region is not sent");
+            for (full, short) in plan.sends.iter().zip(&compact.sends) {
+                let back: Vec<(u32, [i8; 3])> =
+                    short.iter().map(|&(m, o)| (list[m as usize], o)).collect();
+                assert_eq!(&back, full);
+            }
+            assert_eq!(compact.neighbours, plan.neighbours);
         }
     }
 }

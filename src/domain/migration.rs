@@ -102,6 +102,24 @@ pub fn unpack_particles(buf: &[u8], p: &mut Particles) -> Vec<(ContactKey, Conta
     (0..m).map(|_| read_entry(&mut r)).collect()
 }
 
+/// Per rank, the indices of the particles at `positions` (owned by `rank`) whose centroid is in
+/// that rank's box and not in `rank`'s own: those that migrate, in index order (empty for
+/// `rank` itself).
+pub fn leaving(
+    sub: &Subdomains,
+    rank: usize,
+    ranks: usize,
+    positions: &[nalgebra::Vector3<f64>],
+) -> Vec<Vec<usize>> {
+    let mut leaving: Vec<Vec<usize>> = vec![Vec::new(); ranks];
+    for (i, x) in positions.iter().enumerate() {
+        if !sub.contains(rank, x) {
+            leaving[sub.owner(x)].push(i);
+        }
+    }
+    leaving
+}
+
 /// Sends every owned particle outside this rank's box to its owner; returns how many left.
 /// History entries travel with their members and are merged on arrival (an entry the
 /// receiver already holds, for a pair it evaluated itself, is bitwise the same).
@@ -112,12 +130,7 @@ pub fn migrate(
     history: &mut ContactHistory,
 ) -> usize {
     let me = comm.rank();
-    let mut leaving: Vec<Vec<usize>> = vec![Vec::new(); comm.size()];
-    for i in 0..p.len() {
-        if !sub.contains(me, &p.position[i]) {
-            leaving[sub.owner(&p.position[i])].push(i);
-        }
-    }
+    let leaving = leaving(sub, me, comm.size(), &p.position);
     let sends: Vec<Vec<u8>> = leaving
         .iter()
         .enumerate()

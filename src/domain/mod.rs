@@ -25,7 +25,6 @@ pub use exchange::{ExchangeError, Exchanged};
 
 use crate::neighbor::Bounds;
 use crate::scene::{BalanceWeight, Decomposition, ParallelSettings, Scene, SceneError};
-use crate::state::Particles;
 use halo::{Ghosts, HaloPlan};
 use nalgebra::Vector3;
 use std::sync::Arc;
@@ -43,11 +42,13 @@ pub struct ParallelTimers {
     pub insert: f64,
     /// Waiting for the slowest rank before the collective rebuild decision: the imbalance.
     pub wait: f64,
-    /// A GPU rank's rebuilds: copying the device state (particles, contact history and
-    /// statistics) to the host before the exchange.
+    /// A GPU rank's rebuilds: copying to the host what the exchange needs (through the host:
+    /// the whole state; on the device: the centroids, the leaving particles with their history
+    /// and the ghosts' sources).
     pub device_download: f64,
-    /// A GPU rank's rebuilds: uploading the exchanged state (particles, ghosts, history and the
-    /// walls) after it.
+    /// A GPU rank's rebuilds: uploading the exchanged state after it (through the host: the
+    /// particles, ghosts, history and walls; on the device: the arrivals and ghosts, assembled
+    /// there with the particles that stay).
     pub device_upload: f64,
     /// Particles that migrated.
     pub migrated: u64,
@@ -55,6 +56,9 @@ pub struct ParallelTimers {
     pub rebalances: u64,
     /// Halo rebuilds.
     pub rebuilds: u64,
+    /// Of a GPU rank's rebuilds, those made with the state left on the device (the others,
+    /// at insertions, removals and after an upload, go through the host).
+    pub device_rebuilds: u64,
 }
 
 /// A rank's part of a decomposed run.
@@ -68,6 +72,19 @@ pub struct Parallel {
     /// Seconds of force evaluation since the last load check (for `weight = "cost"`).
     pub cost: f64,
     rebuilds_since_check: u64,
+}
+
+/// The smallest id among `ghosts` held twice, as two ghosts or as a ghost and one of the
+/// unique `owned` ids (sorting the ghosts alone: a rank's ghosts are few beside its particles).
+fn held_twice(owned: &[u64], ghosts: &[u64]) -> Option<u64> {
+    let mut ghosts = ghosts.to_vec();
+    ghosts.sort_unstable();
+    let among_ghosts = ghosts.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]);
+    let also_owned = owned
+        .iter()
+        .copied()
+        .filter(|id| ghosts.binary_search(id).is_ok());
+    among_ghosts.chain(also_owned).min()
 }
 
 impl Parallel {
@@ -129,8 +146,11 @@ impl Parallel {
 
     /// At a rebuild: whether the boxes should be redrawn, and if so redraws them by recursive
     /// bisection of the owned particles' weights (count, or this rank's measured cost spread
-    /// evenly over its particles). Returns whether the boxes changed.
-    pub fn rebalance_if_needed(&mut self, owned: &Particles) -> Result<bool, DecompositionError> {
+    /// evenly over its particles), given their centroids. Returns whether the boxes changed.
+    pub fn rebalance_if_needed(
+        &mut self,
+        owned: &[Vector3<f64>],
+    ) -> Result<bool, DecompositionError> {
         if self.comm.size() == 1 || self.settings.decomposition != Decomposition::Rcb {
             return Ok(false);
         }
@@ -165,7 +185,7 @@ impl Parallel {
             &*self.comm,
             self.subdomains.domain,
             self.subdomains.halo,
-            &owned.position,
+            owned,
             &weights,
         ) {
             Ok(n) => n,
@@ -187,24 +207,19 @@ impl Parallel {
         Ok(changed)
     }
 
-    /// Ghost ids must be unique and distinct from owned ids; a repeat means a box narrower than
-    /// 2 × halo along a periodic axis, where one particle would be seen twice.
-    pub fn check_ghosts(&self, owned: &Particles) -> Result<(), String> {
-        let mut ids: Vec<u64> = owned
-            .id
-            .iter()
-            .chain(&self.ghosts.particles.id)
-            .copied()
-            .collect();
-        ids.sort_unstable();
-        if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
+    /// Ghost ids must be unique and distinct from the owned particles' ids `owned` (unique
+    /// themselves: migration moves particles, it never copies them); a repeat means a box
+    /// narrower than 2 × halo along a periodic axis, where one particle would be seen twice.
+    /// The smallest id held twice is named.
+    pub fn check_ghosts(&self, owned: &[u64]) -> Result<(), String> {
+        if let Some(twice) = held_twice(owned, &self.ghosts.particles.id) {
             let b = self.own_box();
             return Err(format!(
                 "rank {} holds particle {} twice (as owner or ghost): its box {:?} to {:?} is too \
                  thin for the halo width {:e} m across a periodic seam; use fewer ranks along \
                  that axis",
                 self.rank(),
-                w[0],
+                twice,
                 b.lo,
                 b.hi,
                 self.subdomains.halo
@@ -249,5 +264,37 @@ impl Parallel {
             }
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::held_twice;
+    use crate::rng::Rng;
+
+    /// The id held twice is the smallest repeat of all ids together (brute force: sort them
+    /// all), for unique owned ids and ghosts drawn with repeats and overlaps.
+    #[test]
+    fn the_smallest_id_held_twice_is_found() {
+        let mut rng = Rng::new(5);
+        let mut found = 0;
+        for case in 0..200 {
+            let mut owned: Vec<u64> = (0..300).map(|_| (rng.uniform() * 5000.0) as u64).collect();
+            owned.sort_unstable();
+            owned.dedup();
+            let n_ghosts = 1 + case % 40;
+            let ghosts: Vec<u64> = (0..n_ghosts)
+                .map(|_| (rng.uniform() * 20000.0) as u64)
+                .collect();
+            let mut all: Vec<u64> = owned.iter().chain(&ghosts).copied().collect();
+            all.sort_unstable();
+            let want = all.windows(2).find(|w| w[0] == w[1]).map(|w| w[0]);
+            assert_eq!(held_twice(&owned, &ghosts), want, "case {case}");
+            found += usize::from(want.is_some());
+        }
+        assert!(found > 20 && found < 180, "{found} cases with a repeat");
+        assert_eq!(held_twice(&[1, 2, 3], &[]), None);
+        assert_eq!(held_twice(&[1, 2, 3], &[7, 3, 2]), Some(2));
+        assert_eq!(held_twice(&[1], &[9, 8, 9]), Some(9));
     }
 }

@@ -182,7 +182,7 @@ impl Simulation {
     /// The wall meshes this rank needs: in a decomposed run, of each wall that does not move,
     /// the facets that reach the rank's box plus the halo; moving walls and single-rank runs
     /// keep every facet.
-    pub(super) fn restrict_walls(&mut self) {
+    pub(crate) fn restrict_walls(&mut self) {
         let cell = self.scene.cutoff();
         let region = self.parallel.as_deref().map(|p| {
             let b = p.own_box().grown(p.subdomains.halo);

@@ -7,10 +7,12 @@
 //! with MPI, and the received motion goes up through a second pinned buffer into the ghost
 //! slots (`unpack_motion`): only the halo crosses the bus. The pair list holds the pairs of two
 //! owned particles first; they are evaluated while the halo is in flight (the host waits for
-//! the packed copy alone and does the MPI exchange meanwhile), the pairs with a ghost after it. At neighbour-list rebuilds (decided by all
-//! ranks together) the state makes one round trip through the host, where migration, load
-//! balancing and the choice of ghosts run as on the CPU backend ([`Simulation`]'s exchange),
-//! and the ghosts go up after the owned particles.
+//! the packed copy alone and does the MPI exchange meanwhile), the pairs with a ghost after it.
+//! At neighbour-list rebuilds (decided by all ranks together) the state makes a round trip
+//! through the host, where migration, load balancing and the choice of ghosts run as on the CPU
+//! backend ([`Simulation`]'s exchange); or, with `POLYDEM_GPU_EXCHANGE=device`, these run on the
+//! host from the centroids alone while the state stays on the device ([`super::exchange`]).
+//! Either way the ghosts follow the owned particles in the device arrays.
 //!
 //! [`Simulation`]: crate::pipeline::Simulation
 

@@ -176,6 +176,7 @@ kernel_table! {
         );
         GatherU32 gather_u32(
             n: &i32,
+            width: &i32,
             src: &CudaSlice<u32>,
             dst: &mut CudaSlice<u32>,
             order: &CudaSlice<u32>,
@@ -215,6 +216,24 @@ kernel_table! {
             old_offset: &CudaSlice<u32>,
             old_partner: &CudaSlice<u64>,
             old_spring: &CudaSlice<f64>,
+            spring: &mut CudaSlice<f64>,
+        );
+        RemapHistoryExchanged remap_history_exchanged(
+            n_pairs: &i32,
+            pairs: &CudaSlice<i32>,
+            id: &CudaSlice<u64>,
+            order: &CudaSlice<u32>,
+            old_slot: &CudaSlice<u32>,
+            old_ref_offset: &CudaSlice<u32>,
+            old_refs: &CudaSlice<u32>,
+            old_pairs: &CudaSlice<i32>,
+            old_id: &CudaSlice<u64>,
+            old_contact: &CudaSlice<u32>,
+            old_spring: &CudaSlice<f64>,
+            n_recv: &i32,
+            recv_a: &CudaSlice<u64>,
+            recv_b: &CudaSlice<u64>,
+            recv_spring: &CudaSlice<f64>,
             spring: &mut CudaSlice<f64>,
         );
         MovedBeyond moved_beyond(
@@ -283,6 +302,36 @@ kernel_table! {
             orientation: &mut CudaSlice<f64>,
             angular_velocity: &mut CudaSlice<f64>,
             contacts: &mut CudaSlice<u32>,
+        );
+        CountLiveRefs count_live_refs(
+            count: &i32,
+            slots: &CudaSlice<u32>,
+            ref_offset: &CudaSlice<u32>,
+            refs: &CudaSlice<u32>,
+            contact: &CudaSlice<u32>,
+            out: &mut CudaSlice<u32>,
+        );
+        PackLiveRefs pack_live_refs(
+            count: &i32,
+            slots: &CudaSlice<u32>,
+            ref_offset: &CudaSlice<u32>,
+            refs: &CudaSlice<u32>,
+            pairs: &CudaSlice<i32>,
+            id: &CudaSlice<u64>,
+            contact: &CudaSlice<u32>,
+            spring: &CudaSlice<f64>,
+            row_offset: &CudaSlice<u32>,
+            out_a: &mut CudaSlice<u64>,
+            out_b: &mut CudaSlice<u64>,
+            out_spring: &mut CudaSlice<f64>,
+        );
+        GatherLiveWallSprings gather_live_wall_springs(
+            n: &i32,
+            walls: &i32,
+            source: &CudaSlice<u32>,
+            contact: &CudaSlice<u32>,
+            src: &CudaSlice<f64>,
+            dst: &mut CudaSlice<f64>,
         );
     }
 }

@@ -12,6 +12,7 @@
 
 mod backend;
 mod error;
+mod exchange;
 mod forces;
 mod gpu;
 mod halo;

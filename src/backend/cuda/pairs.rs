@@ -5,6 +5,7 @@
 //! [`super::pair_contacts`].
 
 use super::error::{CudaError, HaloError};
+use super::exchange::ExchangedHistory;
 use super::gpu::Gpu;
 use super::history::PairOutcomes;
 use super::launch::{cfg, ptr, zeros};
@@ -128,12 +129,18 @@ pub(super) fn pair_bytes(spheres: bool, staged_bytes: usize) -> usize {
     }
 }
 
-/// The contact history handed to the next list build: for each particle in the numbering
-/// before the build's reordering, its pairs' partner ids and springs (CSR).
-pub(super) struct HistorySource {
-    pub(super) offset: CudaSlice<u32>,
-    pub(super) partner: CudaSlice<u64>,
-    pub(super) spring: CudaSlice<f64>,
+/// The contact history handed to the next list build.
+pub(super) enum HistorySource {
+    /// For each particle in the numbering before the build's reordering, its pairs as first
+    /// member: the partners' ids and the springs (CSR).
+    Rows {
+        offset: CudaSlice<u32>,
+        partner: CudaSlice<u64>,
+        spring: CudaSlice<f64>,
+    },
+    /// A decomposed run's rebuild on the device: the list before it and the entries migrating
+    /// particles brought ([`ExchangedHistory`]).
+    Exchanged(Box<ExchangedHistory>),
 }
 
 /// Stage 2 and the pair list it keeps (the GPU twin of the CPU's `PairList`).
@@ -245,14 +252,14 @@ impl PairStage {
                 unsafe {
                     k.history_partners(&st, cfg(old.n), &npi, &old.pairs, &p.id, &mut partner)?;
                 }
-                HistorySource {
+                HistorySource::Rows {
                     offset: old_offset,
                     partner,
                     // The latest springs: `forces` swapped them into `spring_in`.
                     spring: old.spring_in,
                 }
             }
-            (None, None) => HistorySource {
+            (None, None) => HistorySource::Rows {
                 offset: zeros::<u32>(&st, n + 1)?,
                 partner: zeros::<u64>(&st, 1)?,
                 spring: zeros::<f64>(&st, HISTORY_WIDTH)?,
@@ -397,19 +404,29 @@ impl PairStage {
         }
         // The springs of pairs that survive, found by (lower-id member, partner id).
         let mut spring_in = zeros::<f64>(&st, HISTORY_WIDTH * np)?;
-        unsafe {
-            k.remap_history(
-                &st,
-                cfg(np),
-                &npi,
-                &pairs,
-                &p.id,
-                order,
-                &history.offset,
-                &history.partner,
-                &history.spring,
-                &mut spring_in,
-            )?;
+        match history {
+            HistorySource::Rows {
+                offset,
+                partner,
+                spring,
+            } => unsafe {
+                // SAFETY: the rows cover the n particles before the build, `order` n indices.
+                k.remap_history(
+                    &st,
+                    cfg(np),
+                    &npi,
+                    &pairs,
+                    &p.id,
+                    order,
+                    offset,
+                    partner,
+                    spring,
+                    &mut spring_in,
+                )?;
+            },
+            HistorySource::Exchanged(h) => {
+                h.remap(k, &st, np, &pairs, &p.id, order, &mut spring_in)?
+            }
         }
         let staged_bytes = staged_planes_bytes(gpu.config.precision);
         Ok(PairList {

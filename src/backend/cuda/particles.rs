@@ -134,8 +134,20 @@ macro_rules! upload_motion_field {
 }
 
 /// An element type of the particle arrays, reordered by its gather kernel.
-pub(super) trait Gather: DeviceRepr + ValidAsZeroBits + Default + Clone {
-    /// `dst[k·width..] = src[order[k]·width..]` for the `n` particles, into a new buffer.
+pub(super) trait Gather: DeviceRepr + ValidAsZeroBits + Default + Clone + Unpin {
+    /// `dst[k·width..] = src[order[k]·width..]` for the `n` rows `k < n` (the rest of `dst`
+    /// untouched).
+    fn gather_into(
+        k: &Kernels,
+        st: &Arc<CudaStream>,
+        n: usize,
+        width: usize,
+        src: &CudaSlice<Self>,
+        order: &CudaSlice<u32>,
+        dst: &mut CudaSlice<Self>,
+    ) -> Result<(), CudaError>;
+
+    /// [`Gather::gather_into`] a new buffer of the `n` rows.
     fn gather(
         k: &Kernels,
         st: &Arc<CudaStream>,
@@ -143,60 +155,100 @@ pub(super) trait Gather: DeviceRepr + ValidAsZeroBits + Default + Clone {
         width: usize,
         src: &CudaSlice<Self>,
         order: &CudaSlice<u32>,
-    ) -> Result<CudaSlice<Self>, CudaError>;
+    ) -> Result<CudaSlice<Self>, CudaError> {
+        let mut dst = zeros::<Self>(st, width * n)?;
+        Self::gather_into(k, st, n, width, src, order, &mut dst)?;
+        Ok(dst)
+    }
 }
 
 impl Gather for f64 {
-    fn gather(
+    fn gather_into(
         k: &Kernels,
         st: &Arc<CudaStream>,
         n: usize,
         width: usize,
         src: &CudaSlice<f64>,
         order: &CudaSlice<u32>,
-    ) -> Result<CudaSlice<f64>, CudaError> {
-        let mut dst = zeros::<f64>(st, width * n)?;
+        dst: &mut CudaSlice<f64>,
+    ) -> Result<(), CudaError> {
+        debug_assert!(dst.len() >= width * n && order.len() >= n);
         let (ni, w) = (n as i32, width as i32);
-        // SAFETY: both buffers hold width·n values, `order` n indices below n.
-        unsafe { k.gather_f64(st, cfg(n), &ni, &w, src, &mut dst, order)? };
-        Ok(dst)
+        // SAFETY: `dst` holds width·n values, `order` n indices of rows of `src`.
+        unsafe { k.gather_f64(st, cfg(n), &ni, &w, src, dst, order)? };
+        Ok(())
     }
 }
 
 impl Gather for u32 {
-    fn gather(
+    fn gather_into(
         k: &Kernels,
         st: &Arc<CudaStream>,
         n: usize,
         width: usize,
         src: &CudaSlice<u32>,
         order: &CudaSlice<u32>,
-    ) -> Result<CudaSlice<u32>, CudaError> {
-        debug_assert_eq!(width, 1);
-        let mut dst = zeros::<u32>(st, n)?;
-        let ni = n as i32;
-        // SAFETY: both buffers hold n values, `order` n indices below n.
-        unsafe { k.gather_u32(st, cfg(n), &ni, src, &mut dst, order)? };
-        Ok(dst)
+        dst: &mut CudaSlice<u32>,
+    ) -> Result<(), CudaError> {
+        debug_assert!(dst.len() >= width * n && order.len() >= n);
+        let (ni, w) = (n as i32, width as i32);
+        // SAFETY: `dst` holds width·n values, `order` n indices of rows of `src`.
+        unsafe { k.gather_u32(st, cfg(n), &ni, &w, src, dst, order)? };
+        Ok(())
     }
 }
 
 impl Gather for u64 {
-    fn gather(
+    fn gather_into(
         k: &Kernels,
         st: &Arc<CudaStream>,
         n: usize,
         width: usize,
         src: &CudaSlice<u64>,
         order: &CudaSlice<u32>,
-    ) -> Result<CudaSlice<u64>, CudaError> {
+        dst: &mut CudaSlice<u64>,
+    ) -> Result<(), CudaError> {
         debug_assert_eq!(width, 1);
-        let mut dst = zeros::<u64>(st, n)?;
+        debug_assert!(dst.len() >= n && order.len() >= n);
         let ni = n as i32;
-        // SAFETY: both buffers hold n values, `order` n indices below n.
-        unsafe { k.gather_u64(st, cfg(n), &ni, src, &mut dst, order)? };
-        Ok(dst)
+        // SAFETY: `dst` holds n values, `order` n indices of `src`.
+        unsafe { k.gather_u64(st, cfg(n), &ni, src, dst, order)? };
+        Ok(())
     }
+}
+
+/// The new array of one field after a decomposed run's rebuild on the device: the `n_kept`
+/// rows of `src` at `kept`, then the rows of `tail` (from the host), `width` values a row.
+fn assemble_field<T: Gather>(
+    k: &Kernels,
+    st: &Arc<CudaStream>,
+    width: usize,
+    src: &CudaSlice<T>,
+    (kept, n_kept): (&CudaSlice<u32>, usize),
+    tail: &[T],
+) -> Result<CudaSlice<T>, CudaError> {
+    let head = width * n_kept;
+    let mut dst = zeros::<T>(st, head + tail.len())?;
+    if n_kept > 0 {
+        T::gather_into(k, st, n_kept, width, src, kept, &mut dst)?;
+    }
+    if !tail.is_empty() {
+        st.memcpy_htod(tail, &mut dst.slice_mut(head..head + tail.len()))?;
+    }
+    Ok(dst)
+}
+
+/// The rows at `slots` of a `host` or `motion` field, copied down; empty for a `device` one.
+macro_rules! download_rows_field {
+    (device $ty:ident $k:ident $st:ident $device:ident $field:ident $width:literal $slots:ident $count:ident) => {
+        Vec::new()
+    };
+    ($origin:ident $ty:ident $k:ident $st:ident $device:ident $field:ident $width:literal $slots:ident $count:ident) => {{
+        let rows = <$ty as Gather>::gather($k, $st, $count, $width, &$device.$field, $slots)?;
+        let mut v = $st.clone_dtoh(&rows)?;
+        v.truncate($width * $count);
+        v
+    }};
 }
 
 /// `v`, or one default value when it is empty (every device buffer has an address).
@@ -257,6 +309,42 @@ macro_rules! declare_particles {
                 let n = self.n;
                 Ok(HostParticleArrays {
                     $($($field: download_field!($origin st self $field ($width * n)),)*)*
+                })
+            }
+
+            /// The `host` and `motion` arrays of the `count` particles at `slots`, copied
+            /// down (gathered on the device first), `width · count` values each; the
+            /// `device` ones are left empty.
+            pub(super) fn download_rows(
+                &self,
+                k: &Kernels,
+                st: &Arc<CudaStream>,
+                slots: &CudaSlice<u32>,
+                count: usize,
+            ) -> Result<HostParticleArrays, CudaError> {
+                Ok(HostParticleArrays {
+                    $($($field: download_rows_field!(
+                        $origin $ty k st self $field $width slots count
+                    ),)*)*
+                })
+            }
+
+            /// The arrays after a decomposed run's rebuild on the device: the `n_kept`
+            /// particles of `old` at slots `kept` (gathered on the device), then the
+            /// `n_tail` of `tail` (from the host: arrivals and ghosts).
+            pub(super) fn assemble(
+                k: &Kernels,
+                st: &Arc<CudaStream>,
+                old: &DeviceParticles,
+                (kept, n_kept): (&CudaSlice<u32>, usize),
+                tail: HostParticleArrays,
+                n_tail: usize,
+            ) -> Result<Self, CudaError> {
+                Ok(DeviceParticles {
+                    n: n_kept + n_tail,
+                    $($($field: assemble_field::<$ty>(
+                        k, st, $width, &old.$field, (kept, n_kept), &tail.$field
+                    )?,)*)*
                 })
             }
 

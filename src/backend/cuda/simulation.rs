@@ -305,13 +305,18 @@ impl CudaSimulation {
         let pending = self.host.inserter_pending();
         if let Some(par) = self.host.parallel.as_deref_mut() {
             // All ranks rebuild together: when some rank inserts, removes or has a particle
-            // that moved half the skin. The rebuild is a round trip through the host, where
-            // migration, balancing and the choice of ghosts run as on the CPU backend.
+            // that moved half the skin.
             let local = flags.rebuild != 0 || flags.outside > 0 || self.pairs.rebuild;
             let t_wait = Instant::now();
             let rebuild = par.comm.any(local) || pending;
             par.timers.wait += t_wait.elapsed().as_secs_f64();
-            if rebuild {
+            if rebuild && self.rebuild_stays_on_device(pending, flags.outside > 0) {
+                // Migration and the ghosts' choice with the state left on the device
+                // ([`super::exchange`]).
+                self.rebuild_on_device()?;
+            } else if rebuild {
+                // A round trip through the host, where insertion, removal, migration,
+                // balancing and the choice of ghosts run as on the CPU backend.
                 let t_download = Instant::now();
                 self.sync_host()?;
                 let download = t_download.elapsed().as_secs_f64();

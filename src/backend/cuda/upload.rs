@@ -9,6 +9,8 @@ use super::pairs::HistorySource;
 use super::particles::{DeviceParticles, HostParticleArrays};
 use super::simulation::CudaSimulation;
 use super::walls::WallStage;
+use crate::scene::Scene;
+use crate::state::Particles;
 use cudarc::driver::{CudaModule, CudaStream, DeviceRepr};
 use nalgebra::{UnitQuaternion, Vector3};
 use std::sync::Arc;
@@ -26,6 +28,49 @@ pub(super) fn flat_quats(v: &[UnitQuaternion<f64>]) -> Vec<f64> {
             [c.x, c.y, c.z, c.w]
         })
         .collect()
+}
+
+/// Particles `p` of `scene` in the device's layout, with the `device` fields derived: the
+/// template and material of each one's type, its circumscribed radius, and the normal and
+/// tangential stiffness scales `E / r` and `G / r` of its equivalent radius; the particles from
+/// `owned` on are a decomposed run's ghosts.
+pub(super) fn host_arrays(scene: &Scene, p: &Particles, owned: usize) -> HostParticleArrays {
+    let n = p.len();
+    let ghost: Vec<u32> = (0..n).map(|i| u32::from(i >= owned)).collect();
+    let mut tmpl = Vec::with_capacity(n);
+    let mut material = Vec::with_capacity(n);
+    let (mut radius, mut cn, mut ct) = (Vec::new(), Vec::new(), Vec::new());
+    for i in 0..n {
+        let ty = &scene.particle_types[p.kind[i] as usize];
+        let t = &scene.templates[ty.template];
+        let m = &scene.materials[ty.material];
+        tmpl.push(ty.template as u32);
+        material.push(ty.material as u32);
+        radius.push(t.circumscribed_radius * p.scale[i]);
+        let r = t.equivalent_radius * p.scale[i];
+        cn.push(m.youngs_modulus / r);
+        ct.push(m.youngs_modulus / (2.0 * (1.0 + m.poisson_ratio) * r));
+    }
+    HostParticleArrays {
+        scale: p.scale.clone(),
+        radius,
+        cn,
+        ct,
+        mass: p.mass.clone(),
+        position: flat3(&p.position),
+        velocity: flat3(&p.velocity),
+        angular_velocity: flat3(&p.angular_velocity),
+        orientation: flat_quats(&p.orientation),
+        force: flat3(&p.force),
+        torque: flat3(&p.torque),
+        inertia: flat3(&p.inertia),
+        tmpl,
+        material,
+        kind: p.kind.clone(),
+        ghost,
+        contacts: p.contacts.clone(),
+        id: p.id.clone(),
+    }
 }
 
 impl CudaSimulation {
@@ -97,53 +142,14 @@ impl CudaSimulation {
             }
             None => (&h.particles, h.particles.len()),
         };
-        let s = &h.scene;
         let n = p.len();
-        let ghost: Vec<u32> = (0..n).map(|i| u32::from(i >= owned)).collect();
-        let mut tmpl = Vec::with_capacity(n);
-        let mut material = Vec::with_capacity(n);
-        let (mut radius, mut cn, mut ct) = (Vec::new(), Vec::new(), Vec::new());
-        for i in 0..n {
-            let ty = &s.particle_types[p.kind[i] as usize];
-            let t = &s.templates[ty.template];
-            let m = &s.materials[ty.material];
-            tmpl.push(ty.template as u32);
-            material.push(ty.material as u32);
-            radius.push(t.circumscribed_radius * p.scale[i]);
-            let r = t.equivalent_radius * p.scale[i];
-            cn.push(m.youngs_modulus / r);
-            ct.push(m.youngs_modulus / (2.0 * (1.0 + m.poisson_ratio) * r));
-        }
-        self.particles = DeviceParticles::upload(
-            &st,
-            n,
-            HostParticleArrays {
-                scale: p.scale.clone(),
-                radius,
-                cn,
-                ct,
-                mass: p.mass.clone(),
-                position: flat3(&p.position),
-                velocity: flat3(&p.velocity),
-                angular_velocity: flat3(&p.angular_velocity),
-                orientation: flat_quats(&p.orientation),
-                force: flat3(&p.force),
-                torque: flat3(&p.torque),
-                inertia: flat3(&p.inertia),
-                tmpl,
-                material,
-                kind: p.kind.clone(),
-                ghost,
-                contacts: p.contacts.clone(),
-                id: p.id.clone(),
-            },
-        )
-        .map_err(|e| {
-            e.out_of_memory(
-                || format!("the particle arrays of {n} particles"),
-                Some(n * DeviceParticles::BYTES_PER_PARTICLE),
-            )
-        })?;
+        self.particles =
+            DeviceParticles::upload(&st, n, host_arrays(&h.scene, p, owned)).map_err(|e| {
+                e.out_of_memory(
+                    || format!("the particle arrays of {n} particles"),
+                    Some(n * DeviceParticles::BYTES_PER_PARTICLE),
+                )
+            })?;
         // History, as a CSR over the uploaded order, for the coming list build.
         let n_walls = self.walls.as_ref().map_or(0, |w| w.n);
         let HistoryRows {
@@ -152,7 +158,7 @@ impl CudaSimulation {
             spring,
             wall_spring,
         } = history_rows(&p.id, &h.history, n_walls);
-        let history = HistorySource {
+        let history = HistorySource::Rows {
             offset: st.clone_htod(&offset)?,
             partner: st.clone_htod(&partner)?,
             spring: st.clone_htod(&spring)?,

@@ -151,8 +151,19 @@ impl WallStage {
         n: usize,
         spring: &[f64],
     ) -> Result<(), CudaError> {
+        self.install(st, n, st.clone_htod(spring)?)
+    }
+
+    /// Per-particle buffers for `n` particles, the springs `spring` already on the device
+    /// (`n · walls` records); the list is due.
+    pub(super) fn install(
+        &mut self,
+        st: &Arc<CudaStream>,
+        n: usize,
+        spring: CudaSlice<f64>,
+    ) -> Result<(), CudaError> {
         let nw = (n * self.n).max(1);
-        self.spring_in = st.clone_htod(spring)?;
+        self.spring_in = spring;
         self.spring_out = st.alloc_zeros::<f64>(HISTORY_WIDTH * nw)?;
         self.force = st.alloc_zeros::<f64>(3 * n.max(1))?;
         self.torque = st.alloc_zeros::<f64>(3 * n.max(1))?;

@@ -1,0 +1,618 @@
+//! A decomposed run's rebuild on the device (docs/design.md §6): migration and the choice of
+//! ghosts without the rank's state going through the host.
+//!
+//! At a neighbour-list rebuild a GPU rank used to copy its whole state down (particles, the
+//! pair list's outcomes gathered into the contact history), run the CPU backend's exchange on
+//! it and upload everything again: about 100 ms a rebuild for 1.25e5 spheres a rank against
+//! 3.5 ms of stepping per list (docs/performance.md). Here only what the decisions and the
+//! neighbours need crosses the bus:
+//!
+//! 1. down: every slot's ghost flag, global id and centroid (36 bytes a particle), from which
+//!    the host balances, picks the particles that leave ([`crate::domain::migration::leaving`])
+//!    and, after they arrive, plans the halo ([`HaloPlan::new`]) exactly as the CPU backend;
+//! 2. down: the leaving particles' records, and their contact history packed on the device
+//!    (`count_live_refs`, `pack_live_refs` and their wall rows of cuda/halo.cu), sent to their
+//!    new owners as [`pack_particles`] buffers;
+//! 3. down: the records of the particles the neighbours need as ghosts (the outer region),
+//!    exchanged as [`build_ghosts`] does;
+//! 4. up: the arrivals and the ghosts, appended on the device to the particles that stay,
+//!    gathered there ([`DeviceParticles::assemble`]).
+//!
+//! The contact history never comes down whole: the next list build looks each new pair up in
+//! the list before the rebuild (through each particle's slot before it) and then among the
+//! entries the arrivals brought (`remap_history_exchanged` of cuda/neighbor.cu), and the walls'
+//! springs are gathered from the old slots (`gather_live_wall_springs`). Both keep live contacts
+//! only, the union the host round trip holds, so the trajectory is bitwise the same.
+//! `POLYDEM_GPU_EXCHANGE` chooses the path (`device` or `host`; see [`ON_DEVICE_BY_DEFAULT`]).
+//!
+//! Insertion, removal through an open face, and the first rebuild after an upload (no list
+//! yet) still take the round trip: they are rare, and need the host's state anyway.
+
+use super::error::CudaError;
+use super::history::history_rows;
+use super::launch::{cfg, zeros};
+use super::layout::{CONTACT_LIVE, HISTORY_WIDTH, history_state};
+use super::pairs::{HistorySource, PairList};
+use super::particles::{DeviceParticles, Gather};
+use super::simulation::CudaSimulation;
+use super::upload::host_arrays;
+use crate::contact::{ContactHistory, ContactKey, ContactState};
+use crate::domain::ExchangeError;
+use crate::domain::halo::{HaloPlan, build_ghosts};
+use crate::domain::migration::{leaving, pack_particles, unpack_particles};
+use crate::pipeline::SimulationError;
+use crate::state::Particles;
+use cudarc::driver::{CudaSlice, CudaStream};
+use nalgebra::Vector3;
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Whether rebuilds stay on the device when `POLYDEM_GPU_EXCHANGE` is unset. Off until the path
+/// has run on a GPU (its tests are `tests/mpi_decomposition.rs`,
+/// `gpu_rebuilds_on_the_device_are_the_host_round_trip`, and the GPU ranks' tests with it on).
+const ON_DEVICE_BY_DEFAULT: bool = false;
+
+/// No slot on this rank before the rebuild (`cuda/common.cuh: PD_NO_SLOT`).
+const NO_SLOT: u32 = u32::MAX;
+
+/// The contact history for the first list build after a rebuild on the device: the list
+/// before it with the particles' global ids then, each new upload index's slot before it, and
+/// the entries migrating particles brought, sorted by key.
+pub(super) struct ExchangedHistory {
+    old: PairList,
+    old_id: CudaSlice<u64>,
+    /// Per particle of the new upload order: its slot before the rebuild, or [`NO_SLOT`].
+    old_slot: CudaSlice<u32>,
+    n_recv: usize,
+    recv_a: CudaSlice<u64>,
+    recv_b: CudaSlice<u64>,
+    recv_spring: CudaSlice<f64>,
+}
+
+impl ExchangedHistory {
+    /// The springs of the `np` new pairs `pairs` (slots after the build's reordering `order`;
+    /// `id` the particles' global ids in it) into `spring`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn remap(
+        &self,
+        k: &super::launch::Kernels,
+        st: &Arc<CudaStream>,
+        np: usize,
+        pairs: &CudaSlice<i32>,
+        id: &CudaSlice<u64>,
+        order: &CudaSlice<u32>,
+        spring: &mut CudaSlice<f64>,
+    ) -> Result<(), CudaError> {
+        let (npi, nr) = (np as i32, self.n_recv as i32);
+        let o = &self.old;
+        // SAFETY: `old_slot` covers the upload order `order` indexes, and its slots the old
+        // list's particles; the received arrays hold n_recv entries, `spring` np records.
+        unsafe {
+            k.remap_history_exchanged(
+                st,
+                cfg(np),
+                &npi,
+                pairs,
+                id,
+                order,
+                &self.old_slot,
+                &o.ref_offset,
+                &o.refs,
+                &o.pairs,
+                &self.old_id,
+                &o.contact,
+                &o.spring_in,
+                &nr,
+                &self.recv_a,
+                &self.recv_b,
+                &self.recv_spring,
+                spring,
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// The owned slots (`ghost[i] == 0`) that are not among `leaving`, in slot order: the
+/// particles that stay on the rank, new indices `0..` of its arrays.
+fn staying(ghost: &[u32], leaving: &[u32]) -> Vec<u32> {
+    let mut gone = vec![false; ghost.len()];
+    for &s in leaving {
+        gone[s as usize] = true;
+    }
+    (0..ghost.len() as u32)
+        .filter(|&s| ghost[s as usize] == 0 && !gone[s as usize])
+        .collect()
+}
+
+/// Where each particle of a rank's arrays after a rebuild on the device was before it: the
+/// particles that stay (new indices `0..kept`), then the arrivals and the ghosts (`tail`).
+#[derive(Debug, PartialEq)]
+struct RebuildLayout {
+    /// Per new index, its slot before, or [`NO_SLOT`]: a particle that stays, its own; an
+    /// arrival or a ghost, the slot where it was a ghost or that it left from.
+    old_slot: Vec<u32>,
+    /// Per new index, the old slot whose live wall contacts it keeps, or [`NO_SLOT`]: a
+    /// particle that stays, its own; a ghost that was owned here (it left), its own too, as
+    /// the host's history would keep them; an arrival none (it brings its own).
+    wall_source: Vec<u32>,
+}
+
+impl RebuildLayout {
+    /// The layout for old slots of flags `ghost` and global ids `id`, the slots `kept` that
+    /// stay and `leaving` that left, and after the kept ones the particles of ids `tail`, of
+    /// which the first `arrivals` arrived (the rest are ghosts).
+    fn new(
+        ghost: &[u32],
+        id: &[u64],
+        kept: &[u32],
+        leaving: &[u32],
+        tail: &[u64],
+        arrivals: usize,
+    ) -> Self {
+        // Only ghosts and leavers can come back as arrivals or ghosts: a few among many.
+        let mut was: HashMap<u64, u32> = HashMap::new();
+        for s in (0..ghost.len() as u32).filter(|&s| ghost[s as usize] != 0) {
+            was.insert(id[s as usize], s);
+        }
+        for &s in leaving {
+            was.insert(id[s as usize], s);
+        }
+        let before: Vec<u32> = tail
+            .iter()
+            .map(|g| was.get(g).copied().unwrap_or(NO_SLOT))
+            .collect();
+        let old_slot = kept.iter().chain(&before).copied().collect();
+        let wall_source = kept
+            .iter()
+            .copied()
+            .chain(before.iter().enumerate().map(|(t, &s)| {
+                let left_from_here = s != NO_SLOT && ghost[s as usize] == 0;
+                if t >= arrivals && left_from_here {
+                    s
+                } else {
+                    NO_SLOT
+                }
+            }))
+            .collect();
+        RebuildLayout {
+            old_slot,
+            wall_source,
+        }
+    }
+}
+
+/// `v` cut to `n` values.
+fn first<T>(mut v: Vec<T>, n: usize) -> Vec<T> {
+    v.truncate(n);
+    v
+}
+
+impl CudaSimulation {
+    /// Whether this rebuild of a decomposed run can stay on the device: no insertion is due on
+    /// any rank (`pending` is the same on all), no particle left through an open face, and the
+    /// device holds a list to carry the history from. A collective: every rank calls it at
+    /// every rebuild and all get the same answer.
+    pub(super) fn rebuild_stays_on_device(&self, pending: bool, outside: bool) -> bool {
+        let par = self.host.parallel.as_deref().expect("a decomposed run");
+        let local = outside || self.pairs.list.is_none();
+        let host = par.comm.any(local) || pending;
+        !host
+            && crate::tuning::Tuning::get()
+                .gpu_exchange_on_device
+                .unwrap_or(ON_DEVICE_BY_DEFAULT)
+    }
+
+    /// The rebuild of a decomposed run on the device (see the module docs): balance,
+    /// migration and the ghosts chosen afresh, the particle arrays assembled anew on the
+    /// device, and the next list build set to carry the history over.
+    pub(super) fn rebuild_on_device(&mut self) -> Result<(), CudaError> {
+        let st = self.gpu.stream.clone();
+        let t_down = Instant::now();
+        let n = self.particles.n;
+        let ghost = first(st.clone_dtoh(&self.particles.ghost)?, n);
+        let id = first(st.clone_dtoh(&self.particles.id)?, n);
+        let position: Vec<Vector3<f64>> = first(st.clone_dtoh(&self.particles.position)?, 3 * n)
+            .chunks_exact(3)
+            .map(|c| Vector3::new(c[0], c[1], c[2]))
+            .collect();
+        let owned: Vec<u32> = (0..n as u32).filter(|&i| ghost[i as usize] == 0).collect();
+        let owned_x: Vec<Vector3<f64>> = owned.iter().map(|&s| position[s as usize]).collect();
+        let mut download = t_down.elapsed().as_secs_f64();
+        let step = self.host.step;
+        let ghosts_error =
+            |message: String| SimulationError::from(ExchangeError::Ghosts { step, message });
+
+        // Balance, then who leaves for whom.
+        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
+        let t0 = Instant::now();
+        let redrawn = par
+            .rebalance_if_needed(&owned_x)
+            .map_err(|e| SimulationError::from(ExchangeError::from(e)))?;
+        par.timers.balance += t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        let (me, ranks) = (par.rank(), par.comm.size());
+        let leaving = leaving(&par.subdomains, me, ranks, &owned_x);
+        // Their slots, rank by rank in `leaving`'s order, which the sends below follow.
+        let leaving_slots: Vec<u32> = leaving.iter().flatten().map(|&i| owned[i]).collect();
+        let moved = leaving_slots.len();
+        let t_pack = Instant::now();
+        let (batch, entries) = self.leavers_state(&leaving_slots)?;
+        let pack = t_pack.elapsed().as_secs_f64();
+        download += pack;
+        let history = ContactHistory::from_entries(entries);
+        let mut at = 0;
+        let sends: Vec<Vec<u8>> = leaving
+            .iter()
+            .map(|which| {
+                let range: Vec<usize> = (at..at + which.len()).collect();
+                at += which.len();
+                if which.is_empty() {
+                    Vec::new()
+                } else {
+                    pack_particles(&batch, &range, &history)
+                }
+            })
+            .collect();
+        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
+        let received = par.comm.all_to_all(&sends);
+        let mut arrivals = Particles::default();
+        let mut brought = Vec::new();
+        for buf in &received {
+            brought.extend(unpack_particles(buf, &mut arrivals));
+        }
+        par.timers.migrated += moved as u64;
+        par.timers.migrate += t0.elapsed().as_secs_f64() - pack;
+
+        // The particles that stay, in slot order, then the arrivals: the new owned numbering.
+        let t0 = Instant::now();
+        let kept = staying(&ghost, &leaving_slots);
+        let new_x: Vec<Vector3<f64>> = kept
+            .iter()
+            .map(|&s| position[s as usize])
+            .chain(arrivals.position.iter().copied())
+            .collect();
+        par.plan = HaloPlan::new(&par.subdomains, me, &new_x);
+        let (compact, sent) = par.plan.compact();
+        let n_kept = kept.len();
+        let sent_kept: Vec<u32> = sent
+            .iter()
+            .filter(|&&m| (m as usize) < n_kept)
+            .map(|&m| kept[m as usize])
+            .collect();
+        let t_src = Instant::now();
+        let mut source = self.download_particles(&sent_kept)?;
+        let sources = t_src.elapsed().as_secs_f64();
+        download += sources;
+        let arrived: Vec<usize> = sent
+            .iter()
+            .filter(|&&m| (m as usize) >= n_kept)
+            .map(|&m| m as usize - n_kept)
+            .collect();
+        source.extend_from(&arrivals.select(&arrived));
+        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
+        par.ghosts = build_ghosts(&*par.comm, &compact, &source, &self.host.scene);
+        par.timers.rebuilds += 1;
+        par.timers.device_rebuilds += 1;
+        let owned_ids: Vec<u64> = kept
+            .iter()
+            .map(|&s| id[s as usize])
+            .chain(arrivals.id.iter().copied())
+            .collect();
+        par.check_ghosts(&owned_ids).map_err(ghosts_error)?;
+        par.timers.halo += t0.elapsed().as_secs_f64() - sources;
+
+        // Up: the arrivals and the ghosts after the particles that stay.
+        let t_up = Instant::now();
+        let n_arrivals = arrivals.len();
+        let mut tail = arrivals;
+        tail.extend_from(&par.ghosts.particles);
+        let k = &self.gpu.k;
+        let kept_slots = st.clone_htod(&at_least_one(kept.clone()))?;
+        let n_tail = tail.len();
+        let particles = DeviceParticles::assemble(
+            k,
+            &st,
+            &self.particles,
+            (&kept_slots, n_kept),
+            host_arrays(&self.host.scene, &tail, n_arrivals),
+            n_tail,
+        )
+        .map_err(|e| {
+            let n = n_kept + n_tail;
+            e.out_of_memory(
+                || format!("the particle arrays of {n} particles"),
+                Some(n * DeviceParticles::BYTES_PER_PARTICLE),
+            )
+        })?;
+        let n_new = particles.n;
+
+        let layout = RebuildLayout::new(&ghost, &id, &kept, &leaving_slots, &tail.id, n_arrivals);
+        // The walls' springs: a particle that stays keeps its live ones, an arrival takes
+        // those it brought, a ghost that was owned here keeps its own (the host's history
+        // would; a ghost's walls are its owner's to evaluate).
+        let received = ContactHistory::from_entries(brought);
+        let wall_spring = match &self.walls {
+            Some(w) if w.n > 0 => {
+                let mut spring = zeros::<f64>(&st, HISTORY_WIDTH * w.n * n_new)?;
+                let source_slot = st.clone_htod(&at_least_one(layout.wall_source.clone()))?;
+                let (nn, nw) = (n_new as i32, w.n as i32);
+                // SAFETY: `source_slot` holds n_new slots of the old arrays (or NO_SLOT), the
+                // old flags and springs a row per old slot and wall, `spring` n_new · walls.
+                unsafe {
+                    k.gather_live_wall_springs(
+                        &st,
+                        cfg(n_new * w.n),
+                        &nn,
+                        &nw,
+                        &source_slot,
+                        &w.contact,
+                        &w.spring_in,
+                        &mut spring,
+                    )?;
+                }
+                let rows = history_rows(&tail.id[..n_arrivals], &received, w.n).wall_spring;
+                let (from, len) = (
+                    HISTORY_WIDTH * w.n * n_kept,
+                    HISTORY_WIDTH * w.n * n_arrivals,
+                );
+                if n_arrivals > 0 {
+                    st.memcpy_htod(&rows[..len], &mut spring.slice_mut(from..from + len))?;
+                }
+                Some(spring)
+            }
+            _ => None,
+        };
+
+        // The pair entries the arrivals brought, sorted by key, for the build's look-up.
+        let recv: Vec<&(ContactKey, ContactState)> = received
+            .entries()
+            .iter()
+            .filter(|(key, _)| key.wall_index().is_none())
+            .collect();
+        let recv_a: Vec<u64> = recv.iter().map(|(key, _)| key.a).collect();
+        let recv_b: Vec<u64> = recv.iter().map(|(key, _)| key.b).collect();
+        let recv_spring: Vec<f64> = recv
+            .iter()
+            .flat_map(|(_, s)| super::layout::history_record(s))
+            .collect();
+        let old_list = self
+            .pairs
+            .list
+            .take()
+            .ok_or(super::error::HaloError::MissingHistory)?;
+        let old = std::mem::replace(&mut self.particles, particles);
+        let history = ExchangedHistory {
+            old: old_list,
+            old_id: old.id,
+            old_slot: st.clone_htod(&at_least_one(layout.old_slot))?,
+            n_recv: recv.len(),
+            recv_a: st.clone_htod(&at_least_one(recv_a))?,
+            recv_b: st.clone_htod(&at_least_one(recv_b))?,
+            recv_spring: st.clone_htod(&at_least_one(recv_spring))?,
+        };
+        if redrawn {
+            // The walls this rank keeps follow its new box.
+            self.host.restrict_walls();
+            self.upload_walls()?;
+        }
+        if let (Some(w), Some(spring)) = (&mut self.walls, wall_spring) {
+            w.install(&st, n_new, spring)?;
+        }
+        self.pairs
+            .reset(HistorySource::Exchanged(Box::new(history)));
+        self.halo.reset();
+        self.host_current = false;
+        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
+        par.timers.device_download += download;
+        par.timers.device_upload += t_up.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// The particles at device slots `slots`, copied down (host fields only).
+    fn download_particles(&self, slots: &[u32]) -> Result<Particles, CudaError> {
+        let mut p = Particles::default();
+        if slots.is_empty() {
+            return Ok(p);
+        }
+        let st = &self.gpu.stream;
+        let d = st.clone_htod(slots)?;
+        let rows = self
+            .particles
+            .download_rows(&self.gpu.k, st, &d, slots.len())?;
+        rows.copy_into(&mut p, slots.len());
+        Ok(p)
+    }
+
+    /// The particles at device slots `slots` (leaving this rank) and the live contact history
+    /// they are members of: their pairs, packed on the device, and their walls.
+    fn leavers_state(
+        &self,
+        slots: &[u32],
+    ) -> Result<(Particles, Vec<(ContactKey, ContactState)>), CudaError> {
+        let p = self.download_particles(slots)?;
+        let mut entries = Vec::new();
+        if slots.is_empty() {
+            return Ok((p, entries));
+        }
+        let st = &self.gpu.stream;
+        let k = &self.gpu.k;
+        let count = slots.len();
+        let ci = count as i32;
+        let d = st.clone_htod(slots)?;
+        if let Some(list) = &self.pairs.list {
+            let mut counts = zeros::<u32>(st, count)?;
+            // SAFETY: `d` holds count slots below n, the list's references cover n slots.
+            unsafe {
+                k.count_live_refs(
+                    st,
+                    cfg(count),
+                    &ci,
+                    &d,
+                    &list.ref_offset,
+                    &list.refs,
+                    &list.contact,
+                    &mut counts,
+                )?;
+            }
+            let counts = first(st.clone_dtoh(&counts)?, count);
+            let mut offset = Vec::with_capacity(count);
+            let mut rows = 0u32;
+            for c in &counts {
+                offset.push(rows);
+                rows += c;
+            }
+            let rows = rows as usize;
+            if rows > 0 {
+                let offset = st.clone_htod(&offset)?;
+                let mut a = zeros::<u64>(st, rows)?;
+                let mut b = zeros::<u64>(st, rows)?;
+                let mut spring = zeros::<f64>(st, HISTORY_WIDTH * rows)?;
+                // SAFETY: as above; the outputs hold the rows the scanned counts reach.
+                unsafe {
+                    k.pack_live_refs(
+                        st,
+                        cfg(count),
+                        &ci,
+                        &d,
+                        &list.ref_offset,
+                        &list.refs,
+                        &list.pairs,
+                        &self.particles.id,
+                        &list.contact,
+                        &list.spring_in,
+                        &offset,
+                        &mut a,
+                        &mut b,
+                        &mut spring,
+                    )?;
+                }
+                let (a, b) = (
+                    first(st.clone_dtoh(&a)?, rows),
+                    first(st.clone_dtoh(&b)?, rows),
+                );
+                let spring = first(st.clone_dtoh(&spring)?, HISTORY_WIDTH * rows);
+                for r in 0..rows {
+                    let s = &spring[HISTORY_WIDTH * r..HISTORY_WIDTH * (r + 1)];
+                    entries.push((ContactKey::particles(a[r], b[r]), history_state(s)));
+                }
+            }
+        }
+        if let Some(w) = self.walls.as_ref().filter(|w| w.n > 0) {
+            let flags = first(
+                st.clone_dtoh(&u32::gather(k, st, count, w.n, &w.contact, &d)?)?,
+                count * w.n,
+            );
+            let springs = first(
+                st.clone_dtoh(&f64::gather(
+                    k,
+                    st,
+                    count,
+                    HISTORY_WIDTH * w.n,
+                    &w.spring_in,
+                    &d,
+                )?)?,
+                HISTORY_WIDTH * w.n * count,
+            );
+            for (m, &g) in p.id.iter().enumerate() {
+                for wall in 0..w.n {
+                    let s = m * w.n + wall;
+                    if flags[s] == CONTACT_LIVE {
+                        let spring = &springs[HISTORY_WIDTH * s..HISTORY_WIDTH * (s + 1)];
+                        entries.push((ContactKey::wall(g, wall), history_state(spring)));
+                    }
+                }
+            }
+        }
+        Ok((p, entries))
+    }
+}
+
+/// `v`, or one zero when it is empty (every device buffer has an address).
+fn at_least_one<T: Default>(mut v: Vec<T>) -> Vec<T> {
+    if v.is_empty() {
+        v.push(T::default());
+    }
+    v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// On random ranks (slots of owned particles and ghosts shuffled, some owned ones leaving;
+    /// arrivals and ghosts after the rebuild drawn among the old ghosts, the leavers and new
+    /// ids): the particles that stay are the owned ones that did not leave, in slot order; a
+    /// new particle's old slot holds its id, and is missing exactly when it was not on the
+    /// rank; the wall springs come from its own slot for those that stay and for ghosts that
+    /// left from here, from nowhere for the others.
+    #[test]
+    fn each_particle_after_a_rebuild_is_traced_to_its_slot_before() {
+        let mut rng = Rng::new(41);
+        for case in 0..50 {
+            let n = 50 + case * 7;
+            let ghost: Vec<u32> = (0..n).map(|_| u32::from(rng.uniform() < 0.3)).collect();
+            let id: Vec<u64> = (0..n as u64).map(|i| 1000 + 3 * i + case as u64).collect();
+            let owned: Vec<u32> = (0..n as u32).filter(|&s| ghost[s as usize] == 0).collect();
+            let leaving: Vec<u32> = owned
+                .iter()
+                .copied()
+                .filter(|_| rng.uniform() < 0.2)
+                .collect();
+            let kept = staying(&ghost, &leaving);
+            let want: Vec<u32> = owned
+                .iter()
+                .copied()
+                .filter(|s| !leaving.contains(s))
+                .collect();
+            assert_eq!(kept, want);
+            // Arrivals: old ghosts or new ids; ghosts: old ghosts, leavers or new ids.
+            let old_ghosts: Vec<u64> = (0..n).filter(|&s| ghost[s] != 0).map(|s| id[s]).collect();
+            let mut fresh = 10_000_000 + case as u64 * 1000;
+            let mut pick = |from: &[u64], rng: &mut Rng| -> u64 {
+                if from.is_empty() || rng.uniform() < 0.4 {
+                    fresh += 1;
+                    fresh
+                } else {
+                    from[(rng.uniform() * from.len() as f64) as usize % from.len()]
+                }
+            };
+            let left: Vec<u64> = leaving.iter().map(|&s| id[s as usize]).collect();
+            let mut tail: Vec<u64> = (0..8).map(|_| pick(&old_ghosts, &mut rng)).collect();
+            let arrivals = tail.len();
+            let back: Vec<u64> = old_ghosts.iter().chain(&left).copied().collect();
+            tail.extend((0..15).map(|_| pick(&back, &mut rng)));
+            tail.sort_unstable();
+            tail.dedup();
+            let arrivals = arrivals.min(tail.len());
+            let l = RebuildLayout::new(&ghost, &id, &kept, &leaving, &tail, arrivals);
+            assert_eq!(l.old_slot.len(), kept.len() + tail.len());
+            assert_eq!(l.wall_source.len(), l.old_slot.len());
+            let new_ids: Vec<u64> = kept
+                .iter()
+                .map(|&s| id[s as usize])
+                .chain(tail.iter().copied())
+                .collect();
+            for (j, (&s, &g)) in l.old_slot.iter().zip(&new_ids).enumerate() {
+                let here_before = (0..n).find(|&t| id[t] == g);
+                match here_before {
+                    Some(t) => assert_eq!(s, t as u32, "new index {j}, id {g}"),
+                    None => assert_eq!(s, NO_SLOT, "new index {j}, id {g}"),
+                }
+                let wall = l.wall_source[j];
+                if j < kept.len() {
+                    assert_eq!(wall, s);
+                } else if j < kept.len() + arrivals {
+                    assert_eq!(wall, NO_SLOT);
+                } else if s != NO_SLOT && ghost[s as usize] == 0 {
+                    assert!(leaving.contains(&s));
+                    assert_eq!(wall, s);
+                } else {
+                    assert_eq!(wall, NO_SLOT);
+                }
+            }
+        }
+    }
+}
