@@ -57,15 +57,21 @@ PD_DEVICE void half_kick_particle(int i, double* velocity, double* angular_veloc
     *w_out = rotate(q, v3(pi.x / I.x, pi.y / I.y, pi.z / I.z));
 }
 
-// Periodic wrap of one coordinate into the box (Bounds::wrap), x = min + (x − min) mod L with
-// the Euclidean remainder.
+// Periodic wrap of one coordinate into [lo, hi) (Bounds::wrap, the same arithmetic): outside,
+// x = lo + (x − lo) mod L with the Euclidean remainder, and lo where that rounds to hi; inside,
+// x unchanged, so that wrapping twice (the device, then the host at a round trip) is wrapping
+// once.
 PD_DEVICE double wrap_coordinate(double x, double lo, double hi) {
+    if (x >= lo && x < hi) {
+        return x;
+    }
     double l = hi - lo;
     double r = fmod(x - lo, l);
     if (r < 0.0) {
         r += l; // rem_euclid
     }
-    return lo + r;
+    double y = lo + r;
+    return y >= hi ? lo : y;
 }
 
 // The first half of a step for particle i, in one pass over its state (the stage order of

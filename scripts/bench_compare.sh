@@ -7,7 +7,10 @@
 # Usage: scripts/bench_compare.sh BEFORE_BIN AFTER_BIN OUT.jsonl ROUNDS "SCENE[:WARMUP:STEPS[:PRECISION]] …"
 #   e.g. scripts/bench_compare.sh old/polydem target/release/polydem out.jsonl 2 \
 #          "launch/bench/settled/dodecahedra_1e6.toml:10:50:mixed launch/bench/settled/spheres_1e6.toml:20:200"
-# BENCH_ARGS adds arguments to every bench (e.g. "--backend cuda").
+# BENCH_ARGS adds arguments to every bench (e.g. "--backend cuda"); LAUNCH prefixes every run
+# (e.g. "mpirun --oversubscribe -n 2"); BEFORE_ENV and AFTER_ENV set variables for one side
+# (e.g. the same binary twice with BEFORE_ENV="POLYDEM_GPU_EXCHANGE=host"
+# AFTER_ENV="POLYDEM_GPU_EXCHANGE=device").
 set -euo pipefail
 [ $# -eq 5 ] || { sed -n 2,10p "$0" >&2; exit 2; }
 before=$1 after=$2 out=$3 rounds=$4 scenes=$5
@@ -20,10 +23,10 @@ for spec in $scenes; do
     [ -n "${precision:-}" ] && args+=(--gpu-precision "$precision")
     for round in $(seq 1 "$rounds"); do
         for label in before after; do
-            bin=$before
-            [ "$label" = after ] && bin=$after
+            bin=$before vars=${BEFORE_ENV:-}
+            [ "$label" = after ] && bin=$after vars=${AFTER_ENV:-}
             # shellcheck disable=SC2086
-            if report=$("$bin" bench "$scene" "${args[@]}" ${BENCH_ARGS:-} 2>/dev/null); then
+            if report=$(env $vars ${LAUNCH:-} "$bin" bench "$scene" "${args[@]}" ${BENCH_ARGS:-} 2>/dev/null); then
                 python3 -c 'import json,sys; r=json.loads(sys.argv[3]); print(json.dumps({"label": sys.argv[1], "round": int(sys.argv[2]), **r}))' \
                     "$label" "$round" "$report" >> "$out"
                 echo "$label $round $scene: $(grep -o '"particle_steps_per_second": [0-9.e+]*' <<<"$report")"

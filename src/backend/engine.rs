@@ -74,6 +74,11 @@ impl Engine {
         self.backend.host()
     }
 
+    /// See [`Backend::particle_count`].
+    pub fn particle_count(&self) -> usize {
+        self.backend.particle_count()
+    }
+
     /// See [`Backend::host_mut`].
     pub fn host_mut(&mut self) -> &mut Simulation {
         self.backend.host_mut()

@@ -27,9 +27,15 @@ pub trait Backend {
     /// Advances one time step (the stages of docs/design.md §1).
     fn step(&mut self) -> Result<()>;
 
-    /// The host simulation: time, step, dt, scene and particle count are always current; the
-    /// particle state and statistics only after [`Backend::sync`].
+    /// The host simulation: time, step, dt and scene are always current; the particle state
+    /// and statistics only after [`Backend::sync`] (the count: [`Backend::particle_count`]).
     fn host(&self) -> &Simulation;
+
+    /// Particles this rank owns now, without a sync (a GPU rank's rebuilds on the device move
+    /// particles between ranks without updating the host's copy).
+    fn particle_count(&self) -> usize {
+        self.host().particles.len()
+    }
 
     /// The host simulation for its bookkeeping (timers, counters), which the backend does
     /// not hold elsewhere; its particle state may be stale (see [`Backend::host`]).

@@ -41,15 +41,27 @@ impl Bounds {
         d
     }
 
-    /// Wraps a position into the box along periodic axes.
+    /// Wraps a position into the box along periodic axes: a coordinate outside
+    /// `[min, max)` becomes `min + (x − min) mod L` (Euclidean remainder), one inside is left
+    /// as it is. So a second wrap changes nothing: `min + (x − min)` need not give `x` back
+    /// in floating point, and a coordinate just below `min` can round to `max` itself, which
+    /// is taken as `min` (`wrap_coordinate` of cuda/integrate.cu, the same arithmetic).
     pub fn wrap(&self, x: &mut Vector3<f64>) {
         for k in 0..3 {
             if self.periodic[k] {
-                let l = self.max[k] - self.min[k];
-                x[k] = self.min[k] + (x[k] - self.min[k]).rem_euclid(l);
+                x[k] = wrap_coordinate(x[k], self.min[k], self.max[k]);
             }
         }
     }
+}
+
+/// One coordinate of [`Bounds::wrap`].
+fn wrap_coordinate(x: f64, lo: f64, hi: f64) -> f64 {
+    if x >= lo && x < hi {
+        return x;
+    }
+    let y = lo + (x - lo).rem_euclid(hi - lo);
+    if y >= hi { lo } else { y }
 }
 
 /// One entry of a particle's sorted pair list: the pair's index and whether the particle is the
@@ -416,6 +428,36 @@ mod tests {
     use crate::rng::Rng;
 
     /// The binned list equals the brute-force all-pairs list, with and without periodic axes.
+    /// A wrapped coordinate lies in [min, max) and wrapping it again leaves it as it is, for
+    /// boxes not at the origin and for coordinates a rounding error below `min` (where
+    /// `min + (x − min) mod L` rounds to `max`), beyond a period, and already inside; and a
+    /// coordinate inside is never moved.
+    #[test]
+    fn wrapping_twice_is_wrapping_once() {
+        let mut rng = crate::rng::Rng::new(8);
+        let mut at_max = 0;
+        for case in 0..20_000 {
+            let lo = rng.range(-3.0, 3.0);
+            let hi = lo + rng.range(0.01, 5.0);
+            let l = hi - lo;
+            let x = match case % 4 {
+                0 => lo - rng.uniform() * 1e-15 * l.max(lo.abs()),
+                1 => rng.range(lo - 3.0 * l, hi + 3.0 * l),
+                2 => hi + rng.uniform() * 1e-15 * l.max(hi.abs()),
+                _ => rng.range(lo, hi),
+            };
+            let once = wrap_coordinate(x, lo, hi);
+            assert!(once >= lo && once < hi, "{x} in [{lo}, {hi}) gave {once}");
+            assert_eq!(wrap_coordinate(once, lo, hi).to_bits(), once.to_bits());
+            if x >= lo && x < hi {
+                assert_eq!(once.to_bits(), x.to_bits());
+            }
+            let plain = lo + (x - lo).rem_euclid(l);
+            at_max += usize::from(plain >= hi);
+        }
+        assert!(at_max > 100, "the rounding to max was met {at_max} times");
+    }
+
     #[test]
     fn pair_list_matches_brute_force() {
         for periodic in [[false; 3], [true, false, true]] {

@@ -207,7 +207,7 @@ fn step_loop(
         if let Err(e) = engine.step() {
             return Err(stopped_unstable(e, &*comm, engine, &dir, id));
         }
-        particle_steps += engine.host().particles.len() as u64;
+        particle_steps += engine.particle_count() as u64;
         let (t, dt) = (engine.host().time, engine.host().dt);
         if frame_at.due(t, dt) {
             out.frame(engine.synced()?)?;

@@ -100,7 +100,7 @@ fn cycle(engine: &mut Engine, steps: u64, factor: Option<f64>) -> Result<f64> {
         engine.step()?;
     }
     let (contacts, _) = engine.contact_counts()?;
-    let z = 2.0 * contacts as f64 / engine.host().particles.len().max(1) as f64;
+    let z = 2.0 * contacts as f64 / engine.particle_count().max(1) as f64;
     let mut rescaled = Ok(());
     engine.edit(|sim| {
         sim.particles.velocity.fill(Vector3::zeros());
@@ -140,7 +140,7 @@ pub fn pack(opts: &PackOptions) -> Result<serde_json::Value> {
         device,
     )
     .with_context(|| format!("{}: placing the particles", opts.scene.display()))?;
-    let n = engine.host().particles.len();
+    let n = engine.particle_count();
     let phi0 = solid_fraction(engine.host());
     let target = opts.contacts;
     let mut cycles = 0u32;

@@ -24,6 +24,10 @@ impl Backend for CudaSimulation {
         &self.host
     }
 
+    fn particle_count(&self) -> usize {
+        CudaSimulation::particle_count(self)
+    }
+
     fn host_mut(&mut self) -> &mut Simulation {
         &mut self.host
     }

@@ -56,11 +56,17 @@ const ON_DEVICE_BY_DEFAULT: bool = false;
 /// No slot on this rank before the rebuild (`cuda/common.cuh: PD_NO_SLOT`).
 const NO_SLOT: u32 = u32::MAX;
 
-/// The contact history for the first list build after a rebuild on the device: the list
-/// before it with the particles' global ids then, each new upload index's slot before it, and
-/// the entries migrating particles brought, sorted by key.
+/// The contact history for the first list build after a rebuild on the device: of the list
+/// before it, what the look-up reads (the pairs, each slot's references, the contact flags and
+/// the springs; the rest of that list is freed at the rebuild, as the round trip frees it
+/// all), the particles' global ids then, each new upload index's slot before it, and the
+/// entries migrating particles brought, sorted by key.
 pub(super) struct ExchangedHistory {
-    old: PairList,
+    old_pairs: CudaSlice<i32>,
+    old_ref_offset: CudaSlice<u32>,
+    old_refs: CudaSlice<u32>,
+    old_contact: CudaSlice<u32>,
+    old_spring: CudaSlice<f64>,
     old_id: CudaSlice<u64>,
     /// Per particle of the new upload order: its slot before the rebuild, or [`NO_SLOT`].
     old_slot: CudaSlice<u32>,
@@ -85,7 +91,6 @@ impl ExchangedHistory {
         spring: &mut CudaSlice<f64>,
     ) -> Result<(), CudaError> {
         let (npi, nr) = (np as i32, self.n_recv as i32);
-        let o = &self.old;
         // SAFETY: `old_slot` covers the upload order `order` indexes, and its slots the old
         // list's particles; the received arrays hold n_recv entries, `spring` np records.
         unsafe {
@@ -97,12 +102,12 @@ impl ExchangedHistory {
                 id,
                 order,
                 &self.old_slot,
-                &o.ref_offset,
-                &o.refs,
-                &o.pairs,
+                &self.old_ref_offset,
+                &self.old_refs,
+                &self.old_pairs,
                 &self.old_id,
-                &o.contact,
-                &o.spring_in,
+                &self.old_contact,
+                &self.old_spring,
                 &nr,
                 &self.recv_a,
                 &self.recv_b,
@@ -190,18 +195,18 @@ fn first<T>(mut v: Vec<T>, n: usize) -> Vec<T> {
 }
 
 impl CudaSimulation {
-    /// Whether this rebuild of a decomposed run can stay on the device: no insertion is due on
-    /// any rank (`pending` is the same on all), no particle left through an open face, and the
-    /// device holds a list to carry the history from. A collective: every rank calls it at
-    /// every rebuild and all get the same answer.
+    /// Whether this rebuild of a decomposed run can stay on the device: it is asked for
+    /// (`POLYDEM_GPU_EXCHANGE`), no insertion is due on any rank (`pending` is the same on
+    /// all), no particle left through an open face, and the device holds a list to carry the
+    /// history from. A collective: every rank calls it at every rebuild and all get the same
+    /// answer, even if the setting reached some ranks and not others.
     pub(super) fn rebuild_stays_on_device(&self, pending: bool, outside: bool) -> bool {
         let par = self.host.parallel.as_deref().expect("a decomposed run");
-        let local = outside || self.pairs.list.is_none();
-        let host = par.comm.any(local) || pending;
-        !host
-            && crate::tuning::Tuning::get()
-                .gpu_exchange_on_device
-                .unwrap_or(ON_DEVICE_BY_DEFAULT)
+        let asked = crate::tuning::Tuning::get()
+            .gpu_exchange_on_device
+            .unwrap_or(ON_DEVICE_BY_DEFAULT);
+        let local = !asked || outside || self.pairs.list.is_none();
+        !(pending || par.comm.any(local))
     }
 
     /// The rebuild of a decomposed run on the device (see the module docs): balance,
@@ -211,12 +216,7 @@ impl CudaSimulation {
         let st = self.gpu.stream.clone();
         let t_down = Instant::now();
         let n = self.particles.n;
-        let ghost = first(st.clone_dtoh(&self.particles.ghost)?, n);
-        let id = first(st.clone_dtoh(&self.particles.id)?, n);
-        let position: Vec<Vector3<f64>> = first(st.clone_dtoh(&self.particles.position)?, 3 * n)
-            .chunks_exact(3)
-            .map(|c| Vector3::new(c[0], c[1], c[2]))
-            .collect();
+        let (ghost, id, position) = self.agree_device(self.centroids())?;
         let owned: Vec<u32> = (0..n as u32).filter(|&i| ghost[i as usize] == 0).collect();
         let owned_x: Vec<Vector3<f64>> = owned.iter().map(|&s| position[s as usize]).collect();
         let mut download = t_down.elapsed().as_secs_f64();
@@ -238,7 +238,7 @@ impl CudaSimulation {
         let leaving_slots: Vec<u32> = leaving.iter().flatten().map(|&i| owned[i]).collect();
         let moved = leaving_slots.len();
         let t_pack = Instant::now();
-        let (batch, entries) = self.leavers_state(&leaving_slots)?;
+        let (batch, entries) = self.agree_device(self.leavers_state(&leaving_slots))?;
         let pack = t_pack.elapsed().as_secs_f64();
         download += pack;
         let history = ContactHistory::from_entries(entries);
@@ -282,7 +282,7 @@ impl CudaSimulation {
             .map(|&m| kept[m as usize])
             .collect();
         let t_src = Instant::now();
-        let mut source = self.download_particles(&sent_kept)?;
+        let mut source = self.agree_device(self.download_particles(&sent_kept))?;
         let sources = t_src.elapsed().as_secs_f64();
         download += sources;
         let arrived: Vec<usize> = sent
@@ -377,14 +377,25 @@ impl CudaSimulation {
             .iter()
             .flat_map(|(_, s)| super::layout::history_record(s))
             .collect();
-        let old_list = self
+        let PairList {
+            pairs: old_pairs,
+            ref_offset: old_ref_offset,
+            refs: old_refs,
+            contact: old_contact,
+            spring_in: old_spring,
+            ..
+        } = self
             .pairs
             .list
             .take()
             .ok_or(super::error::HaloError::MissingHistory)?;
         let old = std::mem::replace(&mut self.particles, particles);
         let history = ExchangedHistory {
-            old: old_list,
+            old_pairs,
+            old_ref_offset,
+            old_refs,
+            old_contact,
+            old_spring,
             old_id: old.id,
             old_slot: st.clone_htod(&at_least_one(layout.old_slot))?,
             n_recv: recv.len(),
@@ -408,6 +419,45 @@ impl CudaSimulation {
         par.timers.device_download += download;
         par.timers.device_upload += t_up.elapsed().as_secs_f64();
         Ok(())
+    }
+
+    /// What the host decides a rebuild from: each slot's ghost flag, global id and centroid.
+    #[allow(clippy::type_complexity)]
+    fn centroids(&self) -> Result<(Vec<u32>, Vec<u64>, Vec<Vector3<f64>>), CudaError> {
+        let (st, p, n) = (&self.gpu.stream, &self.particles, self.particles.n);
+        let position = first(st.clone_dtoh(&p.position)?, 3 * n)
+            .chunks_exact(3)
+            .map(|c| Vector3::new(c[0], c[1], c[2]))
+            .collect();
+        Ok((
+            first(st.clone_dtoh(&p.ghost)?, n),
+            first(st.clone_dtoh(&p.id)?, n),
+            position,
+        ))
+    }
+
+    /// `local`, the outcome of this rank's device copies between two collectives of a
+    /// rebuild, agreed with every rank before the next one: a rank whose copy failed returns
+    /// its error and the others stop with it ([`SimulationError::Stopped`]), rather than wait
+    /// in a collective that rank will not join.
+    fn agree_device<T>(&self, local: Result<T, CudaError>) -> Result<T, CudaError> {
+        let par = self.host.parallel.as_deref().expect("a decomposed run");
+        let failed: Vec<usize> = par
+            .comm
+            .all_gather(&[u8::from(local.is_err())])
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| b.first() == Some(&1))
+            .map(|(r, _)| r)
+            .collect();
+        match local {
+            Ok(_) if !failed.is_empty() => Err(SimulationError::Stopped {
+                step: self.host.step,
+                ranks: failed,
+            }
+            .into()),
+            other => other,
+        }
     }
 
     /// The particles at device slots `slots`, copied down (host fields only).

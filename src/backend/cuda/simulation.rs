@@ -203,6 +203,15 @@ impl CudaSimulation {
             + self.walls.as_ref().map_or(0, WallStage::bytes)
     }
 
+    /// Particles this rank owns now: the host's count, or after a decomposed run's rebuild on
+    /// the device (which leaves the host's copy stale) the device's slots less its ghosts.
+    pub fn particle_count(&self) -> usize {
+        match self.host.parallel.as_deref() {
+            Some(par) if !self.host_current => self.particles.n - par.ghosts.particles.len(),
+            _ => self.host.particles.len(),
+        }
+    }
+
     /// Pairs in the current candidate list.
     pub fn candidate_pairs(&self) -> usize {
         self.pairs.list.as_ref().map_or(0, |p| p.n)
