@@ -79,6 +79,31 @@ impl ContactHistory {
         ContactHistory { entries }
     }
 
+    /// Adds `more` (in any order; a few beside the history, say the entries migrating
+    /// particles bring): the same history as [`ContactHistory::from_entries`] of this one's
+    /// entries followed by `more` (a key held by both keeps `more`'s state), by one merge of
+    /// the sorted `more` into the entries instead of sorting them all again.
+    pub fn merge(&mut self, more: Vec<(ContactKey, ContactState)>) {
+        if more.is_empty() {
+            return;
+        }
+        let more = ContactHistory::from_entries(more).entries;
+        let old = std::mem::take(&mut self.entries);
+        let mut merged = Vec::with_capacity(old.len() + more.len());
+        let mut rest = more.into_iter().peekable();
+        for e in old {
+            while let Some(m) = rest.next_if(|m| m.0 < e.0) {
+                merged.push(m);
+            }
+            match rest.next_if(|m| m.0 == e.0) {
+                Some(m) => merged.push(m),
+                None => merged.push(e),
+            }
+        }
+        merged.extend(rest);
+        self.entries = merged;
+    }
+
     /// The entries, sorted by key.
     pub fn entries(&self) -> &[(ContactKey, ContactState)] {
         &self.entries
@@ -100,5 +125,48 @@ impl ContactHistory {
             .binary_search_by_key(key, |e| e.0)
             .ok()
             .map(|i| &self.entries[i].1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    fn state(rng: &mut Rng) -> ContactState {
+        ContactState {
+            spring: Vector3::new(rng.uniform(), rng.uniform(), rng.uniform()),
+            approach_speed: rng.uniform(),
+            twist: rng.uniform(),
+        }
+    }
+
+    fn key(rng: &mut Rng) -> ContactKey {
+        let a = (rng.uniform() * 60.0) as u64;
+        if rng.uniform() < 0.2 {
+            ContactKey::wall(a, (rng.uniform() * 3.0) as usize)
+        } else {
+            ContactKey::particles(a, (rng.uniform() * 60.0) as u64)
+        }
+    }
+
+    /// Merging entries into a history gives the history of all the entries in order, a key
+    /// held by both (or twice among the new ones) keeping the last state, bit for bit.
+    #[test]
+    fn merging_is_building_from_all_entries() {
+        let mut rng = Rng::new(13);
+        for case in 0..300 {
+            let old: Vec<_> = (0..case % 50)
+                .map(|_| (key(&mut rng), state(&mut rng)))
+                .collect();
+            let more: Vec<_> = (0..case % 17)
+                .map(|_| (key(&mut rng), state(&mut rng)))
+                .collect();
+            let mut merged = ContactHistory::from_entries(old.clone());
+            merged.merge(more.clone());
+            let all: Vec<_> = old.into_iter().chain(more).collect();
+            assert_eq!(merged, ContactHistory::from_entries(all), "case {case}");
+            assert!(merged.entries().windows(2).all(|w| w[0].0 < w[1].0));
+        }
     }
 }

@@ -147,12 +147,10 @@ pub fn migrate(
     let moved = gone.len();
     let received = comm.all_to_all(&sends);
     p.remove(&gone);
-    let mut entries = history.entries().to_vec();
+    let mut arrived = Vec::new();
     for buf in &received {
-        entries.extend(unpack_particles(buf, p));
+        arrived.extend(unpack_particles(buf, p));
     }
-    if received.iter().any(|b| !b.is_empty()) {
-        *history = ContactHistory::from_entries(entries);
-    }
+    history.merge(arrived);
     moved
 }

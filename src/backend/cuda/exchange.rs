@@ -382,7 +382,7 @@ impl CudaSimulation {
             ref_offset: old_ref_offset,
             refs: old_refs,
             contact: old_contact,
-            spring_in: old_spring,
+            spring: old_spring,
             ..
         } = self
             .pairs
@@ -531,7 +531,7 @@ impl CudaSimulation {
                         &list.pairs,
                         &self.particles.id,
                         &list.contact,
-                        &list.spring_in,
+                        &list.spring,
                         &offset,
                         &mut a,
                         &mut b,

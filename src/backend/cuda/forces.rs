@@ -110,8 +110,8 @@ impl CudaSimulation {
             dt,
             kick,
         )?;
-        // The springs just computed are the history of the next evaluation.
-        std::mem::swap(&mut pairs.spring_in, &mut pairs.spring_out);
+        // The walls' springs just computed are the history of the next evaluation (the pairs'
+        // were updated in place, `PairList::spring`).
         if let Some(w) = &mut self.walls {
             std::mem::swap(&mut w.spring_in, &mut w.spring_out);
         }

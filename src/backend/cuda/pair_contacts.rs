@@ -27,8 +27,9 @@ impl PairStage {
             p: *view,
             materials: ptr(&gpu.materials, st),
             n_materials,
-            spring_in: ptr(&pairs.spring_in, st),
-            spring_out: ptr(&pairs.spring_out, st),
+            // One buffer, read and written in place (`PairList::spring`).
+            spring_in: ptr(&pairs.spring, st),
+            spring_out: ptr(&pairs.spring, st),
             out: PairOutputs {
                 forces: ptr(&pairs.forces, st),
                 energy: ptr(&pairs.energy, st),

@@ -31,8 +31,11 @@ pub(super) struct PairList {
     pub(super) offset: Option<CudaSlice<u32>>,
     pub(super) pairs: CudaSlice<i32>,
     pub(super) axes: CudaSlice<f64>,
-    pub(super) spring_in: CudaSlice<f64>,
-    pub(super) spring_out: CudaSlice<f64>,
+    /// Each pair's contact history ([`HISTORY_WIDTH`] values): read and written in place by
+    /// the one thread that settles the pair in a step (`pair_contact_law` reads the record
+    /// before it writes it; a pair without contact has it cleared, unread), so one buffer
+    /// serves as last step's history and this step's.
+    pub(super) spring: CudaSlice<f64>,
     pub(super) forces: CudaSlice<f64>,
     pub(super) energy: CudaSlice<f64>,
     pub(super) contact: CudaSlice<u32>,
@@ -71,11 +74,10 @@ impl PairList {
         Ok(contact)
     }
 
-    /// The last evaluation's outcomes, copied down (its springs are in `spring_in` after the
-    /// swap that ends a step).
+    /// The last evaluation's outcomes, copied down.
     pub(super) fn outcomes(&self, st: &Arc<CudaStream>) -> Result<PairOutcomes, CudaError> {
         let (slots, contact) = (self.slots(st)?, self.flags(st)?);
-        let mut spring = st.clone_dtoh(&self.spring_in)?;
+        let mut spring = st.clone_dtoh(&self.spring)?;
         spring.truncate(HISTORY_WIDTH * self.n);
         let mut energy = st.clone_dtoh(&self.energy)?;
         energy.truncate(self.n);
@@ -106,8 +108,7 @@ impl PairList {
             + b(&self.bucket_count)
             + b(&self.bucket_fill)
             + b(&self.axes)
-            + b(&self.spring_in)
-            + b(&self.spring_out)
+            + b(&self.spring)
             + b(&self.forces)
             + b(&self.energy)
             + b(&self.contact)
@@ -117,11 +118,11 @@ impl PairList {
 }
 
 /// Device bytes per pair of a list ([`PairStage::allocate_list`]): the pair, its two
-/// references, the cached separating axis, the springs in and out, the forces, energy and
-/// contact flag, the deferred index and, for polyhedra, the staged planes (`staged_bytes`),
+/// references, the cached separating axis, the spring (one record, updated in place), the
+/// forces, energy and contact flag, the deferred index and, for polyhedra, the staged planes (`staged_bytes`),
 /// the plane-count bucket and the bucket order.
 pub(super) fn pair_bytes(spheres: bool, staged_bytes: usize) -> usize {
-    let common = 2 * 4 + 2 * 4 + 3 * 8 + 2 * HISTORY_WIDTH * 8 + 9 * 8 + 8 + 4 + 4;
+    let common = 2 * 4 + 2 * 4 + 3 * 8 + HISTORY_WIDTH * 8 + 9 * 8 + 8 + 4 + 4;
     if spheres {
         common
     } else {
@@ -255,8 +256,7 @@ impl PairStage {
                 HistorySource::Rows {
                     offset: old_offset,
                     partner,
-                    // The latest springs: `forces` swapped them into `spring_in`.
-                    spring: old.spring_in,
+                    spring: old.spring,
                 }
             }
             (None, None) => HistorySource::Rows {
@@ -403,7 +403,7 @@ impl PairStage {
             k.sort_refs(&st, cfg(n), &ni, &ref_offset, &mut refs, &pairs, &p.id)?;
         }
         // The springs of pairs that survive, found by (lower-id member, partner id).
-        let mut spring_in = zeros::<f64>(&st, HISTORY_WIDTH * np)?;
+        let mut carried = zeros::<f64>(&st, HISTORY_WIDTH * np)?;
         match history {
             HistorySource::Rows {
                 offset,
@@ -421,11 +421,11 @@ impl PairStage {
                     offset,
                     partner,
                     spring,
-                    &mut spring_in,
+                    &mut carried,
                 )?;
             },
             HistorySource::Exchanged(h) => {
-                h.remap(k, &st, np, &pairs, &p.id, order, &mut spring_in)?
+                h.remap(k, &st, np, &pairs, &p.id, order, &mut carried)?
             }
         }
         let staged_bytes = staged_planes_bytes(gpu.config.precision);
@@ -435,8 +435,7 @@ impl PairStage {
             offset,
             pairs,
             axes: zeros::<f64>(&st, 3 * np)?,
-            spring_in,
-            spring_out: zeros::<f64>(&st, HISTORY_WIDTH * np)?,
+            spring: carried,
             forces: zeros::<f64>(&st, 9 * np)?,
             energy: zeros::<f64>(&st, np)?,
             contact: zeros::<u32>(&st, np)?,

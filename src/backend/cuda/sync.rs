@@ -21,8 +21,7 @@ impl CudaSimulation {
         // The host's fields of the table, into `p`.
         let arrays = self.particles.download(st)?;
         arrays.copy_into(p, n);
-        // History and statistics from the last evaluation (springs are in `spring_in` after
-        // the swap at its end).
+        // History and statistics from the last evaluation.
         // A rank of a decomposed run holds ghosts too: they are left out of the host copy, and
         // a pair counts in the statistics where its lower-id member (the first) is owned.
         let ghost: Vec<bool> = if self.host.parallel.is_some() {
