@@ -348,8 +348,9 @@ PD_DEVICE int plane_bucket(int m) { return PD_ENUM_MAX_PLANES - m; }
 // Lean pass 1 for polyhedral pairs first .. n_pairs − 1 (Simulation::pair_contacts): the broad
 // phase, the cached axis, the planes culled and placed about the Chebyshev centre. A pair whose
 // intersection the centre proves, with at most PD_ENUM_MAX_PLANES planes, is staged for
-// pair_faces: its planes in staged[k], its bucket (by plane count) in bucket[k], counted in
-// bucket_count. Pairs needing GJK or the dual hull are appended to `deferred` (count in
+// pair_faces: its planes in staged[k − first], its bucket (by plane count) in
+// bucket[k − first], counted in bucket_count (the staging buffers hold one batch of pairs,
+// src/backend/cuda/pair_contacts.rs). Pairs needing GJK or the dual hull are appended to `deferred` (count in
 // deferred_count[0]) for pair_contacts_deferred: a few per cent of the pairs of a dense packing
 // need them, and compiled in here they would size every thread's registers and local memory.
 // The faces, whose cost grows as the fourth power of the plane count, run in pass 2 in warps
@@ -393,7 +394,7 @@ extern "C" __global__ void PD_PAIR_BOUNDS pair_planes(int first, int n_pairs, Pa
                 (status == STATUS_OK && ready && m > PD_ENUM_MAX_PLANES)) {
                 append(deferred, deferred_count, (unsigned int)kk);
             } else if (status == STATUS_OK && ready) {
-                StagedPlanes& s = staged[k];
+                StagedPlanes& s = staged[k - (size_t)first];
                 for (int i = 0; i < ws.a.n_planes; ++i) s.planes[i] = ws.a.planes[i];
                 for (int i = 0; i < ws.b.n_planes; ++i) s.planes[ws.a.n_planes + i] = ws.b.planes[i];
                 s.frame[0] = frame.x;
@@ -407,7 +408,7 @@ extern "C" __global__ void PD_PAIR_BOUNDS pair_planes(int first, int n_pairs, Pa
             }
         }
     }
-    bucket[k] = key < 0 ? (unsigned char)PD_PLANE_BUCKETS : (unsigned char)key;
+    bucket[k - (size_t)first] = key < 0 ? (unsigned char)PD_PLANE_BUCKETS : (unsigned char)key;
     // One atomic per bucket and warp: the lanes of a bucket add together.
     unsigned int lanes = __match_any_sync(__activemask(), key);
     int leader = __ffs(lanes) - 1;
@@ -418,7 +419,8 @@ extern "C" __global__ void PD_PAIR_BOUNDS pair_planes(int first, int n_pairs, Pa
 }
 
 // Between the lean passes: the staged pairs of first .. n_pairs − 1 listed bucket by bucket in
-// `order` (bucket_count from pair_planes; bucket_fill zeroed by the host). Within a bucket the
+// `order` by their index in the list (bucket_count from pair_planes, bucket[k − first] its
+// buckets; bucket_fill zeroed by the host). Within a bucket the
 // order is that of the atomics, which changes no result: each pair writes only its own slots.
 extern "C" __global__ void bucket_pairs(int first, int n_pairs, const unsigned char* bucket,
                                         const unsigned int* bucket_count, unsigned int* bucket_fill,
@@ -427,7 +429,7 @@ extern "C" __global__ void bucket_pairs(int first, int n_pairs, const unsigned c
     if (kk >= n_pairs) {
         return;
     }
-    int key = bucket[kk];
+    int key = bucket[kk - first];
     if (key >= PD_PLANE_BUCKETS) {
         return;
     }
@@ -446,12 +448,13 @@ extern "C" __global__ void bucket_pairs(int first, int n_pairs, const unsigned c
 
 // Lean pass 2: the faces of the staged pairs, listed by bucket_pairs, by vertex enumeration,
 // then the contact law. A pair whose faces do not close (which the dual hull must settle) goes
-// to the deferred list. Launched for every pair of the range, the threads past the staged count
-// return at once.
-extern "C" __global__ void PD_PAIR_BOUNDS pair_faces(PairArgs args, const unsigned int* order,
+// to the deferred list. Launched for every pair of the range first .. (the batch pair_planes
+// staged), the threads past the staged count return at once.
+extern "C" __global__ void PD_PAIR_BOUNDS pair_faces(int first, PairArgs args, const unsigned int* order,
                                                     const unsigned int* bucket_count, const StagedPlanes* staged,
                                                     unsigned int* deferred, unsigned int* deferred_count) {
 #if PD_SPHERES
+    (void)first;
     (void)args;
     (void)order;
     (void)bucket_count;
@@ -467,7 +470,7 @@ extern "C" __global__ void PD_PAIR_BOUNDS pair_faces(PairArgs args, const unsign
     }
     PD_CLK_START
     size_t k = order[i];
-    const StagedPlanes& s = staged[k];
+    const StagedPlanes& s = staged[k - (size_t)first];
     // The planes are read where they were staged (the overlap reads each once).
     const Plane<GeomReal>* planes = s.planes;
     int na = s.na, nb = s.nb;

@@ -33,6 +33,10 @@ pub struct Tuning {
     /// `POLYDEM_MPI`: `0` or `1` overrides the guess whether an MPI launcher started the
     /// process.
     pub mpi: Option<bool>,
+    /// `POLYDEM_PAIR_BATCH`: pairs per batch of the GPU's lean polyhedral pair passes (a
+    /// positive count) instead of as many as 256 MiB of staged planes hold; tests drive small
+    /// lists through many batches with it.
+    pub pair_batch: Option<u64>,
     /// `POLYDEM_GPU_EXCHANGE`: `device` keeps a decomposed GPU run's rebuilds on the device,
     /// `host` makes them the round trip of the whole rank state through the host; `None` when
     /// unset (the backend's default). Both give bitwise the same run.
@@ -73,10 +77,14 @@ impl Tuning {
             n == 0 || (24..=255).contains(&n)
         });
         let mpi_round_bytes = number("POLYDEM_MPI_ROUND_BYTES", "a positive count", &|b| b > 0);
+        let pair_batch = number("POLYDEM_PAIR_BATCH", "a count in 1-2^31", &|b| {
+            (1..=1 << 31).contains(&b)
+        });
         t.cuda_block = cuda_block.map(|b| b as u32);
         t.wall_merge_cells = wall_merge_cells.map(|n| n as u32);
         t.pair_max_registers = pair_max_registers.map(|n| n as u32);
         t.mpi_round_bytes = mpi_round_bytes;
+        t.pair_batch = pair_batch;
         t.phase_clocks = var("POLYDEM_PHASE_CLOCKS").is_some();
         t.ptx_cache = var("POLYDEM_PTX_CACHE")
             .map(|v| (!(v.is_empty() || v == "0")).then(|| PathBuf::from(v)));
@@ -136,6 +144,7 @@ impl Tuning {
             self.mpi_round_bytes.map(|x| x.to_string()),
         );
         put("POLYDEM_MPI", self.mpi.map(|x| u8::from(x).to_string()));
+        put("POLYDEM_PAIR_BATCH", self.pair_batch.map(|x| x.to_string()));
         put(
             "POLYDEM_GPU_EXCHANGE",
             self.gpu_exchange_on_device
@@ -188,6 +197,7 @@ mod tests {
             ("POLYDEM_MPI", "1"),
             ("POLYDEM_MPI_ROUND_BYTES", "777"),
             ("POLYDEM_GPU_EXCHANGE", "host"),
+            ("POLYDEM_PAIR_BATCH", "64"),
         ]);
         assert_eq!(t.cuda_block, Some(96));
         assert_eq!(t.wall_merge_cells, Some(0));
@@ -196,6 +206,7 @@ mod tests {
         assert_eq!(t.mpi, Some(true));
         assert_eq!(t.mpi_round_bytes, Some(777));
         assert_eq!(t.gpu_exchange_on_device, Some(false));
+        assert_eq!(t.pair_batch, Some(64));
         assert_eq!(t.rejected.len(), 1, "{:?}", t.rejected);
         assert!(t.rejected[0].starts_with("POLYDEM_PAIR_MAX_REGISTERS=\"20\""));
         let bad = from(&[

@@ -352,7 +352,9 @@ fn assert_bitwise_equal(c: StateView, g: StateView, what: &str) {
 ///
 /// Before the free rotation's sin and cos were evaluated by `portable_sin_cos` on both
 /// backends, the GPU's libdevice and the CPU's libm differed in the last bit for some angle,
-/// and the GPU left the CPU from step 6600 on.
+/// and the GPU left the CPU from step 6600 on. A third GPU run takes the lean pair passes in
+/// batches of 97 pairs (`POLYDEM_PAIR_BATCH`, as a list of millions of pairs takes them) and
+/// must end bitwise the same at step 4000.
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu() {
@@ -379,6 +381,19 @@ fn the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu() {
         checkpoint_view(&walk[0]),
         checkpoint_view(&walk[1]),
         "GPU, walking the facet grid",
+    );
+    // The lean pair passes in batches of 97 pairs (a large list's batches, on a small one):
+    // the same run.
+    let batched = run_on_both(
+        &scene,
+        Some(4000),
+        &[("POLYDEM_PAIR_BATCH", "97")],
+        "quickstart-batches",
+    );
+    assert_bitwise_equal(
+        checkpoint_view(&batched[0]),
+        checkpoint_view(&batched[1]),
+        "GPU, lean passes in batches of 97 pairs",
     );
 }
 

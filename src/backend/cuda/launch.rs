@@ -266,6 +266,7 @@ kernel_table! {
             order: &mut CudaSlice<u32>,
         );
         PairFaces pair_faces(
+            first: &i32,
             args: &PairArgs,
             order: &CudaSlice<u32>,
             bucket_count: &CudaSlice<u32>,

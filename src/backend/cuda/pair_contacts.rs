@@ -78,45 +78,55 @@ impl PairStage {
             }
             return Ok(());
         }
-        st.memset_zeros(&mut pairs.bucket_count)?;
-        st.memset_zeros(&mut pairs.bucket_fill)?;
-        let lc = cfg(last - first);
-        // SAFETY: `deferred`, `bucket` and `order` hold one slot per pair, `staged` one
-        // StagedPlanes record per pair (sizes checked by static_assert), the bucket counts and
-        // fill cursors PLANE_BUCKETS values.
-        unsafe {
-            k.pair_planes(
-                st,
-                lc,
-                &fi,
-                &li,
-                args,
-                &mut pairs.deferred,
-                &mut pairs.deferred_count,
-                &mut pairs.staged,
-                &mut pairs.bucket,
-                &mut pairs.bucket_count,
-            )?;
-            k.bucket_pairs(
-                st,
-                lc,
-                &fi,
-                &li,
-                &pairs.bucket,
-                &pairs.bucket_count,
-                &mut pairs.bucket_fill,
-                &mut pairs.order,
-            )?;
-            k.pair_faces(
-                st,
-                lc,
-                args,
-                &pairs.order,
-                &pairs.bucket_count,
-                &pairs.staged,
-                &mut pairs.deferred,
-                &mut pairs.deferred_count,
-            )?;
+        // The lean passes batch by batch: the staging buffers hold one batch of pairs.
+        let batch = pairs.batch.max(1);
+        let mut start = first;
+        while start < last {
+            let end = (start + batch).min(last);
+            let (si, ei) = (start as i32, end as i32);
+            st.memset_zeros(&mut pairs.bucket_count)?;
+            st.memset_zeros(&mut pairs.bucket_fill)?;
+            let lc = cfg(end - start);
+            // SAFETY: `deferred` holds one slot per pair of the list; `bucket`, `order` one per
+            // pair of a batch and `staged` one StagedPlanes record per pair of a batch (sizes
+            // checked by static_assert), indexed from `start`; the bucket counts and fill
+            // cursors PLANE_BUCKETS values.
+            unsafe {
+                k.pair_planes(
+                    st,
+                    lc,
+                    &si,
+                    &ei,
+                    args,
+                    &mut pairs.deferred,
+                    &mut pairs.deferred_count,
+                    &mut pairs.staged,
+                    &mut pairs.bucket,
+                    &mut pairs.bucket_count,
+                )?;
+                k.bucket_pairs(
+                    st,
+                    lc,
+                    &si,
+                    &ei,
+                    &pairs.bucket,
+                    &pairs.bucket_count,
+                    &mut pairs.bucket_fill,
+                    &mut pairs.order,
+                )?;
+                k.pair_faces(
+                    st,
+                    lc,
+                    &si,
+                    args,
+                    &pairs.order,
+                    &pairs.bucket_count,
+                    &pairs.staged,
+                    &mut pairs.deferred,
+                    &mut pairs.deferred_count,
+                )?;
+            }
+            start = end;
         }
         Ok(())
     }

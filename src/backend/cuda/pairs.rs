@@ -45,10 +45,12 @@ pub(super) struct PairList {
     /// count.
     pub(super) deferred: CudaSlice<u32>,
     pub(super) deferred_count: CudaSlice<u32>,
-    /// Between the two lean passes of polyhedral pairs (`pair_planes`, `pair_faces`): each
-    /// staged pair's planes (`StagedPlanes` of cuda/contact.cu, [`staged_planes_bytes`] each),
-    /// its plane-count bucket, the staged pairs listed bucket by bucket, and per bucket the
-    /// count and the fill cursor ([`PLANE_BUCKETS`] values each).
+    /// Pairs per batch of the lean passes ([`staging_batch`]).
+    pub(super) batch: usize,
+    /// Between the two lean passes of polyhedral pairs (`pair_planes`, `pair_faces`), for the
+    /// pairs of one batch: each staged pair's planes (`StagedPlanes` of cuda/contact.cu,
+    /// [`staged_planes_bytes`] each), its plane-count bucket, the staged pairs listed bucket by
+    /// bucket, and per bucket the count and the fill cursor ([`PLANE_BUCKETS`] values each).
     pub(super) staged: CudaSlice<u8>,
     pub(super) bucket: CudaSlice<u8>,
     pub(super) order: CudaSlice<u32>,
@@ -117,17 +119,31 @@ impl PairList {
     }
 }
 
-/// Device bytes per pair of a list ([`PairStage::allocate_list`]): the pair, its two
-/// references, the cached separating axis, the spring (one record, updated in place), the
-/// forces, energy and contact flag, the deferred index and, for polyhedra, the staged planes (`staged_bytes`),
-/// the plane-count bucket and the bucket order.
-pub(super) fn pair_bytes(spheres: bool, staged_bytes: usize) -> usize {
-    let common = 2 * 4 + 2 * 4 + 3 * 8 + HISTORY_WIDTH * 8 + 9 * 8 + 8 + 4 + 4;
-    if spheres {
-        common
-    } else {
-        common + staged_bytes + 1 + 4
-    }
+/// Device bytes of a list of `np` pairs ([`PairStage::allocate_list`]): per pair, the pair,
+/// its two references, the cached separating axis, the spring (one record, updated in place),
+/// the forces, energy and contact flag and the deferred index; for polyhedra, per pair of one
+/// staging batch of `batch` ([`staging_batch`]), the staged planes (`staged_bytes`), the
+/// plane-count bucket and the bucket order.
+pub(super) fn list_bytes(np: usize, batch: usize, spheres: bool, staged_bytes: usize) -> usize {
+    let per_pair = 2 * 4 + 2 * 4 + 3 * 8 + HISTORY_WIDTH * 8 + 9 * 8 + 8 + 4 + 4;
+    let staging = if spheres { 0 } else { staged_bytes + 1 + 4 };
+    np * per_pair + batch * staging
+}
+
+/// Most bytes of staged planes a list holds by default: the lean passes run over the pairs in
+/// batches of as many pairs as that holds ([`staging_batch`]), so that a list of millions of
+/// pairs does not hold a staging record for each (160 B a pair in mixed precision, as much as
+/// everything else of a pair together).
+const STAGING_BYTES: usize = 256 << 20;
+
+/// Pairs per staging batch of the lean passes for a list of `np` pairs of `staged_bytes` a
+/// staged record: all of them when they fit [`STAGING_BYTES`] (or `POLYDEM_PAIR_BATCH`), else
+/// as many as fit. The batches change no result: each pair is settled by itself.
+pub(super) fn staging_batch(np: usize, staged_bytes: usize) -> usize {
+    let most = crate::tuning::Tuning::get()
+        .pair_batch
+        .map_or(STAGING_BYTES / staged_bytes.max(1), |b| b as usize);
+    np.min(most.max(1)).max(1)
 }
 
 /// The contact history handed to the next list build.
@@ -336,7 +352,7 @@ impl PairStage {
         };
         let spheres = gpu.config.spheres;
         let staged_bytes = staged_planes_bytes(gpu.config.precision);
-        let per_pair = pair_bytes(spheres, staged_bytes);
+        let bytes = list_bytes(np, staging_batch(np, staged_bytes), spheres, staged_bytes);
         let list = Self::allocate_list(
             gpu,
             p,
@@ -348,8 +364,8 @@ impl PairStage {
         )
         .map_err(|e| {
             e.out_of_memory(
-                || format!("the pair list of {n} particles ({np} pairs, {per_pair} bytes each)"),
-                Some(np * per_pair),
+                || format!("the pair list of {n} particles ({np} pairs, {bytes} bytes)"),
+                Some(bytes),
             )
         })?;
         self.list = Some(list);
@@ -429,8 +445,10 @@ impl PairStage {
             }
         }
         let staged_bytes = staged_planes_bytes(gpu.config.precision);
+        let batch = staging_batch(np, staged_bytes);
         Ok(PairList {
             n: np,
+            batch,
             n_interior,
             offset,
             pairs,
@@ -443,10 +461,11 @@ impl PairStage {
             refs,
             deferred: zeros::<u32>(&st, np)?,
             deferred_count: zeros::<u32>(&st, 1)?,
-            // The two lean passes of polyhedral pairs stage planes per pair (spheres: none).
-            staged: zeros::<u8>(&st, if spheres { 1 } else { np * staged_bytes })?,
-            bucket: zeros::<u8>(&st, if spheres { 1 } else { np })?,
-            order: zeros::<u32>(&st, if spheres { 1 } else { np })?,
+            // The two lean passes of polyhedral pairs stage planes per pair of a batch
+            // (spheres: none).
+            staged: zeros::<u8>(&st, if spheres { 1 } else { batch * staged_bytes })?,
+            bucket: zeros::<u8>(&st, if spheres { 1 } else { batch })?,
+            order: zeros::<u32>(&st, if spheres { 1 } else { batch })?,
             bucket_count: zeros::<u32>(&st, PLANE_BUCKETS)?,
             bucket_fill: zeros::<u32>(&st, PLANE_BUCKETS)?,
         })
