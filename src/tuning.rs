@@ -77,8 +77,8 @@ impl Tuning {
             n == 0 || (24..=255).contains(&n)
         });
         let mpi_round_bytes = number("POLYDEM_MPI_ROUND_BYTES", "a positive count", &|b| b > 0);
-        let pair_batch = number("POLYDEM_PAIR_BATCH", "a count in 1-2^31", &|b| {
-            (1..=1 << 31).contains(&b)
+        let pair_batch = number("POLYDEM_PAIR_BATCH", "a count in 1-2147483647", &|b| {
+            (1..=i32::MAX as u64).contains(&b)
         });
         t.cuda_block = cuda_block.map(|b| b as u32);
         t.wall_merge_cells = wall_merge_cells.map(|n| n as u32);

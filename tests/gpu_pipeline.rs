@@ -354,7 +354,7 @@ fn assert_bitwise_equal(c: StateView, g: StateView, what: &str) {
 /// backends, the GPU's libdevice and the CPU's libm differed in the last bit for some angle,
 /// and the GPU left the CPU from step 6600 on. A third GPU run takes the lean pair passes in
 /// batches of 97 pairs (`POLYDEM_PAIR_BATCH`, as a list of millions of pairs takes them) and
-/// must end bitwise the same at step 4000.
+/// must end bitwise the same at step 6000.
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu() {
@@ -383,10 +383,10 @@ fn the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu() {
         "GPU, walking the facet grid",
     );
     // The lean pair passes in batches of 97 pairs (a large list's batches, on a small one):
-    // the same run.
+    // the same run, to step 6000 (the first pair contacts form after step 3000).
     let batched = run_on_both(
         &scene,
-        Some(4000),
+        Some(6000),
         &[("POLYDEM_PAIR_BATCH", "97")],
         "quickstart-batches",
     );

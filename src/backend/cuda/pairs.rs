@@ -383,7 +383,7 @@ impl PairStage {
     /// The per-pair buffers of a list of `np` pairs (`n_interior` of two owned particles),
     /// given its pairs and per-particle offsets: the references per particle sorted by
     /// partner id and the springs of the pairs that survive from `history`
-    /// ([`pair_bytes`] per pair in all).
+    /// ([`list_bytes`] in all).
     #[allow(clippy::too_many_arguments)]
     fn allocate_list(
         gpu: &Gpu,
