@@ -71,6 +71,20 @@ PD_DEVICE void report_error(unsigned int* error, unsigned long long source, int 
     atomicMax((unsigned long long*)error, ~key);
 }
 
+// Pair k's cached separating axis (zero: none), kept in float: it is a hint, which
+// cached_axis_separates tests with a margin far above GJK's tolerance before it skips GJK, so a
+// rounded axis changes which pairs skip GJK at most, never a verdict (an axis rounded to zero,
+// or beyond float's range, is no hint: GJK runs). 12 bytes a pair instead of 24.
+PD_DEVICE void store_axis(const PairArgs& q, size_t k, V3<double> a) {
+    q.axes[3 * k] = (float)a.x;
+    q.axes[3 * k + 1] = (float)a.y;
+    q.axes[3 * k + 2] = (float)a.z;
+}
+
+PD_DEVICE V3<double> load_axis(const PairArgs& q, size_t k) {
+    return v3((double)q.axes[3 * k], (double)q.axes[3 * k + 1], (double)q.axes[3 * k + 2]);
+}
+
 // The slots of pair k with no contact: no force, no energy, no spring. Every pair's slots are
 // written once per step, by whichever kernel settles the pair: these zeros, or the contact
 // law's results (pair_contact_law). The force slots are 72 bytes apart, so a warp's store to
@@ -100,7 +114,7 @@ PD_DEVICE bool pair_broad_phase(const PairArgs& q, size_t k, int* a, int* b, V3<
     double reach = p.radius[*a] + p.radius[*b];
     if (norm2(d) >= reach * reach) {
 #if !PD_SPHERES
-        store3(q.axes, k, zero3<double>());
+        store_axis(q, k, zero3<double>());
 #endif
         clear_pair(q, k);
         return false;
@@ -213,7 +227,7 @@ PD_DEVICE void pair_bodies(const PairArgs& q, int a, int b, V3<double> xa, V3<do
 // Stage 4 shortcut: last step's separating axis, with a margin far above GJK's touching
 // tolerance, so the verdict is GJK's.
 PD_DEVICE bool cached_axis_separates(const PairArgs& q, size_t k, const BodyRef& A, const BodyRef& B, int a, int b) {
-    V3<double> axis = load3(q.axes, k);
+    V3<double> axis = load_axis(q, k);
     double reach = q.p.radius[a] + q.p.radius[b];
     return !(axis == zero3<double>()) && axis_separates(A, B, axis, 1e-9 * reach);
 }
@@ -224,17 +238,17 @@ PD_DEVICE bool cached_axis_separates(const PairArgs& q, size_t k, const BodyRef&
 PD_DEVICE bool pair_geometry_outcome(const PairArgs& q, size_t k, int status, const PairGeometry& g) {
     if (status != STATUS_OK) {
         report_error(q.error, PD_ERROR_PAIR, status, (unsigned int)k);
-        store3(q.axes, k, zero3<double>());
+        store_axis(q, k, zero3<double>());
         clear_pair(q, k);
         q.out.contact[k] = PD_CONTACT_FAILED | (unsigned int)(status & 0xff);
         return false;
     }
     if (g.overlap.volume <= 0.0) {
-        store3(q.axes, k, g.separating_axis);
+        store_axis(q, k, g.separating_axis);
         clear_pair(q, k);
         return false;
     }
-    store3(q.axes, k, zero3<double>());
+    store_axis(q, k, zero3<double>());
     return true;
 }
 #endif

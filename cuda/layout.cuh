@@ -136,7 +136,8 @@ PD_CHECK_OFFSET(PairOutputs, contact, PAIR_OUTPUTS);
 struct PairArgs {
     const int2* pairs;
     GridParams grid;
-    double* axes;
+    // Each pair's cached separating axis, in float (store_axis, load_axis of contact.cu).
+    float* axes;
     ParticleView p;
     const PairMaterial* materials;
     int n_materials;

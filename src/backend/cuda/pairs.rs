@@ -30,7 +30,8 @@ pub(super) struct PairList {
     /// of the next build; `None` for a decomposed run's two-part list.
     pub(super) offset: Option<CudaSlice<u32>>,
     pub(super) pairs: CudaSlice<i32>,
-    pub(super) axes: CudaSlice<f64>,
+    /// Each pair's cached separating axis, in f32 (a hint: `store_axis` of cuda/contact.cu).
+    pub(super) axes: CudaSlice<f32>,
     /// Each pair's contact history ([`HISTORY_WIDTH`] values): read and written in place by
     /// the one thread that settles the pair in a step (`pair_contact_law` reads the record
     /// before it writes it; a pair without contact has it cleared, unread), so one buffer
@@ -120,12 +121,12 @@ impl PairList {
 }
 
 /// Device bytes of a list of `np` pairs ([`PairStage::allocate_list`]): per pair, the pair,
-/// its two references, the cached separating axis, the spring (one record, updated in place),
+/// its two references, the cached separating axis (f32), the spring (one record, updated in place),
 /// the forces, energy and contact flag and the deferred index; for polyhedra, per pair of one
 /// staging batch of `batch` ([`staging_batch`]), the staged planes (`staged_bytes`), the
 /// plane-count bucket and the bucket order.
 pub(super) fn list_bytes(np: usize, batch: usize, spheres: bool, staged_bytes: usize) -> usize {
-    let per_pair = 2 * 4 + 2 * 4 + 3 * 8 + HISTORY_WIDTH * 8 + 9 * 8 + 8 + 4 + 4;
+    let per_pair = 2 * 4 + 2 * 4 + 3 * 4 + HISTORY_WIDTH * 8 + 9 * 8 + 8 + 4 + 4;
     let staging = if spheres { 0 } else { staged_bytes + 1 + 4 };
     np * per_pair + batch * staging
 }
@@ -452,7 +453,7 @@ impl PairStage {
             n_interior,
             offset,
             pairs,
-            axes: zeros::<f64>(&st, 3 * np)?,
+            axes: zeros::<f32>(&st, 3 * np)?,
             spring: carried,
             forces: zeros::<f64>(&st, 9 * np)?,
             energy: zeros::<f64>(&st, np)?,
