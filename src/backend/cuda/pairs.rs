@@ -554,3 +554,34 @@ fn list_pairs(
     unsafe { gpu.k.fill_pairs(&st, cfg(n), &args, &offset, &mut pairs)? };
     Ok((np, pairs, offset))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backend::cuda::Precision;
+
+    /// A short list is staged whole; a long one in batches that hold at most 256 MiB of staged
+    /// planes, in either precision, and the list's bytes count the staging once per batch.
+    #[test]
+    fn long_lists_are_staged_in_batches_of_256_mib() {
+        for precision in [Precision::Mixed, Precision::Double] {
+            let staged = staged_planes_bytes(precision);
+            assert_eq!(staging_batch(0, staged), 1);
+            assert_eq!(staging_batch(5000, staged), 5000);
+            let long = 20_000_000;
+            let batch = staging_batch(long, staged);
+            assert!(batch < long && batch * staged <= STAGING_BYTES);
+            assert!((batch + 1) * staged > STAGING_BYTES);
+            let whole = list_bytes(long, long, false, staged);
+            let batched = list_bytes(long, batch, false, staged);
+            assert_eq!(whole - batched, (long - batch) * (staged + 1 + 4));
+            assert_eq!(
+                list_bytes(long, batch, true, staged),
+                list_bytes(long, 1, true, 0)
+            );
+        }
+        // Mixed precision stages 160 bytes a pair: 1.68e6 pairs a batch.
+        assert_eq!(staged_planes_bytes(Precision::Mixed), 160);
+        assert_eq!(staging_batch(usize::MAX, 160), 1_677_721);
+    }
+}
