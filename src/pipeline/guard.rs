@@ -114,25 +114,33 @@ impl Simulation {
     /// left through a closed face goes through here, which is what lets the run treat those
     /// errors as common to all ranks ([`SimulationError::stops_every_rank`]).
     pub fn agree(&self, local: Result<(), SimulationError>) -> Result<(), SimulationError> {
-        let Some(par) = self.parallel.as_deref() else {
+        if self.parallel.is_none() {
             return local;
-        };
-        let failed: Vec<usize> = par
+        }
+        let stopped = self.stopped_by(local.is_err());
+        match local {
+            Err(e) => Err(e),
+            Ok(()) => stopped.map_or(Ok(()), Err),
+        }
+    }
+
+    /// The collective of [`Simulation::agree`]: each rank says whether it `failed` (one gather
+    /// of a byte per rank); [`SimulationError::Stopped`] naming the ranks that did, if any.
+    /// Every rank of a decomposed run must call it at the same point.
+    pub(crate) fn stopped_by(&self, failed: bool) -> Option<SimulationError> {
+        let par = self.parallel.as_deref()?;
+        let ranks: Vec<usize> = par
             .comm
-            .all_gather(&[u8::from(local.is_err())])
+            .all_gather(&[u8::from(failed)])
             .iter()
             .enumerate()
             .filter(|(_, b)| b.first() == Some(&1))
             .map(|(r, _)| r)
             .collect();
-        match local {
-            Err(e) => Err(e),
-            Ok(()) if failed.is_empty() => Ok(()),
-            Ok(()) => Err(SimulationError::Stopped {
-                step: self.step,
-                ranks: failed,
-            }),
-        }
+        (!ranks.is_empty()).then_some(SimulationError::Stopped {
+            step: self.step,
+            ranks,
+        })
     }
 
     /// The guard's error for particle `i` (an index of this rank's particles), naming its

@@ -33,7 +33,7 @@ use super::history::history_rows;
 use super::launch::{cfg, zeros};
 use super::layout::{CONTACT_LIVE, HISTORY_WIDTH, history_state};
 use super::pairs::{HistorySource, PairList};
-use super::particles::{DeviceParticles, Gather};
+use super::particles::{DeviceParticles, Gather, at_least_one};
 use super::simulation::CudaSimulation;
 use super::upload::host_arrays;
 use crate::contact::{ContactHistory, ContactKey, ContactState};
@@ -441,22 +441,9 @@ impl CudaSimulation {
     /// its error and the others stop with it ([`SimulationError::Stopped`]), rather than wait
     /// in a collective that rank will not join.
     fn agree_device<T>(&self, local: Result<T, CudaError>) -> Result<T, CudaError> {
-        let par = self.host.parallel.as_deref().expect("a decomposed run");
-        let failed: Vec<usize> = par
-            .comm
-            .all_gather(&[u8::from(local.is_err())])
-            .iter()
-            .enumerate()
-            .filter(|(_, b)| b.first() == Some(&1))
-            .map(|(r, _)| r)
-            .collect();
-        match local {
-            Ok(_) if !failed.is_empty() => Err(SimulationError::Stopped {
-                step: self.host.step,
-                ranks: failed,
-            }
-            .into()),
-            other => other,
+        match (self.host.stopped_by(local.is_err()), local) {
+            (Some(stopped), Ok(_)) => Err(stopped.into()),
+            (_, local) => local,
         }
     }
 
@@ -577,14 +564,6 @@ impl CudaSimulation {
         }
         Ok((p, entries))
     }
-}
-
-/// `v`, or one zero when it is empty (every device buffer has an address).
-fn at_least_one<T: Default>(mut v: Vec<T>) -> Vec<T> {
-    if v.is_empty() {
-        v.push(T::default());
-    }
-    v
 }
 
 #[cfg(test)]

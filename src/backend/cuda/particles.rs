@@ -162,41 +162,31 @@ pub(super) trait Gather: DeviceRepr + ValidAsZeroBits + Default + Clone + Unpin 
     }
 }
 
-impl Gather for f64 {
-    fn gather_into(
-        k: &Kernels,
-        st: &Arc<CudaStream>,
-        n: usize,
-        width: usize,
-        src: &CudaSlice<f64>,
-        order: &CudaSlice<u32>,
-        dst: &mut CudaSlice<f64>,
-    ) -> Result<(), CudaError> {
-        debug_assert!(dst.len() >= width * n && order.len() >= n);
-        let (ni, w) = (n as i32, width as i32);
-        // SAFETY: `dst` holds width·n values, `order` n indices of rows of `src`.
-        unsafe { k.gather_f64(st, cfg(n), &ni, &w, src, dst, order)? };
-        Ok(())
-    }
+/// [`Gather`] for an element type whose gather kernel takes a width (`gather_f64`,
+/// `gather_u32` of cuda/neighbor.cu).
+macro_rules! gather_with_width {
+    ($($ty:ty => $kernel:ident),*) => {$(
+        impl Gather for $ty {
+            fn gather_into(
+                k: &Kernels,
+                st: &Arc<CudaStream>,
+                n: usize,
+                width: usize,
+                src: &CudaSlice<$ty>,
+                order: &CudaSlice<u32>,
+                dst: &mut CudaSlice<$ty>,
+            ) -> Result<(), CudaError> {
+                debug_assert!(dst.len() >= width * n && order.len() >= n);
+                let (ni, w) = (n as i32, width as i32);
+                // SAFETY: `dst` holds width·n values, `order` n indices of rows of `src`.
+                unsafe { k.$kernel(st, cfg(n), &ni, &w, src, dst, order)? };
+                Ok(())
+            }
+        }
+    )*};
 }
 
-impl Gather for u32 {
-    fn gather_into(
-        k: &Kernels,
-        st: &Arc<CudaStream>,
-        n: usize,
-        width: usize,
-        src: &CudaSlice<u32>,
-        order: &CudaSlice<u32>,
-        dst: &mut CudaSlice<u32>,
-    ) -> Result<(), CudaError> {
-        debug_assert!(dst.len() >= width * n && order.len() >= n);
-        let (ni, w) = (n as i32, width as i32);
-        // SAFETY: `dst` holds width·n values, `order` n indices of rows of `src`.
-        unsafe { k.gather_u32(st, cfg(n), &ni, &w, src, dst, order)? };
-        Ok(())
-    }
-}
+gather_with_width!(f64 => gather_f64, u32 => gather_u32);
 
 impl Gather for u64 {
     fn gather_into(
@@ -252,7 +242,7 @@ macro_rules! download_rows_field {
 }
 
 /// `v`, or one default value when it is empty (every device buffer has an address).
-fn at_least_one<T: Default>(mut v: Vec<T>) -> Vec<T> {
+pub(super) fn at_least_one<T: Default>(mut v: Vec<T>) -> Vec<T> {
     if v.is_empty() {
         v.push(T::default());
     }
