@@ -43,7 +43,8 @@ enum Command {
         #[arg(long)]
         max_steps: Option<u64>,
         /// Pair-geometry arithmetic on the GPU: all f64, or f32 in the contact-centred pair
-        /// frame with f64 state (the CPU is always f64).
+        /// frame with f64 state. With `--backend cpu`, `mixed` evaluates the polyhedral pairs
+        /// as the GPU's mixed precision does (to reproduce a GPU run without a GPU).
         #[arg(long, value_enum, default_value = "double")]
         gpu_precision: polydem::backend::cuda::Precision,
         /// Remove a previous run's output from the output folder first (a new run into a
@@ -67,7 +68,8 @@ enum Command {
         #[arg(long, value_enum, default_value = "auto")]
         backend: BackendChoice,
         /// Pair-geometry arithmetic on the GPU: `mixed` unless given; `bench accuracy` runs
-        /// both precisions unless one is given.
+        /// both precisions unless one is given. With `--backend cpu`: f64 unless `mixed` is
+        /// given (the GPU's mixed precision on the CPU).
         #[arg(long, value_enum)]
         gpu_precision: Option<polydem::backend::cuda::Precision>,
         /// Who builds the pair lists on the GPU, overriding the scene's
@@ -326,7 +328,13 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                 &polydem::run::BenchOptions {
                     scene,
                     backend,
-                    precision: gpu_precision.unwrap_or(polydem::backend::cuda::Precision::Mixed),
+                    // Mixed on a GPU unless given; the CPU only when asked.
+                    precision: gpu_precision.unwrap_or(match backend {
+                        polydem::backend::BackendChoice::Cpu => {
+                            polydem::backend::cuda::Precision::Double
+                        }
+                        _ => polydem::backend::cuda::Precision::Mixed,
+                    }),
                     warmup,
                     steps,
                     neighbor_mode,

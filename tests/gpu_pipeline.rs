@@ -276,6 +276,18 @@ fn run_on_both(
     gpu_env: &[(&str, &str)],
     tag: &str,
 ) -> Vec<polydem::io::Checkpoint> {
+    run_on_both_in("double", scene, max_steps, gpu_env, tag)
+}
+
+/// [`run_on_both`] with the pair geometry in `precision` on both backends (`mixed`: the CPU
+/// evaluates it as the GPU's mixed precision does).
+fn run_on_both_in(
+    precision: &str,
+    scene: &std::path::Path,
+    max_steps: Option<u64>,
+    gpu_env: &[(&str, &str)],
+    tag: &str,
+) -> Vec<polydem::io::Checkpoint> {
     use polydem::io::read_checkpoint;
     let dir = temp_dir(&format!("gpu-run-{tag}"));
     let mut last = Vec::new();
@@ -284,7 +296,7 @@ fn run_on_both(
         let mut cmd = std::process::Command::new(polydem_bin());
         cmd.envs(env.iter().copied());
         cmd.args(["run", scene.to_str().unwrap(), "--backend", backend]);
-        cmd.args(["--gpu-precision", "double", "--out"]).arg(&out);
+        cmd.args(["--gpu-precision", precision, "--out"]).arg(&out);
         if let Some(n) = max_steps {
             cmd.args(["--max-steps", &n.to_string()]);
         }
@@ -394,6 +406,31 @@ fn the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu() {
         checkpoint_view(&batched[0]),
         checkpoint_view(&batched[1]),
         "GPU, lean passes in batches of 97 pairs",
+    );
+}
+
+/// Mixed precision has a CPU twin (`--backend cpu --gpu-precision mixed`,
+/// `geometry::pair::overlap_pair_mixed`): the same f32 geometry (the CUDA headers are bitwise
+/// the Rust code in f32, tests/cuda_geometry_host.rs), the same routing of thin, unproven and
+/// bent pairs to f64, f64 for the walls and the rest of the step. The quickstart in mixed
+/// precision to step 6000 (pair contacts from step 3000 on, wall contacts before) on both
+/// backends ends bitwise the same: a mixed-precision GPU run can be reproduced, and its
+/// failures chased, on a CPU.
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn the_quickstart_in_mixed_precision_is_its_cpu_twin_bit_for_bit() {
+    let scene = repo_root().join("launch/quickstart/quickstart.toml");
+    let last = run_on_both_in("mixed", &scene, Some(6000), &[], "quickstart-mixed");
+    assert_eq!(last[0].step, 6000);
+    assert!(
+        last[0].history.len() > 100,
+        "{} contacts",
+        last[0].history.len()
+    );
+    assert_bitwise_equal(
+        checkpoint_view(&last[0]),
+        checkpoint_view(&last[1]),
+        "GPU mixed against the CPU's mixed twin",
     );
 }
 

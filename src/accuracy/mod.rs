@@ -89,13 +89,17 @@ pub fn devices(
 ) -> Result<Vec<Device>> {
     let serial = crate::domain::SerialComm;
     Ok(
-        match crate::backend::select_device(backend, Precision::Double, &serial)? {
+        match crate::backend::select_device(
+            backend,
+            precision.unwrap_or(Precision::Double),
+            &serial,
+        )? {
             Device::Cuda { ordinal, .. } => precision
                 .map_or(vec![Precision::Double, Precision::Mixed], |p| vec![p])
                 .into_iter()
                 .map(|precision| Device::Cuda { ordinal, precision })
                 .collect(),
-            Device::Cpu => vec![Device::Cpu],
+            cpu => vec![cpu],
         },
     )
 }
@@ -103,6 +107,7 @@ pub fn devices(
 fn device_name(d: Device) -> String {
     match d {
         Device::Cpu => "cpu".into(),
+        Device::CpuMixed => "cpu mixed".into(),
         Device::Cuda { precision, .. } => match precision {
             Precision::Double => "gpu double".into(),
             Precision::Mixed => "gpu mixed".into(),

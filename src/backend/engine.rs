@@ -39,10 +39,16 @@ impl Engine {
     /// Starts `start` on `device`.
     pub fn new(start: impl Into<Start>, device: Device) -> Result<Self> {
         let backend: Box<dyn Backend> = match (start.into(), device) {
-            (Start::State(sim), Device::Cpu) => sim,
-            (Start::Scene { scene, comm }, Device::Cpu) => {
-                Box::new(Simulation::builder(*scene).comm(comm).build()?)
+            (Start::State(mut sim), Device::Cpu | Device::CpuMixed) => {
+                sim.set_pair_precision(device.pair_precision());
+                sim
             }
+            (Start::Scene { scene, comm }, Device::Cpu | Device::CpuMixed) => Box::new(
+                Simulation::builder(*scene)
+                    .comm(comm)
+                    .pair_precision(device.pair_precision())
+                    .build()?,
+            ),
             (Start::State(sim), Device::Cuda { ordinal, precision }) => {
                 Box::new(CudaSimulation::new(*sim, ordinal, precision)?)
             }

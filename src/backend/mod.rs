@@ -97,6 +97,11 @@ pub enum BackendChoice {
 pub enum Device {
     /// The CPU backend (rayon).
     Cpu,
+    /// The CPU backend with the polyhedral pair geometry in the GPU's mixed precision
+    /// ([`crate::geometry::pair::overlap_pair_mixed`], the same decisions pair by pair):
+    /// `--backend cpu --gpu-precision mixed`, to reproduce or check a mixed-precision GPU run
+    /// without a GPU.
+    CpuMixed,
     /// GPU `ordinal`, with the pair geometry in `precision`.
     Cuda {
         ordinal: usize,
@@ -105,17 +110,29 @@ pub enum Device {
 }
 
 impl Device {
+    /// The arithmetic of the polyhedral pair geometry on this device.
+    pub fn pair_precision(&self) -> Precision {
+        match self {
+            Device::Cpu => Precision::Double,
+            Device::CpuMixed => Precision::Mixed,
+            Device::Cuda { precision, .. } => *precision,
+        }
+    }
+
     /// The arithmetic of the pair geometry as summaries name it: "double" on the CPU.
     pub fn precision_name(&self) -> String {
         match self {
             Device::Cpu => "double".into(),
+            Device::CpuMixed => "mixed".into(),
             Device::Cuda { precision, .. } => format!("{precision:?}").to_lowercase(),
         }
     }
 }
 
 /// Resolves `choice` for this rank of `comm` (docs/design.md §5): `cuda` needs a usable GPU and
-/// NVRTC, `auto` takes the GPU when there is one and says in the log why it does not. Every
+/// NVRTC, `auto` takes the GPU when there is one and says in the log why it does not. `cpu`
+/// with `precision` mixed is [`Device::CpuMixed`]; `auto` without a GPU is the CPU in f64
+/// whatever `precision` says, the fastest there. Every
 /// rank of a decomposed run steps on the same backend (their collectives differ): with `auto`,
 /// one rank without a usable GPU puts all on the CPU (an explicit `cuda` has already failed on
 /// that rank, which ends the run on all). A GPU rank drives its node-local rank modulo the
@@ -145,6 +162,14 @@ pub fn select_device(
             false
         }
     };
+    let cpu = if choice == BackendChoice::Cpu && precision == Precision::Mixed {
+        tracing::info!(
+            "the polyhedral pair geometry in the GPU's mixed precision (--gpu-precision mixed)"
+        );
+        Device::CpuMixed
+    } else {
+        Device::Cpu
+    };
     if comm.size() == 1 {
         return Ok(if gpu {
             Device::Cuda {
@@ -152,7 +177,7 @@ pub fn select_device(
                 precision,
             }
         } else {
-            Device::Cpu
+            cpu
         });
     }
     let cpu_somewhere = comm.any(!gpu);
@@ -160,7 +185,7 @@ pub fn select_device(
         tracing::warn!("another rank has no usable GPU: all ranks run on the CPU");
     }
     if cpu_somewhere {
-        return Ok(Device::Cpu);
+        return Ok(cpu);
     }
     let gpus = info.gpus.len().max(1);
     let local = crate::domain::comm::node_local_rank().unwrap_or(comm.rank());

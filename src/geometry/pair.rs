@@ -17,6 +17,18 @@ use super::quickhull::HullError;
 use crate::shape::ConvexTemplate;
 use nalgebra::{Isometry3, Vector3};
 
+/// Arithmetic of the pair geometry (`--gpu-precision`): what the GPU's kernels are compiled
+/// for, and what the CPU backend evaluates when asked to run as the GPU's mixed precision does.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+pub enum Precision {
+    /// Everything in f64.
+    #[default]
+    Double,
+    /// f64 state; f32 pair geometry in the pair's contact-centred frame (docs/design.md §3),
+    /// with the pairs f32 cannot resolve evaluated in f64 ([`overlap_pair_mixed`]).
+    Mixed,
+}
+
 /// Buffers for a full pair evaluation: both placed polytopes and the overlap workspace.
 #[derive(Clone, Debug, Default)]
 pub struct PairWorkspace<T: Real> {

@@ -12,6 +12,7 @@
 use super::{Simulation, SimulationError, StageTimers};
 use crate::contact::{ContactHistory, hunt_crossley_alpha};
 use crate::domain::{Comm, Parallel};
+use crate::geometry::pair::Precision;
 use crate::neighbor::{Bounds, PairList};
 use crate::scene::{Inserter, Scene};
 use crate::stability::StabilityGuard;
@@ -54,6 +55,7 @@ pub struct SimulationBuilder {
     comm: Option<Arc<dyn Comm>>,
     restore: Option<RestoredState>,
     evaluate_forces: bool,
+    precision: Precision,
 }
 
 impl SimulationBuilder {
@@ -82,6 +84,17 @@ impl SimulationBuilder {
         self
     }
 
+    /// The arithmetic of the polyhedral pair geometry (default: f64). [`Precision::Mixed`]
+    /// evaluates it as the GPU's mixed precision does ([`overlap_pair_mixed`]), pair by pair
+    /// the same decisions: f32 in the contact-centred frame, f64 for the pairs f32 cannot
+    /// resolve. Spheres and walls are f64 in both, as on the GPU.
+    ///
+    /// [`overlap_pair_mixed`]: crate::geometry::pair::overlap_pair_mixed
+    pub fn pair_precision(mut self, precision: Precision) -> Self {
+        self.precision = precision;
+        self
+    }
+
     /// The simulation. Fails for a decomposition that cannot be made, an insertion that cannot
     /// place its particles, a restored state that cannot be stepped, or a failed first force
     /// evaluation.
@@ -91,16 +104,17 @@ impl SimulationBuilder {
             comm,
             restore,
             evaluate_forces,
+            precision,
         } = self;
         let parallel = match comm {
             Some(comm) if comm.size() > 1 => Some(Box::new(Parallel::new(comm, &scene)?)),
             _ => None,
         };
         match (restore, evaluate_forces) {
-            (Some(state), _) => Simulation::empty(scene, parallel)?.restored(state),
-            (None, true) => Simulation::started(scene, parallel),
+            (Some(state), _) => Simulation::empty(scene, parallel, precision)?.restored(state),
+            (None, true) => Simulation::started(scene, parallel, precision),
             (None, false) if parallel.is_some() => {
-                let mut sim = Simulation::empty(scene, parallel)?;
+                let mut sim = Simulation::empty(scene, parallel, precision)?;
                 // Every rank takes part in the first exchange's rebuild.
                 sim.dirty = true;
                 sim.exchange()?;
@@ -108,7 +122,7 @@ impl SimulationBuilder {
                 Ok(sim)
             }
             (None, false) => {
-                let mut sim = Simulation::empty(scene, None)?;
+                let mut sim = Simulation::empty(scene, None, precision)?;
                 sim.exchange()?;
                 sim.reset_guard();
                 Ok(sim)
@@ -126,11 +140,16 @@ impl Simulation {
             comm: None,
             restore: None,
             evaluate_forces: true,
+            precision: Precision::Double,
         }
     }
 
     /// A simulation at t = 0: particles of count insertions placed, forces evaluated.
-    fn started(scene: Scene, parallel: Option<Box<Parallel>>) -> Result<Self, SimulationError> {
+    fn started(
+        scene: Scene,
+        parallel: Option<Box<Parallel>>,
+        pair_precision: Precision,
+    ) -> Result<Self, SimulationError> {
         let n_mat = scene.materials.len();
         let damping = (0..n_mat * n_mat)
             .map(|k| {
@@ -178,6 +197,7 @@ impl Simulation {
             },
             too_deep: None,
             pair_outcomes: Vec::new(),
+            pair_precision,
         };
         sim.restrict_walls();
         sim.exchange()?;
@@ -189,10 +209,14 @@ impl Simulation {
     }
 
     /// A simulation of `scene` with no particle placed yet (its insertions still to come).
-    fn empty(scene: Scene, parallel: Option<Box<Parallel>>) -> Result<Self, SimulationError> {
+    fn empty(
+        scene: Scene,
+        parallel: Option<Box<Parallel>>,
+        pair_precision: Precision,
+    ) -> Result<Self, SimulationError> {
         let mut s = scene.clone();
         s.insertions.clear();
-        let mut sim = Simulation::started(s, parallel)?;
+        let mut sim = Simulation::started(s, parallel, pair_precision)?;
         sim.scene = scene;
         sim.inserter = Inserter::new(&sim.scene);
         Ok(sim)

@@ -94,6 +94,10 @@ pub struct Simulation {
     /// The pair stage's outcome buffer, kept between evaluations for its capacity
     /// ([`Simulation::pair_stage`]).
     pair_outcomes: Vec<pairs::PairOutcome>,
+    /// Arithmetic of the polyhedral pair geometry: f64, or the GPU's mixed precision
+    /// ([`crate::geometry::pair::overlap_pair_mixed`]), so that a mixed-precision run can be
+    /// reproduced and checked without a GPU.
+    pair_precision: crate::geometry::pair::Precision,
 }
 
 impl Simulation {
@@ -183,6 +187,17 @@ impl Simulation {
         self.bounds.max = max;
         self.scene.domain.max = max;
         self.refresh()
+    }
+
+    /// The arithmetic of the polyhedral pair geometry ([`SimulationBuilder::pair_precision`]).
+    pub fn pair_precision(&self) -> crate::geometry::pair::Precision {
+        self.pair_precision
+    }
+
+    /// Sets the arithmetic of the polyhedral pair geometry from the next force evaluation on
+    /// (a checkpoint does not record it: a restart chooses again).
+    pub fn set_pair_precision(&mut self, precision: crate::geometry::pair::Precision) {
+        self.pair_precision = precision;
     }
 
     /// Pair lists built so far (the first one included).

@@ -10,7 +10,9 @@ use crate::contact::{
     mass_share,
 };
 use crate::geometry::Overlap;
-use crate::geometry::pair::{PairWorkspace, axis_separates, overlap_pair};
+use crate::geometry::pair::{
+    PairWorkspace, Precision, axis_separates, overlap_pair, overlap_pair_mixed,
+};
 use crate::geometry::sphere::sphere_lens;
 use crate::state::Particles;
 use nalgebra::{Isometry3, Vector3};
@@ -162,6 +164,7 @@ impl Simulation {
         let s = &self.scene;
         let step = self.step;
         let spheres = s.spheres_only();
+        let mixed = self.pair_precision == Precision::Mixed;
         let periodic = self.bounds.periodic.iter().any(|&k| k);
         let bounds = self.bounds;
         let failure = FirstFailure::default();
@@ -214,7 +217,11 @@ impl Simulation {
                     }
                     // Stages 4–5: the narrow phase (GJK where the Chebyshev centre proves no
                     // intersection), then the overlap.
-                    let g = match with_workspace(|ws| overlap_pair(ws, body_a, body_b)) {
+                    let g = match if mixed {
+                        with_workspaces(|w32, w64| overlap_pair_mixed(w32, w64, body_a, body_b))
+                    } else {
+                        with_workspace(|ws| overlap_pair(ws, body_a, body_b))
+                    } {
                         Ok(g) => g,
                         Err(e) => {
                             let error = SimulationError::Geometry {
@@ -299,6 +306,24 @@ pub(super) fn with_workspace<R>(f: impl FnOnce(&mut PairWorkspace<f64>) -> R) ->
     WORKSPACE.with(|cell| match cell.try_borrow_mut() {
         Ok(mut slot) => f(slot.get_or_insert_with(PairWorkspace::boxed)),
         Err(_) => f(&mut PairWorkspace::boxed()),
+    })
+}
+
+thread_local! {
+    /// The f32 pair workspace of the mixed precision's pair geometry, per worker thread.
+    static WORKSPACE_F32: std::cell::RefCell<Option<Box<PairWorkspace<f32>>>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// Runs `f` with this thread's f32 and f64 pair workspaces (for
+/// [`overlap_pair_mixed`]).
+fn with_workspaces<R>(f: impl FnOnce(&mut PairWorkspace<f32>, &mut PairWorkspace<f64>) -> R) -> R {
+    WORKSPACE_F32.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut slot) => {
+            let w32 = slot.get_or_insert_with(PairWorkspace::boxed);
+            with_workspace(|w64| f(w32, w64))
+        }
+        Err(_) => with_workspace(|w64| f(&mut PairWorkspace::boxed(), w64)),
     })
 }
 

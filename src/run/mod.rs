@@ -397,7 +397,7 @@ fn log_neighbor_mode(scene: &crate::scene::Scene, device: Device, ranks: usize) 
     use crate::scene::NeighborMode;
     let mode = scene.simulation.neighbor.mode;
     let what = match (device, mode) {
-        (Device::Cpu, _) => format!(
+        (Device::Cpu | Device::CpuMixed, _) => format!(
             "the CPU backend builds its pair lists itself (simulation.neighbor.mode = \"{}\" \
              chooses the builder of a GPU run)",
             mode.name()

@@ -48,14 +48,7 @@ pub const KERNEL_FILES: &[&str] = &[
     "halo.cu",
 ];
 
-/// Arithmetic of the pair geometry on the GPU (issue: precision modes).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
-pub enum Precision {
-    /// Everything in f64.
-    Double,
-    /// f64 state; f32 pair geometry in the pair's contact-centred frame (docs/design.md §3).
-    Mixed,
-}
+pub use crate::geometry::pair::Precision;
 
 /// What a scene needs from the kernels; turned into `#define`s.
 #[derive(Clone, Debug, PartialEq)]
