@@ -197,3 +197,24 @@ pub fn select_device(
     );
     Ok(Device::Cuda { ordinal, precision })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::domain::SerialComm;
+
+    /// `--backend cpu` runs the GPU's mixed precision only when asked; `auto` on a machine
+    /// without a GPU is the CPU in f64 whatever the precision (the fastest there).
+    #[test]
+    fn the_cpu_runs_mixed_precision_only_when_asked() {
+        let cpu = |p| select_device(BackendChoice::Cpu, p, &SerialComm).unwrap();
+        assert_eq!(cpu(Precision::Double), Device::Cpu);
+        assert_eq!(cpu(Precision::Mixed), Device::CpuMixed);
+        assert_eq!(Device::CpuMixed.pair_precision(), Precision::Mixed);
+        assert_eq!(Device::CpuMixed.precision_name(), "mixed");
+        if cuda_info().unavailable.is_some() {
+            let auto = select_device(BackendChoice::Auto, Precision::Mixed, &SerialComm).unwrap();
+            assert_eq!(auto, Device::Cpu);
+        }
+    }
+}
