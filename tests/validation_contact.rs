@@ -8,6 +8,7 @@ mod common;
 use common::*;
 use nalgebra::{UnitQuaternion, Vector3};
 use polydem::backend::{Device, Engine};
+use polydem::geometry::pair::Precision;
 use polydem::pipeline::Simulation;
 use polydem::scene::parse_scene;
 use std::f64::consts::FRAC_PI_4;
@@ -107,6 +108,12 @@ fn elastic_collisions_on_gpu_mixed() {
     elastic_collisions(GPU_MIXED);
 }
 
+/// The same in the CPU twin of mixed precision: the f32 pair geometry's floor, on CI.
+#[test]
+fn elastic_collisions_in_the_cpu_twin_of_mixed_precision() {
+    elastic_collisions(CPU_MIXED);
+}
+
 fn elastic_collisions(device: Device) {
     let dodeca = "{ kind = \"dodecahedron\", size = 0.02 }";
     let q1 = UnitQuaternion::from_euler_angles(0.3, 1.1, -0.4);
@@ -169,7 +176,11 @@ fn elastic_collisions(device: Device) {
         // least second order. In mixed mode the pair geometry's f32 rounding (relative 1e-7 on
         // V and S per step, docs/validation.md §8) leaves an energy floor of about 1e-7: a
         // halving whose errors are both below it says nothing about the order.
-        let floor = if device == GPU_MIXED { 1e-7 } else { 0.0 };
+        let floor = if device.pair_precision() == Precision::Mixed {
+            1e-7
+        } else {
+            0.0
+        };
         for (o, w) in orders.iter().zip(errors.windows(2)) {
             if w[0] < floor && w[1] < floor {
                 continue;
@@ -205,6 +216,13 @@ fn restitution_on_gpu_double() {
 #[ignore = "needs a CUDA GPU"]
 fn restitution_on_gpu_mixed() {
     restitution(GPU_MIXED, &[0.1, 0.5, 0.95, 1.0]);
+}
+
+/// The GPU's subset of the sweep in the CPU twin of mixed precision (on CI): face impacts
+/// resolved in f32, the thin slabs of a face first touching a face in f64.
+#[test]
+fn restitution_in_the_cpu_twin_of_mixed_precision() {
+    restitution(CPU_MIXED, &[0.1, 0.5, 0.95, 1.0]);
 }
 
 /// The e of the restitution sweeps: 0.1 … 0.95, and 1.
@@ -540,6 +558,12 @@ fn aligned_cubes_in_a_periodic_box_conserve_energy_to_second_order() {
 #[ignore = "needs a CUDA GPU"]
 fn aligned_cubes_on_gpu_double() {
     aligned_cubes(GPU_DOUBLE);
+}
+
+/// Faces on faces throughout, in the CPU twin of mixed precision: the same second order.
+#[test]
+fn aligned_cubes_in_the_cpu_twin_of_mixed_precision() {
+    aligned_cubes(CPU_MIXED);
 }
 
 fn aligned_cubes(device: Device) {

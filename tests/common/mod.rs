@@ -295,6 +295,9 @@ dir = "{}"
 /// in the `*_on_gpu_*` variants, which are `#[ignore]`d without a GPU.
 #[allow(dead_code)]
 pub const CPU: polydem::backend::Device = polydem::backend::Device::Cpu;
+/// The CPU with the GPU's mixed-precision pair geometry (its twin, `--gpu-precision mixed`).
+#[allow(dead_code)]
+pub const CPU_MIXED: polydem::backend::Device = polydem::backend::Device::CpuMixed;
 #[allow(dead_code)]
 pub const GPU_DOUBLE: polydem::backend::Device = polydem::backend::Device::Cuda {
     ordinal: 0,
