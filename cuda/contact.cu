@@ -286,27 +286,9 @@ PD_DEVICE void evaluate_pair(const PairArgs& q, size_t k) {
 #if PD_DOUBLE_GEOMETRY
     int status = overlap_pair_t<GeomReal, true>(ws, A, B, &g);
 #else
-    // Mixed precision (geometry::pair::overlap_pair_mixed): f32 where the centre proves an
-    // overlap thick enough for it, f64 otherwise (STATUS_WIDE), and f64 again where f32 cannot
-    // resolve the dual hull: a thin slab between two faces lying on each other puts its two
-    // large faces' dual points at 1/δ and the others at ~1/L.
-    V3<double> frame;
-    bool ready;
-    int status = pair_planes_t<GeomReal, true, true>(ws, A, B, &g, &frame, &ready);
-    if (status == STATUS_OK && ready) {
-        status = overlap_of_planes<GeomReal, true>(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes,
-                                                   ws.b.n_planes, frame, &g);
-        // A hull that round-off bent (vertices outside the planes): f64 too.
-        if (status == STATUS_OK &&
-            (double)ws.overlap.hull_vertex_excess() > PD_MIXED_VERTEX_SLACK * g.overlap.depth) {
-            status = STATUS_WIDE;
-        }
-    }
-    if (status == STATUS_WIDE || status == STATUS_HULL_DEGENERATE || status == STATUS_HULL_TOPOLOGY ||
-        status == STATUS_HULL_CAPACITY) {
-        PairWorkspace<double> wide;
-        status = overlap_pair_t<double, true>(wide, A, B, &g);
-    }
+    // Mixed precision (overlap.cuh overlap_pair_mixed, geometry::pair::overlap_pair_mixed).
+    PairWorkspace<double> wide;
+    int status = overlap_pair_mixed(ws, wide, A, B, &g);
 #endif
 #if defined(PD_PHASE_CLOCKS)
     pd_t = clock64();

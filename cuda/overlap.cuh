@@ -531,4 +531,29 @@ template <class T> PD_HD int overlap_pair(PairWorkspace<T>& ws, const BodyRef& A
     return overlap_pair_t<T, true>(ws, A, B, out);
 }
 
+// pair::overlap_pair_mixed, the pair geometry of mixed precision in full (the GPU's deferred
+// pass, and its CPU twin): f32 where the Chebyshev centre proves an overlap at least
+// PD_MIXED_WIDE_ULPS f32 epsilons of ra + rb thick, f64 (`wide`) otherwise, and f64 again
+// where the f32 dual hull fails or comes out bent (a vertex outside a plane by more than
+// PD_MIXED_VERTEX_SLACK of the Chebyshev radius): a thin slab between two faces lying on each
+// other puts its two large faces' dual points at 1/δ and the others at ~1/L.
+PD_HD int overlap_pair_mixed(PairWorkspace<float>& ws, PairWorkspace<double>& wide, const BodyRef& A, const BodyRef& B,
+                             PairGeometry* out) {
+    V3<double> frame;
+    bool ready;
+    int status = pair_planes_t<float, true, true>(ws, A, B, out, &frame, &ready);
+    if (status == STATUS_OK && ready) {
+        status = overlap_of_planes<float, true>(ws.overlap, ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes,
+                                                frame, out);
+        if (status == STATUS_OK && (double)ws.overlap.hull_vertex_excess() > PD_MIXED_VERTEX_SLACK * out->overlap.depth) {
+            status = STATUS_WIDE;
+        }
+    }
+    if (status == STATUS_WIDE || status == STATUS_HULL_DEGENERATE || status == STATUS_HULL_TOPOLOGY ||
+        status == STATUS_HULL_CAPACITY) {
+        status = overlap_pair_t<double, true>(wide, A, B, out);
+    }
+    return status;
+}
+
 } // namespace pd

@@ -562,11 +562,18 @@ fn cxx() -> String {
 }
 
 /// Compiles the harness into `dir` and returns its path.
+///
+/// At `-O1`: g++ 12.2 at `-O2` (its SLP vectorizer) dropped a rounding the headers ask for,
+/// `(double)(float)x` evaluated as `x` where mixed precision's frame takes the f64 LP's centre
+/// rounded to f32 (`overlap_pair_mixed`), so three quarters of the mixed-precision cases
+/// differed from the Rust code by the rounding; at `-O0`, `-O1`, `-O3`, or `-O2` with
+/// `-fno-tree-slp-vectorize`, every case is bitwise the Rust result. The harness runs a few
+/// seconds at either level.
 fn build_harness(root: &Path, dir: &Path) -> PathBuf {
     let exe = dir.join("geometry_harness");
     let cxx = cxx();
     let out = Command::new(&cxx)
-        .args(["-O2", "-std=c++17", "-ffp-contract=off", "-Wall", "-I"])
+        .args(["-O1", "-std=c++17", "-ffp-contract=off", "-Wall", "-I"])
         .arg(root.join("cuda"))
         .arg(root.join("cuda/host/geometry_harness.cpp"))
         .arg("-o")
@@ -1007,6 +1014,109 @@ fn harness_mismatches(mode: &str, tag: &str, text: String, want: &[String]) -> V
         .filter(|(g, w)| g.trim() != w.trim())
         .map(|(g, w)| format!("C++  {g}\nRust {w}"))
         .collect()
+}
+
+/// Mixed precision's routing (`overlap_pair_mixed` of `cuda/overlap.cuh`, which the GPU's
+/// full pair evaluation runs) against `geometry::pair::overlap_pair_mixed`, the CPU twin's
+/// pair geometry, bit for bit: on the random cases of the parity test above and on the
+/// contacts of the committed settled packing of dodecahedra, as compressed and dilated by
+/// 1e-5 … 1e-4 (faces resting on faces, thinned until most are below f32's resolution, so
+/// that both the f32 path and the routing of thin and unproven pairs to f64 are taken).
+#[test]
+fn cuda_mixed_precision_routing_matches_the_cpu_twin_bitwise() {
+    use nalgebra::Translation3;
+    use polydem::geometry::pair::overlap_pair_mixed;
+    use polydem::io::Packing;
+    let root = repo_root();
+    let mut shapes = test_shapes();
+    let mut pairs = pair_cases(&shapes, N_PAIRS, 4242);
+    let packing = Packing::read(&root.join("launch/bench/packings/dodecahedra.packing")).unwrap();
+    shapes.push(Shape {
+        name: "dodecahedron of the settled packing",
+        template: ConvexTemplate::from_file(&root.join("meshes/particles/dodecahedron.stl"))
+            .unwrap(),
+    });
+    let d = shapes.len() - 1;
+    let scale = packing.particles[0].scale;
+    let reach = 2.0 * shapes[d].template.circumscribed_radius * scale;
+    let mut close = 0usize;
+    for (k, dilation) in [0.0, 1e-5, 3e-5, 1e-4].into_iter().enumerate() {
+        let p = &packing.particles;
+        for i in 0..p.len() {
+            for j in i + 1..p.len() {
+                let mut x = p[j].position - p[i].position;
+                for a in 0..3 {
+                    x[a] -= packing.cell[a] * (x[a] / packing.cell[a]).round();
+                }
+                let x = x * (1.0 + dilation);
+                if x.norm() >= reach {
+                    continue;
+                }
+                close += 1;
+                // One close pair in four of each dilation, a different quarter each time.
+                if close % 4 != k {
+                    continue;
+                }
+                let pose =
+                    |c, q: UnitQuaternion<f64>| Isometry3::from_parts(Translation3::from(c), q);
+                pairs.push(PairCase {
+                    a: d,
+                    b: d,
+                    sa: scale,
+                    sb: scale,
+                    pose_a: pose(p[i].position, p[i].orientation),
+                    pose_b: pose(p[i].position + x, p[j].orientation),
+                    axis: Vector3::zeros(),
+                    margin: 0.0,
+                    kind: "settled packing",
+                });
+            }
+        }
+    }
+    let (mut w32, mut w64) = (PairWorkspace::<f32>::boxed(), PairWorkspace::<f64>::boxed());
+    let mut f64_ws = PairWorkspace::<f64>::boxed();
+    let (mut in_f64, mut in_f32, mut contacts) = (0, 0, 0);
+    let mut want = Vec::with_capacity(pairs.len());
+    for (i, c) in pairs.iter().enumerate() {
+        let (ta, tb) = (&shapes[c.a].template, &shapes[c.b].template);
+        let (a, b) = ((ta, c.sa, &c.pose_a), (tb, c.sb, &c.pose_b));
+        let r = from_rust(overlap_pair_mixed(&mut w32, &mut w64, a, b));
+        if r.status == 0 && r.intersects && r.overlap.volume > 0.0 {
+            contacts += 1;
+            let wide = from_rust(overlap_pair(&mut f64_ws, a, b));
+            if wide.overlap.volume.to_bits() == r.overlap.volume.to_bits() {
+                in_f64 += 1;
+            } else {
+                in_f32 += 1;
+            }
+        }
+        let mut l = format!("M {i} {} {}", r.status, u8::from(r.intersects));
+        hex3(&mut l, &r.axis);
+        put_overlap(&mut l, &r.overlap);
+        want.push(l);
+    }
+    println!(
+        "{} pairs ({} of the settled packing): {contacts} contacts, {in_f32} in f32, {in_f64} in f64",
+        pairs.len(),
+        pairs.len() - N_PAIRS
+    );
+    assert!(
+        in_f32 > 1000 && in_f64 > 100,
+        "both paths taken: {in_f32} in f32, {in_f64} in f64"
+    );
+    let mismatches = harness_mismatches(
+        "--mixed",
+        "cuda-mixed-host",
+        case_file(&shapes, &pairs, &[]),
+        &want,
+    );
+    assert!(
+        mismatches.is_empty(),
+        "{} of {} pairs differ:\n{}",
+        mismatches.len(),
+        pairs.len(),
+        mismatches[..mismatches.len().min(5)].join("\n")
+    );
 }
 
 /// The sphere fast path (`cuda/sphere.cuh`) against `geometry::sphere`, bit for bit, on random

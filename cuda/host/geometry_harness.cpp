@@ -1,8 +1,11 @@
 // Host harness for the parity test tests/cuda_geometry_host.rs: runs the CUDA contact-geometry
 // headers as plain C++17 on the CPU, in double and in float, on cases written by the test.
 //
-// Build: c++ -O2 -std=c++17 -ffp-contract=off -I cuda cuda/host/geometry_harness.cpp
+// Build: c++ -O1 -std=c++17 -ffp-contract=off -I cuda cuda/host/geometry_harness.cpp
+// (not -O2: g++ 12.2 dropped a double → float rounding there, see tests/cuda_geometry_host.rs)
 // Usage: geometry_harness CASES_FILE      (results on stdout)
+//        geometry_harness --mixed CASES_FILE  (each pair through mixed precision's routing,
+//                                           overlap_pair_mixed: M lines, no facets)
 //        geometry_harness --spheres FILE   (the sphere fast path, sphere.cuh; format below)
 //        geometry_harness --law FILE       (portable math and the contact law, contact_law.cuh)
 //        geometry_harness --sizes          (workspace sizes in bytes for the compiled capacities)
@@ -17,6 +20,7 @@
 //   facets N
 //     N × { t s p(3) q(w x y z) origin(3) tri(9, relative to origin) }
 // Output, one line per case, floats as hex bit patterns of doubles (float results widened):
+//   M i  {status intersects axis(3) volume centroid(3) S(3) M(3) depth thickness} (--mixed)
 //   P i  {status intersects axis(3) volume centroid(3) S(3) M(3) depth thickness} for double,
 //        then the same for float, then axis_separates (0/1)
 //   F i  {prism_status status volume centroid(3) S(3) M(3) depth thickness} for double, then float
@@ -303,13 +307,16 @@ int main(int argc, char** argv) {
     if (argc == 3 && std::strcmp(argv[1], "--law") == 0) {
         return run_law(argv[2]);
     }
-    if (argc != 2) {
-        std::fprintf(stderr, "usage: geometry_harness CASES_FILE | --sizes\n");
+    // --mixed: the same cases, each pair through mixed precision's routing instead.
+    const bool mixed = argc == 3 && std::strcmp(argv[1], "--mixed") == 0;
+    if (argc != 2 && !mixed) {
+        std::fprintf(stderr, "usage: geometry_harness [--mixed] CASES_FILE | --sizes\n");
         return 2;
     }
-    in = std::fopen(argv[1], "r");
+    const char* path = argv[argc - 1];
+    in = std::fopen(path, "r");
     if (!in) {
-        std::perror(argv[1]);
+        std::perror(path);
         return 2;
     }
     read_word("templates");
@@ -365,6 +372,17 @@ int main(int argc, char** argv) {
         pd::V3<double> axis = read_v3();
         double margin = read_f64();
         pd::BodyRef a = body(ta, sa, pa, qa), b = body(tb, sb, pb, qb);
+        if (mixed) {
+            poison(*ws32);
+            poison(*ws64);
+            pd::PairGeometry g;
+            int st = pd::overlap_pair_mixed(*ws32, *ws64, a, b, &g);
+            std::printf("M %ld %d %d", i, st, g.intersects);
+            put3(g.separating_axis);
+            put_overlap(g.overlap);
+            std::printf("\n");
+            continue;
+        }
         std::printf("P %ld", i);
         run_pair(*ws64, a, b);
         run_pair(*ws32, a, b);
@@ -382,6 +400,7 @@ int main(int argc, char** argv) {
         pd::V3<double> tri[3];
         for (int k = 0; k < 3; ++k) tri[k] = read_v3();
         pd::BodyRef r = body(t, s, p, q);
+        if (mixed) continue;
         std::printf("F %ld", i);
         run_facet(ws64->overlap, ws64->a, r, origin, tri);
         run_facet(ws32->overlap, ws32->a, r, origin, tri);
