@@ -19,7 +19,7 @@
 
 use crate::geometry::clip::facet_contact;
 use crate::geometry::overlap::OverlapWorkspace;
-use crate::geometry::pair::{PairWorkspace, overlap_pair};
+use crate::geometry::pair::{PairWorkspace, overlap_pair, overlap_pair_mixed};
 use crate::geometry::polytope::{PosedPolytope, cast, widen};
 use crate::geometry::{Overlap, Real};
 use crate::shape::{ConvexTemplate, Generator, MESH_EXTENSIONS};
@@ -38,6 +38,9 @@ pub enum Precision {
     F64,
     /// f32 pair geometry in a frame centred on the first body (positions stay f64).
     F32,
+    /// The GPU's mixed precision ([`crate::geometry::pair::overlap_pair_mixed`]): f32 where it
+    /// resolves the overlap, f64 for thin, unproven and bent pairs; walls in f64.
+    Mixed,
 }
 
 enum ShapeSpec {
@@ -271,6 +274,7 @@ pub fn probe_overlap(path: &Path, precision: Precision, out: &mut dyn Write) -> 
         let result = match precision {
             Precision::F64 => overlap_pair(&mut ws64, body_a, body_b),
             Precision::F32 => overlap_pair(&mut ws32, body_a, body_b),
+            Precision::Mixed => overlap_pair_mixed(&mut ws32, &mut ws64, body_a, body_b),
         }
         .map_err(|e| anyhow!("{}: {e}", field("")))?;
         writeln!(out, "{}", overlap_json(result.intersects, &result.overlap))?;
@@ -325,7 +329,8 @@ pub fn probe_wall(path: &Path, precision: Precision, out: &mut dyn Write) -> Res
             bail!("{}: coordinates must be finite numbers", field("triangles"));
         }
         let value = match precision {
-            Precision::F64 => wall_case(
+            // Mixed precision evaluates walls in f64.
+            Precision::F64 | Precision::Mixed => wall_case(
                 &mut ws64.overlap,
                 &mut ws64.a,
                 shape,

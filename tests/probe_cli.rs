@@ -281,3 +281,56 @@ fn wall_probe_sums_over_a_triangulated_wall() {
         assert_eq!(lines[0]["facets"].as_array().unwrap().len(), 2);
     }
 }
+
+/// `--precision mixed` is the GPU's mixed precision: each pair is evaluated either in f32 (a
+/// contact f32 resolves) or in f64 (thin, unproven or bent), so each output line is the f32 or
+/// the f64 line of the same pair; a face resting on a face 1e-9 of the size deep is thin and
+/// comes out as f64, a deep overlap as f32. Walls are f64 in mixed precision.
+#[test]
+fn mixed_precision_is_f32_or_f64_pair_by_pair_and_f64_for_walls() {
+    let unit = |q: [f64; 4]| {
+        let n = q.iter().map(|c| c * c).sum::<f64>().sqrt();
+        q.map(|c| c / n)
+    };
+    let q = [1.0, 0.0, 0.0, 0.0];
+    let json = format!(
+        r#"{{"shapes": {{"box": {{"vertices": {CUBE}}},
+                        "dodeca": {{"generator": "dodecahedron", "size": 1.0}}}},
+            "pairs": [
+              {{"a": "box", "b": "box", "pose_a": {}, "pose_b": {}}},
+              {{"a": "box", "b": "box", "pose_a": {}, "pose_b": {}}},
+              {{"a": "dodeca", "b": "dodeca", "pose_a": {}, "pose_b": {}}}
+            ]}}"#,
+        pose([0.0, 0.0, 0.0], q),
+        pose([0.2, 0.3, 0.25], q),
+        pose([0.0, 0.0, 0.0], q),
+        pose([0.1, 0.2, 1.0 - 1e-9], q),
+        pose([0.0, 0.0, 0.0], q),
+        pose([0.3, 0.1, 0.2], unit([0.9, 0.1, 0.3, 0.2])),
+    );
+    let run = |p: &str| {
+        let (ok, lines, err) = probe("overlap", &json, &["--precision", p]);
+        assert!(ok, "--precision {p}: {err}");
+        lines
+    };
+    let (f64s, f32s, mixed) = (run("f64"), run("f32"), run("mixed"));
+    assert_eq!(mixed.len(), 3);
+    assert_eq!(mixed[0], f32s[0], "a deep box overlap is f32");
+    assert_ne!(f32s[0], f64s[0]);
+    assert_eq!(
+        mixed[1], f64s[1],
+        "a face resting on a face 1e-9 deep is f64"
+    );
+    assert_ne!(f32s[1], f64s[1]);
+    assert_eq!(mixed[2], f32s[2], "a deep dodecahedron overlap is f32");
+    let wall = format!(
+        r#"{{"shapes": {{"box": {{"vertices": {CUBE}}}}},
+            "cases": [{{"shape": "box", "pose": {}, "triangles": [[[-1,-1,0],[3,-1,0],[-1,3,0]]]}}]}}"#,
+        pose([0.0, 0.0, -0.3], unit([0.99, 0.05, 0.1, 0.0]))
+    );
+    let walls = |p: &str| probe("wall", &wall, &["--precision", p]);
+    let (ok, w_mixed, err) = walls("mixed");
+    assert!(ok, "{err}");
+    assert_eq!(w_mixed, walls("f64").1);
+    assert_ne!(w_mixed, walls("f32").1);
+}

@@ -228,7 +228,8 @@ impl Simulation {
                                 step,
                                 what: format!("particles {} and {}", p.id[a], p.id[b]),
                                 message: format!(
-                                    "{e}; to reproduce with `polydem probe overlap`: A {}, B {}",
+                                    "{e}; to reproduce with `polydem probe overlap{}`: A {}, B {}",
+                                    if mixed { " --precision mixed" } else { "" },
                                     probe_body(ta, p.scale[a], &pose_a),
                                     probe_body(tb, p.scale[b], &pose_b)
                                 ),
