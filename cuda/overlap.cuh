@@ -434,6 +434,11 @@ PD_HD bool axis_separates(const BodyRef& A, const BodyRef& B, V3<double> axis, d
 // or proves with a Chebyshev radius below PD_MIXED_WIDE_ULPS f32 epsilons of ra + rb, returns
 // STATUS_WIDE: f32 cannot place the planes of a face resting on a face to the overlap's
 // thickness, and the caller evaluates such a pair in f64 (Rust's overlap_pair_mixed).
+// Mixed precision's Chebyshev LP in f32 instead of f64 (1), on trial (POLYDEM_MIXED_LP=f32).
+#ifndef PD_MIXED_LP_F32
+#define PD_MIXED_LP_F32 0
+#endif
+
 template <class T, bool kFull, bool kWide = false>
 PD_HD int pair_planes_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out,
                         V3<double>* frame, bool* ready) {
@@ -456,7 +461,13 @@ PD_HD int pair_planes_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B
     PD_CLK(2)
     set_aside_faces_apart(ws.a, A.tpl, A.scale, A.pos, A.rot, ws.b, B.tpl, B.scale, B.pos, B.rot, origin, tol);
     PD_CLK(3)
-    ChebyshevCentre<T> centre = chebyshev_centre_wide(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes);
+    // Mixed precision's LP in f32 with PD_MIXED_LP_F32 (POLYDEM_MIXED_LP=f32, on trial; pair.rs
+    // overlap_pair_mixed_with): the thin pairs it cannot resolve leave by their radius below.
+    // Both branches are compiled in every configuration; the constant removes one.
+    ChebyshevCentre<T> centre =
+        (kWide && PD_MIXED_LP_F32)
+            ? chebyshev_centre<T, T>(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes, zero3<T>())
+            : chebyshev_centre_wide(ws.a.planes, ws.a.n_planes, ws.b.planes, ws.b.n_planes);
     PD_CLK(4)
     // A centre strictly inside every plane of both bodies proves an intersection with an
     // interior (the narrow-phase verdict without GJK): the planes in use hold it by the LP's

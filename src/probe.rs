@@ -19,7 +19,7 @@
 
 use crate::geometry::clip::facet_contact;
 use crate::geometry::overlap::OverlapWorkspace;
-use crate::geometry::pair::{PairWorkspace, overlap_pair, overlap_pair_mixed};
+use crate::geometry::pair::{PairWorkspace, overlap_pair, overlap_pair_mixed_with};
 use crate::geometry::polytope::{PosedPolytope, cast, widen};
 use crate::geometry::{Overlap, Real};
 use crate::shape::{ConvexTemplate, Generator, MESH_EXTENSIONS};
@@ -274,7 +274,13 @@ pub fn probe_overlap(path: &Path, precision: Precision, out: &mut dyn Write) -> 
         let result = match precision {
             Precision::F64 => overlap_pair(&mut ws64, body_a, body_b),
             Precision::F32 => overlap_pair(&mut ws32, body_a, body_b),
-            Precision::Mixed => overlap_pair_mixed(&mut ws32, &mut ws64, body_a, body_b),
+            Precision::Mixed => overlap_pair_mixed_with(
+                &mut ws32,
+                &mut ws64,
+                body_a,
+                body_b,
+                !crate::tuning::Tuning::get().mixed_lp_f32,
+            ),
         }
         .map_err(|e| anyhow!("{}: {e}", field("")))?;
         writeln!(out, "{}", overlap_json(result.intersects, &result.overlap))?;

@@ -2,9 +2,11 @@
 //!
 //! Every such variable is read here, once per process ([`Tuning::get`]), and `polydem run`
 //! logs the ones set at start ([`Tuning::log`]), so that a run's log says which knobs shaped it.
-//! None of them changes results: they choose launch shapes, caches, profiling builds and the
-//! MPI start-up, or drive rare code paths in tests. A value outside what a knob allows is
-//! reported and the default kept.
+//! None of them changes results but one: they choose launch shapes, caches, profiling builds
+//! and the MPI start-up, or drive rare code paths in tests. `POLYDEM_MIXED_LP` changes
+//! mixed-precision results within mixed precision's tolerance (an arithmetic on trial, on the
+//! GPU and its CPU twin alike). A value outside what a knob allows is reported and the default
+//! kept.
 
 use std::path::PathBuf;
 use std::sync::OnceLock;
@@ -41,6 +43,10 @@ pub struct Tuning {
     /// `host` makes them the round trip of the whole rank state through the host; `None` when
     /// unset (the backend's default). Both give bitwise the same run.
     pub gpu_exchange_on_device: Option<bool>,
+    /// `POLYDEM_MIXED_LP`: `f32` solves mixed precision's Chebyshev LP in f32 instead of f64
+    /// (the thin pairs an f32 LP cannot resolve still go to f64 by their radius); on trial:
+    /// docs/performance.md has what it was measured against. `f64` or unset: the default.
+    pub mixed_lp_f32: bool,
     /// `POLYDEM_ROOT`: the repository root (its `meshes/`) for `polydem bench accuracy`.
     pub root: Option<PathBuf>,
     /// What was set but not allowed, one line each (the default is kept).
@@ -110,6 +116,16 @@ impl Tuning {
                 None
             }
         };
+        t.mixed_lp_f32 = match text("POLYDEM_MIXED_LP").as_deref() {
+            None | Some("f64") => false,
+            Some("f32") => true,
+            Some(v) => {
+                t.rejected.push(format!(
+                    "POLYDEM_MIXED_LP={v:?} is not f32 or f64; the default (f64) is used"
+                ));
+                false
+            }
+        };
         t.root = var("POLYDEM_ROOT").map(PathBuf::from);
         t
     }
@@ -150,6 +166,7 @@ impl Tuning {
             self.gpu_exchange_on_device
                 .map(|d| if d { "device" } else { "host" }.to_string()),
         );
+        put("POLYDEM_MIXED_LP", self.mixed_lp_f32.then(|| "f32".into()));
         put(
             "POLYDEM_ROOT",
             self.root.as_ref().map(|p| p.display().to_string()),
@@ -198,8 +215,11 @@ mod tests {
             ("POLYDEM_MPI_ROUND_BYTES", "777"),
             ("POLYDEM_GPU_EXCHANGE", "host"),
             ("POLYDEM_PAIR_BATCH", "64"),
+            ("POLYDEM_MIXED_LP", "f32"),
         ]);
         assert_eq!(t.cuda_block, Some(96));
+        assert!(t.mixed_lp_f32);
+        assert!(t.set().contains(&"POLYDEM_MIXED_LP=f32".to_string()));
         assert_eq!(t.wall_merge_cells, Some(0));
         assert_eq!(t.pair_max_registers, None);
         assert_eq!(t.ptx_cache, Some(None));
@@ -213,11 +233,13 @@ mod tests {
             ("POLYDEM_CUDA_BLOCK", "100"),
             ("POLYDEM_MPI", "yes"),
             ("POLYDEM_GPU_EXCHANGE", "gpu"),
+            ("POLYDEM_MIXED_LP", "half"),
         ]);
         assert_eq!(bad.cuda_block, None);
         assert_eq!(bad.mpi, None);
         assert_eq!(bad.gpu_exchange_on_device, None);
-        assert_eq!(bad.rejected.len(), 3);
+        assert!(!bad.mixed_lp_f32);
+        assert_eq!(bad.rejected.len(), 4);
         assert!(t.set().contains(&"POLYDEM_CUDA_BLOCK=96".to_string()));
     }
 }

@@ -570,10 +570,17 @@ fn cxx() -> String {
 /// `-fno-tree-slp-vectorize`, every case is bitwise the Rust result. The harness runs a few
 /// seconds at either level.
 fn build_harness(root: &Path, dir: &Path) -> PathBuf {
+    build_harness_with(root, dir, &[])
+}
+
+/// [`build_harness`] with extra `-D` options.
+fn build_harness_with(root: &Path, dir: &Path, defines: &[&str]) -> PathBuf {
     let exe = dir.join("geometry_harness");
     let cxx = cxx();
     let out = Command::new(&cxx)
-        .args(["-O1", "-std=c++17", "-ffp-contract=off", "-Wall", "-I"])
+        .args(["-O1", "-std=c++17", "-ffp-contract=off", "-Wall"])
+        .args(defines)
+        .arg("-I")
         .arg(root.join("cuda"))
         .arg(root.join("cuda/host/geometry_harness.cpp"))
         .arg("-o")
@@ -992,9 +999,20 @@ fn parity(what: &str, produce: Producer) {
 /// Runs the harness in `mode` (`--spheres`, `--law`) on the cases `text` and returns the lines
 /// that differ from the Rust results `want`, each as "C++ …\nRust …".
 fn harness_mismatches(mode: &str, tag: &str, text: String, want: &[String]) -> Vec<String> {
+    harness_mismatches_with(mode, tag, text, want, &[])
+}
+
+/// [`harness_mismatches`] with the harness built with extra `-D` options.
+fn harness_mismatches_with(
+    mode: &str,
+    tag: &str,
+    text: String,
+    want: &[String],
+    defines: &[&str],
+) -> Vec<String> {
     let root = repo_root();
     let dir = temp_dir(tag);
-    let exe = build_harness(&root, &dir);
+    let exe = build_harness_with(&root, &dir, defines);
     let cases = dir.join("cases.txt");
     std::fs::write(&cases, text).unwrap();
     let out = Command::new(&exe).arg(mode).arg(&cases).output().unwrap();
@@ -1021,11 +1039,12 @@ fn harness_mismatches(mode: &str, tag: &str, text: String, want: &[String]) -> V
 /// pair geometry, bit for bit: on the random cases of the parity test above and on the
 /// contacts of the committed settled packing of dodecahedra, as compressed and dilated by
 /// 1e-5 … 1e-4 (faces resting on faces, thinned until most are below f32's resolution, so
-/// that both the f32 path and the routing of thin and unproven pairs to f64 are taken).
+/// that both the f32 path and the routing of thin and unproven pairs to f64 are taken). With the
+/// LP in f64 (the default) and in f32 (`POLYDEM_MIXED_LP=f32`, `PD_MIXED_LP_F32`, on trial).
 #[test]
 fn cuda_mixed_precision_routing_matches_the_cpu_twin_bitwise() {
     use nalgebra::Translation3;
-    use polydem::geometry::pair::overlap_pair_mixed;
+    use polydem::geometry::pair::overlap_pair_mixed_with;
     use polydem::io::Packing;
     let root = repo_root();
     let mut shapes = test_shapes();
@@ -1075,48 +1094,54 @@ fn cuda_mixed_precision_routing_matches_the_cpu_twin_bitwise() {
     }
     let (mut w32, mut w64) = (PairWorkspace::<f32>::boxed(), PairWorkspace::<f64>::boxed());
     let mut f64_ws = PairWorkspace::<f64>::boxed();
-    let (mut in_f64, mut in_f32, mut contacts) = (0, 0, 0);
-    let mut want = Vec::with_capacity(pairs.len());
-    for (i, c) in pairs.iter().enumerate() {
-        let (ta, tb) = (&shapes[c.a].template, &shapes[c.b].template);
-        let (a, b) = ((ta, c.sa, &c.pose_a), (tb, c.sb, &c.pose_b));
-        let r = from_rust(overlap_pair_mixed(&mut w32, &mut w64, a, b));
-        if r.status == 0 && r.intersects && r.overlap.volume > 0.0 {
-            contacts += 1;
-            let wide = from_rust(overlap_pair(&mut f64_ws, a, b));
-            if wide.overlap.volume.to_bits() == r.overlap.volume.to_bits() {
-                in_f64 += 1;
-            } else {
-                in_f32 += 1;
+    // The LP in f64 (the default), then in f32 (POLYDEM_MIXED_LP=f32, PD_MIXED_LP_F32).
+    for (wide_lp, defines) in [(true, &[][..]), (false, &["-DPD_MIXED_LP_F32=1"][..])] {
+        let (mut in_f64, mut in_f32, mut contacts) = (0, 0, 0);
+        let mut want = Vec::with_capacity(pairs.len());
+        for (i, c) in pairs.iter().enumerate() {
+            let (ta, tb) = (&shapes[c.a].template, &shapes[c.b].template);
+            let (a, b) = ((ta, c.sa, &c.pose_a), (tb, c.sb, &c.pose_b));
+            let r = from_rust(overlap_pair_mixed_with(&mut w32, &mut w64, a, b, wide_lp));
+            if r.status == 0 && r.intersects && r.overlap.volume > 0.0 {
+                contacts += 1;
+                let wide = from_rust(overlap_pair(&mut f64_ws, a, b));
+                if wide.overlap.volume.to_bits() == r.overlap.volume.to_bits() {
+                    in_f64 += 1;
+                } else {
+                    in_f32 += 1;
+                }
             }
+            let mut l = format!("M {i} {} {}", r.status, u8::from(r.intersects));
+            hex3(&mut l, &r.axis);
+            put_overlap(&mut l, &r.overlap);
+            want.push(l);
         }
-        let mut l = format!("M {i} {} {}", r.status, u8::from(r.intersects));
-        hex3(&mut l, &r.axis);
-        put_overlap(&mut l, &r.overlap);
-        want.push(l);
+        println!(
+            "LP in {}: {} pairs ({} of the settled packing): {contacts} contacts, {in_f32} in f32, \
+         {in_f64} in f64",
+            if wide_lp { "f64" } else { "f32" },
+            pairs.len(),
+            pairs.len() - N_PAIRS
+        );
+        assert!(
+            in_f32 > 1000 && in_f64 > 100,
+            "both paths taken: {in_f32} in f32, {in_f64} in f64"
+        );
+        let mismatches = harness_mismatches_with(
+            "--mixed",
+            "cuda-mixed-host",
+            case_file(&shapes, &pairs, &[]),
+            &want,
+            defines,
+        );
+        assert!(
+            mismatches.is_empty(),
+            "LP in f64 {wide_lp}: {} of {} pairs differ:\n{}",
+            mismatches.len(),
+            pairs.len(),
+            mismatches[..mismatches.len().min(5)].join("\n")
+        );
     }
-    println!(
-        "{} pairs ({} of the settled packing): {contacts} contacts, {in_f32} in f32, {in_f64} in f64",
-        pairs.len(),
-        pairs.len() - N_PAIRS
-    );
-    assert!(
-        in_f32 > 1000 && in_f64 > 100,
-        "both paths taken: {in_f32} in f32, {in_f64} in f64"
-    );
-    let mismatches = harness_mismatches(
-        "--mixed",
-        "cuda-mixed-host",
-        case_file(&shapes, &pairs, &[]),
-        &want,
-    );
-    assert!(
-        mismatches.is_empty(),
-        "{} of {} pairs differ:\n{}",
-        mismatches.len(),
-        pairs.len(),
-        mismatches[..mismatches.len().min(5)].join("\n")
-    );
 }
 
 /// The sphere fast path (`cuda/sphere.cuh`) against `geometry::sphere`, bit for bit, on random

@@ -24,7 +24,7 @@ mod common;
 use common::*;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use polydem::geometry::pair::{
-    MIXED_VERTEX_SLACK, PairWorkspace, overlap_pair, overlap_pair_mixed,
+    MIXED_VERTEX_SLACK, PairWorkspace, overlap_pair, overlap_pair_mixed, overlap_pair_mixed_with,
 };
 use polydem::io::Packing;
 use polydem::shape::ConvexTemplate;
@@ -74,8 +74,10 @@ fn f32_pair_geometry_matches_f64_on_settled_face_contacts() {
     let mut wide = PairWorkspace::<f64>::boxed();
     // (error of f32, overlap thickness in f32 ulps of the pair, error of mixed precision)
     let mut rows = Vec::new();
-    // Pairs on which f64 and mixed precision disagree about contact.
+    // Pairs on which f64 and mixed precision (either LP) disagree about contact.
     let mut verdicts = 0;
+    // The error of mixed precision with its LP in f32, per row.
+    let mut lp32_rows = Vec::new();
     // The packing as compressed, then dilated (every centre distance stretched by 1e-5 …
     // 1e-4): each contact's overlap thins by that fraction of the centre distance, so the
     // thinner face contacts of a packing that has relaxed are all met.
@@ -83,7 +85,11 @@ fn f32_pair_geometry_matches_f64_on_settled_face_contacts() {
         close_pairs(&p, 2.0 * r, dilation, |pa, pb| {
             let g64 = overlap_pair(&mut w64, (&t, s, pa), (&t, s, pb)).unwrap();
             let mixed = overlap_pair_mixed(&mut w32, &mut wide, (&t, s, pa), (&t, s, pb)).unwrap();
-            if in_contact(&g64) != in_contact(&mixed) {
+            // The LP in f32 as well (POLYDEM_MIXED_LP=f32, on trial).
+            let lp32 =
+                overlap_pair_mixed_with(&mut w32, &mut wide, (&t, s, pa), (&t, s, pb), false)
+                    .unwrap();
+            if in_contact(&g64) != in_contact(&mixed) || in_contact(&g64) != in_contact(&lp32) {
                 verdicts += 1;
             }
             if !g64.intersects {
@@ -99,6 +105,7 @@ fn f32_pair_geometry_matches_f64_on_settled_face_contacts() {
             };
             let thickness = 2.0 * a.volume / grad;
             rows.push((error(&g32.overlap), thickness / ulp, error(&mixed.overlap)));
+            lp32_rows.push(error(&lp32.overlap));
         });
     }
     assert!(rows.len() > 50_000, "{} contacts", rows.len());
@@ -127,6 +134,17 @@ fn f32_pair_geometry_matches_f64_on_settled_face_contacts() {
     assert!(
         worst_mixed <= 1e-2,
         "mixed precision: worst error {worst_mixed:.3e}"
+    );
+    // The LP in f32 with the same routing: the same bound (the thin pairs it cannot resolve
+    // leave by their radius).
+    let worst_lp32 = lp32_rows.iter().copied().fold(0.0, f64::max);
+    let in_f64_lp32 = lp32_rows.iter().filter(|&&e| e == 0.0).count();
+    println!(
+        "mixed precision with the LP in f32: worst {worst_lp32:.2e}, {in_f64_lp32} contacts in f64"
+    );
+    assert!(
+        worst_lp32 <= 1e-2,
+        "mixed precision, LP in f32: worst error {worst_lp32:.3e}"
     );
     assert_eq!(verdicts, 0, "contacts gained or lost in mixed precision");
     let worst = rows

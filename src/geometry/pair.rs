@@ -10,7 +10,7 @@
 
 use super::Real;
 use super::gjk::gjk_separating_axis;
-use super::interior::{ChebyshevCentre, chebyshev_centre_wide};
+use super::interior::{ChebyshevCentre, chebyshev_centre, chebyshev_centre_wide};
 use super::overlap::{Overlap, OverlapError, OverlapWorkspace, overlap_about};
 use super::polytope::{Plane, PosedPolytope, set_aside_faces_apart, widen};
 use super::quickhull::HullError;
@@ -108,7 +108,7 @@ pub fn overlap_pair<T: Real>(
         origin,
         mut centre,
         proven,
-    } = centred_planes(ws, a, b);
+    } = centred_planes(ws, a, b, true);
     let separating_axis = if proven {
         None
     } else {
@@ -157,6 +157,7 @@ fn centred_planes<T: Real>(
     ws: &mut PairWorkspace<T>,
     (ta, sa, pose_a): (&ConvexTemplate, f64, &Isometry3<f64>),
     (tb, sb, pose_b): (&ConvexTemplate, f64, &Isometry3<f64>),
+    wide_lp: bool,
 ) -> CentredPlanes<T> {
     // Frame origin on the centre line where the bounding spheres would touch: near the contact,
     // so that the planes that bound the overlap pass close to the origin and their f32 offsets
@@ -185,7 +186,13 @@ fn centred_planes<T: Real>(
     // scale of the overlap, and so is their round-off (which matters in f32 when one body is
     // much smaller than the distance between the centres). In mixed precision the LP runs in
     // f64 on the f32 planes ([`chebyshev_centre_wide`]: a face resting on a face).
-    let centre = chebyshev_centre_wide(ws.a.planes(), ws.b.planes());
+    // With `wide_lp` false (mixed precision's LP on trial, [`overlap_pair_mixed_with`]) the LP
+    // runs in `T` from the origin.
+    let centre = if wide_lp {
+        chebyshev_centre_wide(ws.a.planes(), ws.b.planes())
+    } else {
+        chebyshev_centre(ws.a.planes(), ws.b.planes(), Vector3::zeros())
+    };
     // A centre strictly inside every plane of both bodies proves that A ∩ B has an interior:
     // the bodies intersect (the narrow-phase verdict, without GJK) and the set-aside planes are
     // redundant. The planes in use hold it by the LP's radius, the set-aside ones are checked,
@@ -260,13 +267,27 @@ pub fn overlap_pair_mixed(
     a: (&ConvexTemplate, f64, &Isometry3<f64>),
     b: (&ConvexTemplate, f64, &Isometry3<f64>),
 ) -> Result<PairGeometry, OverlapError> {
+    overlap_pair_mixed_with(w32, w64, a, b, true)
+}
+
+/// [`overlap_pair_mixed`] with the Chebyshev LP in f64 (`wide_lp`, the default) or in f32
+/// (`POLYDEM_MIXED_LP=f32`, on trial; `PD_MIXED_LP_F32` of cuda/overlap.cuh). In f32 the LP can
+/// stop early in the thin wedge of a face resting on a face; its centre then lies nanometres
+/// from a face, a radius below [`MIXED_WIDE_ULPS`], and the pair goes to f64 all the same.
+pub fn overlap_pair_mixed_with(
+    w32: &mut PairWorkspace<f32>,
+    w64: &mut PairWorkspace<f64>,
+    a: (&ConvexTemplate, f64, &Isometry3<f64>),
+    b: (&ConvexTemplate, f64, &Isometry3<f64>),
+    wide_lp: bool,
+) -> Result<PairGeometry, OverlapError> {
     let ((ta, sa, _), (tb, sb, _)) = (a, b);
     let (ra, rb) = (ta.circumscribed_radius * sa, tb.circumscribed_radius * sb);
     let CentredPlanes {
         origin,
         centre,
         proven,
-    } = centred_planes(w32, a, b);
+    } = centred_planes(w32, a, b, wide_lp);
     let wide_below = MIXED_WIDE_ULPS * f64::from(f32::EPSILON) * (ra + rb);
     if !(proven && f64::from(centre.radius) >= wide_below) {
         return overlap_pair(w64, a, b);

@@ -11,7 +11,7 @@ use crate::contact::{
 };
 use crate::geometry::Overlap;
 use crate::geometry::pair::{
-    PairWorkspace, Precision, axis_separates, overlap_pair, overlap_pair_mixed,
+    PairWorkspace, Precision, axis_separates, overlap_pair, overlap_pair_mixed_with,
 };
 use crate::geometry::sphere::sphere_lens;
 use crate::state::Particles;
@@ -165,6 +165,8 @@ impl Simulation {
         let step = self.step;
         let spheres = s.spheres_only();
         let mixed = self.pair_precision == Precision::Mixed;
+        // Mixed precision's LP in f64 unless POLYDEM_MIXED_LP=f32 (on trial; the GPU's too).
+        let wide_lp = !crate::tuning::Tuning::get().mixed_lp_f32;
         let periodic = self.bounds.periodic.iter().any(|&k| k);
         let bounds = self.bounds;
         let failure = FirstFailure::default();
@@ -218,7 +220,9 @@ impl Simulation {
                     // Stages 4–5: the narrow phase (GJK where the Chebyshev centre proves no
                     // intersection), then the overlap.
                     let g = match if mixed {
-                        with_workspaces(|w32, w64| overlap_pair_mixed(w32, w64, body_a, body_b))
+                        with_workspaces(|w32, w64| {
+                            overlap_pair_mixed_with(w32, w64, body_a, body_b, wide_lp)
+                        })
                     } else {
                         with_workspace(|ws| overlap_pair(ws, body_a, body_b))
                     } {
@@ -317,7 +321,7 @@ thread_local! {
 }
 
 /// Runs `f` with this thread's f32 and f64 pair workspaces (for
-/// [`overlap_pair_mixed`]).
+/// [`overlap_pair_mixed_with`]).
 fn with_workspaces<R>(f: impl FnOnce(&mut PairWorkspace<f32>, &mut PairWorkspace<f64>) -> R) -> R {
     WORKSPACE_F32.with(|cell| match cell.try_borrow_mut() {
         Ok(mut slot) => {

@@ -142,6 +142,10 @@ impl KernelConfig {
         if phase_clocks() {
             d.push("-DPD_PHASE_CLOCKS=1".into());
         }
+        // Mixed precision's Chebyshev LP in f32 (POLYDEM_MIXED_LP=f32; on trial).
+        if tuning.mixed_lp_f32 && self.precision == Precision::Mixed {
+            d.push("-DPD_MIXED_LP_F32=1".into());
+        }
         d.extend(layout::layout_defines());
         d.push(format!(
             "-DPD_SIZEOF_STAGED_PLANES={}",
