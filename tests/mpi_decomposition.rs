@@ -267,6 +267,30 @@ fn sheared_lattice_on_a_4_rank_grid_is_bitwise_the_single_rank_run() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The same lattice in the CPU twin of mixed precision (`--gpu-precision mixed`: f32 face
+/// contacts, the thin ones in f64): a pair across two ranks is evaluated alike on both, so 4
+/// ranks are bitwise one rank in mixed precision too; and the run is not the f64 run.
+#[test]
+fn sheared_lattice_in_mixed_precision_on_4_ranks_is_bitwise_one_rank() {
+    let scene = "launch/mpi/lattice.toml";
+    let mixed = ["--gpu-precision", "mixed"];
+    let one = temp_dir("mpi-lattice-mixed-1");
+    let s = run_ok(1, scene, &one, &mixed);
+    assert_eq!(s["precision"], "mixed");
+    let four = temp_dir("mpi-lattice-mixed-4");
+    run_ok(4, scene, &four, &mixed);
+    for step in ["step_0000001638.ckpt", "step_0000003275.ckpt"] {
+        same_checkpoint(&one, &four, step, "lattice in mixed precision, 4 ranks");
+    }
+    let last = |d: &Path| std::fs::read(d.join("checkpoints/step_0000003275.ckpt")).unwrap();
+    assert!(
+        last(&one) != last(&reference(scene)),
+        "the mixed-precision run is the f64 run"
+    );
+    let _ = std::fs::remove_dir_all(&one);
+    let _ = std::fs::remove_dir_all(&four);
+}
+
 /// Grains leaving through the open bottom of a domain periodic along x, fed from above: on 3
 /// ranks the same particles are removed and inserted, bitwise as on one rank.
 #[test]
