@@ -8,7 +8,9 @@
 set -euo pipefail
 cd "$(git rev-parse --show-toplevel)"
 # .device/ is local output: keep it out of git without touching .gitignore.
-grep -qx '/.device/' .git/info/exclude 2> /dev/null || echo '/.device/' >> .git/info/exclude
+exclude=$(git rev-parse --git-path info/exclude)
+mkdir -p "$(dirname "$exclude")"
+grep -qx '/.device/' "$exclude" 2> /dev/null || echo '/.device/' >> "$exclude"
 rm -rf .device
 mkdir -p .device/bin .device/tests
 

@@ -1,0 +1,109 @@
+#!/usr/bin/env bash
+# The GPU checks and A/B benches of the work that waits for a GPU, in one or two device calls.
+#
+# Here (no GPU):  bash scripts/gpu-pack.sh --test gpu_pipeline --test mpi_decomposition \
+#                     --test neighbor_modes --test mixed_flat_contacts --test cuda_geometry_host \
+#                     --test validation_contact
+# There, from the repository root with .device/ carried:
+#   bash scripts/gpu_session.sh tests     # the GPU tests, several processes at once (~5-8 min)
+#   bash scripts/gpu_session.sh benches   # the A/B benches, one at a time on an idle GPU
+#   bash scripts/gpu_session.sh all       # both
+# Results go to $OUT (the device call's folder; out/gpu_session here): summary.txt (one line a
+# test or bench), logs.tgz (every log) and benches.jsonl (every bench report, tagged).
+#
+# The A/B pairs run the same binary with and without one setting, alternating, twice each:
+# - POLYDEM_GPU_EXCHANGE=host against device: a decomposed GPU run's rebuilds through the host
+#   or on the device (docs/parallel.md), on 2 ranks of launch/neighbor/spheres_dense.toml;
+# - POLYDEM_PAIR_BATCH=2147483647 (every candidate staged at once) against the default batches:
+#   device bytes per particle and speed, 1e6 settled dodecahedra, mixed precision;
+# - POLYDEM_MIXED_LP=f32 against the default f64 LP: the same scene's speed (docs/performance.md,
+#   "Mixed precision and dense dodecahedra").
+set -u
+cd "$(dirname "$0")/.."
+what=${1:-all}
+OUT=${OUT:-out/gpu_session}
+mkdir -p "$OUT"
+logs=$(mktemp -d)
+summary="$OUT/summary.txt"
+: > "$summary"
+export POLYDEM_ROOT=$PWD PATH=$PWD/.device/bin:$PATH
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+T=.device/tests
+[ -x .device/bin/polydem ] || { echo "no .device/bin/polydem: run scripts/gpu-pack.sh here first" >&2; exit 2; }
+nvidia-smi --query-gpu=name,memory.total --format=csv,noheader >> "$summary" 2>&1
+
+# name|command: the GPU tests of the open work. The MPI tests start 2-3 ranks each.
+tests=(
+  "gpu_pipeline|$T/gpu_pipeline --ignored --test-threads 3"
+  "mpi_device_rebuild|$T/mpi_decomposition --ignored --exact gpu_rebuilds_on_the_device_are_the_host_round_trip"
+  "mpi_gpu_ranks|$T/mpi_decomposition --ignored --exact gpu_ranks_match_one_gpu"
+  "mpi_neighbor_modes|$T/mpi_decomposition --ignored --exact every_neighbor_mode_on_two_gpu_ranks_matches_one_gpu"
+  "mpi_periodic_restart|$T/mpi_decomposition --ignored --exact gpu_ranks_periodic_grid_and_restart"
+  "mpi_sheared|$T/mpi_decomposition --ignored --exact gpu_ranks_sheared_lattice_is_the_cpus"
+  "mpi_stop|$T/mpi_decomposition --ignored --exact a_stop_on_one_gpu_rank_stops_every_rank_with_the_state_written"
+  "neighbor_modes|$T/neighbor_modes --ignored"
+  "mixed_flat_contacts|$T/mixed_flat_contacts --ignored"
+  "cuda_geometry|$T/cuda_geometry_host --ignored"
+  "validation_contact|$T/validation_contact --ignored --test-threads 2"
+)
+
+# Runs "name|command" lines, at most $2 at a time, each within $3 seconds.
+run_parallel() {
+  local -n list=$1
+  local most=$2 limit=$3
+  for entry in "${list[@]}"; do
+    while [ "$(jobs -rp | wc -l)" -ge "$most" ]; do sleep 1; done
+    (
+      name=${entry%%|*}
+      start=$(date +%s)
+      timeout "$limit" bash -c "${entry#*|}" > "$logs/$name.log" 2>&1
+      rc=$?
+      printf '%-22s rc=%-3s %4ss  %s\n' "$name" "$rc" "$(($(date +%s) - start))" \
+        "$(grep -E '^test result' "$logs/$name.log" | tail -1)" >> "$summary"
+    ) &
+  done
+  wait
+}
+
+bench() { # tag, environment, then the polydem bench arguments
+  local tag=$1 env=$2
+  shift 2
+  local start=$(date +%s)
+  env $env timeout 300 "$@" --json > "$logs/bench_$tag.json" 2> "$logs/bench_$tag.err"
+  local rc=$?
+  python3 - "$tag" "$env" "$logs/bench_$tag.json" "$OUT/benches.jsonl" << 'PY' >> "$summary"
+import json, sys
+tag, env, src, dst = sys.argv[1:]
+try:
+    r = json.load(open(src))
+except Exception as e:
+    print(f"bench {tag:<28} [{env}] no report ({e})"); sys.exit()
+r["tag"], r["env"] = tag, env
+open(dst, "a").write(json.dumps(r) + "\n")
+par = r.get("parallel") or {}
+print(f"bench {tag:<28} [{env}] {r['particle_steps_per_second']:.3e} ps/s, "
+      f"{r.get('device_bytes_per_particle') or 0:.0f} B/particle, "
+      f"pairs {r['stage_seconds']['pairs']:.3f} s, parallel {json.dumps(par)[:300]}")
+PY
+  echo "  (rc=$rc, $(($(date +%s) - start)) s)" >> "$summary"
+}
+
+if [ "$what" = tests ] || [ "$what" = all ]; then
+  run_parallel tests 6 540
+fi
+if [ "$what" = benches ] || [ "$what" = all ]; then
+  mpi2="mpirun --oversubscribe -n 2 polydem bench"
+  dense="launch/neighbor/spheres_dense.toml --backend cuda --neighbor-mode gpu --warmup 20 --steps 600"
+  settled="launch/bench/settled/dodecahedra_1e6.toml --backend cuda --gpu-precision mixed --warmup 10 --steps 100"
+  for round in 1 2; do
+    bench "exchange_host_$round" POLYDEM_GPU_EXCHANGE=host $mpi2 $dense
+    bench "exchange_device_$round" POLYDEM_GPU_EXCHANGE=device $mpi2 $dense
+  done
+  for round in 1 2; do
+    bench "settled_default_$round" X=1 polydem bench $settled
+    bench "settled_one_batch_$round" POLYDEM_PAIR_BATCH=2147483647 polydem bench $settled
+    bench "settled_lp_f32_$round" POLYDEM_MIXED_LP=f32 polydem bench $settled
+  done
+fi
+tar -czf "$OUT/logs.tgz" -C "$logs" .
+cat "$summary"
