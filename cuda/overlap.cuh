@@ -415,6 +415,11 @@ PD_HD bool axis_separates(const BodyRef& A, const BodyRef& B, V3<double> axis, d
     return min_a - max_b > margin * norm(axis);
 }
 
+// Mixed precision's Chebyshev LP in f32 instead of f64 (1), on trial (POLYDEM_MIXED_LP=f32).
+#ifndef PD_MIXED_LP_F32
+#define PD_MIXED_LP_F32 0
+#endif
+
 // pair::overlap_pair: narrow phase and overlap of A against B computed in arithmetic T in a
 // frame centred near the contact (docs/design.md §3): frame origin on the centre line where the
 // bounding spheres would touch, planes culled to those that reach the other's ball and the faces
@@ -434,11 +439,6 @@ PD_HD bool axis_separates(const BodyRef& A, const BodyRef& B, V3<double> axis, d
 // or proves with a Chebyshev radius below PD_MIXED_WIDE_ULPS f32 epsilons of ra + rb, returns
 // STATUS_WIDE: f32 cannot place the planes of a face resting on a face to the overlap's
 // thickness, and the caller evaluates such a pair in f64 (Rust's overlap_pair_mixed).
-// Mixed precision's Chebyshev LP in f32 instead of f64 (1), on trial (POLYDEM_MIXED_LP=f32).
-#ifndef PD_MIXED_LP_F32
-#define PD_MIXED_LP_F32 0
-#endif
-
 template <class T, bool kFull, bool kWide = false>
 PD_HD int pair_planes_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B, PairGeometry* out,
                         V3<double>* frame, bool* ready) {

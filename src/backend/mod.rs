@@ -121,11 +121,7 @@ impl Device {
 
     /// The arithmetic of the pair geometry as summaries name it: "double" on the CPU.
     pub fn precision_name(&self) -> String {
-        match self {
-            Device::Cpu => "double".into(),
-            Device::CpuMixed => "mixed".into(),
-            Device::Cuda { precision, .. } => format!("{precision:?}").to_lowercase(),
-        }
+        format!("{:?}", self.pair_precision()).to_lowercase()
     }
 }
 
