@@ -174,6 +174,8 @@ PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const
     kin.inverse_inertia_b = v3(1.0 / ib.x, 1.0 / ib.y, 1.0 / ib.z);
     kin.sphere_radius_a = PD_SPHERES ? p.radius[a] : 0.0;
     kin.sphere_radius_b = PD_SPHERES ? p.radius[b] : 0.0;
+    kin.inverse_mass_a = 1.0 / p.mass[a];
+    kin.inverse_mass_b = 1.0 / p.mass[b];
     kin.split_a = mass_share(p.contacts[a]);
     kin.split_b = mass_share(p.contacts[b]);
 #if PD_SPHERES

@@ -23,6 +23,7 @@ struct ContactParameters {
 struct ContactKinematics {
     V3<double> x_a, x_b, v_a, v_b, w_a, w_b;
     double effective_mass;
+    double inverse_mass_a, inverse_mass_b; // 1/m; zero for a wall
     Quat<double> q_a, q_b;
     V3<double> inverse_inertia_a, inverse_inertia_b; // zero for a wall
     double sphere_radius_a, sphere_radius_b;          // zero for a polyhedron or a wall
@@ -105,6 +106,75 @@ PD_HD double weighted_inverse_inertia(const ContactKinematics& kin, V3<double> u
     V3<double> sa = v3(ba.x * kin.inverse_inertia_a.x, ba.y * kin.inverse_inertia_a.y, ba.z * kin.inverse_inertia_a.z);
     V3<double> sb = v3(bb.x * kin.inverse_inertia_b.x, bb.y * kin.inverse_inertia_b.y, bb.z * kin.inverse_inertia_b.z);
     return k_a * dot(sa, ba) + k_b * dot(sb, bb);
+}
+
+// ContactKinematics::tangential_inverse_mass_trace: the trace of the tangential block of
+// W = Σ k (1/m − [r − x]× I⁻¹ [r − x]×), as tr W − n·W n, each body's term times its share.
+PD_HD double tangential_inverse_mass_term(Quat<double> q, V3<double> d, double m, V3<double> x, V3<double> r,
+                                          V3<double> n) {
+    V3<double> b = rotate_inverse(q, r - x);
+    V3<double> nb = rotate_inverse(q, n);
+    double x2 = b.x * b.x, y2 = b.y * b.y, z2 = b.z * b.z;
+    double trace = d.x * (y2 + z2) + d.y * (x2 + z2) + d.z * (x2 + y2);
+    V3<double> a = cross(b, nb);
+    V3<double> da = v3(a.x * d.x, a.y * d.y, a.z * d.z);
+    return 2.0 * m + (trace - dot(da, a));
+}
+PD_HD double tangential_inverse_mass_trace(const ContactKinematics& kin, V3<double> r, V3<double> n, double k_a,
+                                           double k_b) {
+    double sum = k_a * tangential_inverse_mass_term(kin.q_a, kin.inverse_inertia_a, kin.inverse_mass_a, kin.x_a, r, n) +
+                 k_b * tangential_inverse_mass_term(kin.q_b, kin.inverse_inertia_b, kin.inverse_mass_b, kin.x_b, r, n);
+    return max_(sum, 0.0);
+}
+
+// friction.rs `resolved_stiffness`: the stiffest spring the step resolves, (σ/Δt)²/w, σ = 0.5.
+PD_HD double resolved_stiffness(double inverse, double dt) {
+    if (dt > 0.0 && inverse > 0.0) {
+        double x = 0.5 / dt;
+        return x * x / inverse;
+    }
+    return 0.0;
+}
+
+// friction.rs `lock_coefficient`: the dashpot whose one-step impulse takes `share` of the motion.
+PD_HD double lock_coefficient(double share, double inverse, double dt) {
+    return dt > 0.0 && inverse > 0.0 ? share / (dt * inverse) : 0.0;
+}
+
+// friction.rs `stretch`: the stretch s/√k of a spring carried at constant energy.
+PD_HD V3<double> stretch(V3<double> stored, double root_k) {
+    return root_k > 0.0 ? stored * (1.0 / root_k) : zero3<double>();
+}
+PD_HD double stretch(double stored, double root_k) { return root_k > 0.0 ? stored * (1.0 / root_k) : 0.0; }
+
+// friction.rs `slip_step`: one step of a Kelvin–Voigt element in series with a Coulomb slider;
+// the force into *force, the stretch at the end of the step returned.
+PD_HD V3<double> slip_step(V3<double> xi_old, V3<double> v, double k, double c, double cap, double dt,
+                           V3<double>* force) {
+    V3<double> xi = xi_old + v * dt;
+    V3<double> trial = xi * (-k) + v * (-c);
+    double magnitude = norm(trial);
+    if (magnitude <= cap) {
+        *force = trial;
+        return xi;
+    }
+    V3<double> unit = trial * (1.0 / magnitude);
+    double stiffness = k + (dt > 0.0 ? c / dt : 0.0);
+    *force = unit * cap;
+    return stiffness > 0.0 ? xi + unit * ((magnitude - cap) / stiffness) : zero3<double>();
+}
+PD_HD double slip_step(double xi_old, double v, double k, double c, double cap, double dt, double* force) {
+    double xi = xi_old + v * dt;
+    double trial = xi * (-k) + v * (-c);
+    double magnitude = abs_(trial);
+    if (magnitude <= cap) {
+        *force = trial;
+        return xi;
+    }
+    double unit = trial * (1.0 / magnitude);
+    double stiffness = k + (dt > 0.0 ? c / dt : 0.0);
+    *force = unit * cap;
+    return stiffness > 0.0 ? xi + unit * ((magnitude - cap) / stiffness) : 0.0;
 }
 
 // U(V) = (3/4) c V^{4/3} for V > 0 (law.rs `potential`).
@@ -317,39 +387,45 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     V3<double> torque_b_el = (-(o.moment_b + cross(c - kin.x_b, s_vec))) * pressure;
     V3<double> torque_a_el = (-((-o.moment_b) + cross(c - kin.x_a, -s_vec))) * pressure;
 
-    V3<double> v_t = v_rel - n * vn;
-    double k_t = params.tangential_stiffness * area;
-    double c_t = 0.0;
-    if (params.restitution < 1.0 && params.friction > 0.0) {
-        c_t = 2.0 * abs_(pm.log_restitution) * sqrt_(k_t * kin.effective_mass) / pm.log_norm;
-    }
-    V3<double> tangential = zero3<double>();
-    if (params.friction > 0.0) {
-        V3<double> old = state->spring;
-        V3<double> in_plane = old - n * dot(old, n);
-        double len = norm(in_plane);
-        V3<double> rotated = len > 0.0 ? in_plane * (norm(old) / len) : zero3<double>();
-        V3<double> xi = rotated + v_t * dt;
-        V3<double> f_t = (-xi) * k_t - v_t * c_t;
-        double cap = params.friction * f_normal;
-        double magnitude = norm(f_t);
-        if (magnitude > cap) {
-            f_t = f_t * (magnitude > 0.0 ? cap / magnitude : 0.0);
-            xi = k_t > 0.0 ? (-f_t) / k_t : zero3<double>();
-        }
-        state->spring = xi;
-        tangential = f_t;
-    } else {
-        state->spring = zero3<double>();
-    }
-
-    // Couples of the contact area: rocking damping and twisting friction.
+    // The relative rotation: about the normal (twist) and about tangent axes (rocking).
     const double pi = 3.141592653589793;
     V3<double> w_rel = kin.w_b - kin.w_a;
     double wn = dot(w_rel, n);
     V3<double> w_perp = w_rel - n * wn;
-    V3<double> couple_b = zero3<double>();
+
+    // Friction at r_e (law.rs, friction.rs): Kelvin–Voigt elements in series with Coulomb
+    // sliders, their dashpots the step's lock.
+    V3<double> v_t = v_rel - n * vn;
     double disk = area / pi;
+    V3<double> tangential = zero3<double>();
+    double m_tw = 0.0;
+    if (params.friction > 0.0) {
+        double seed_t = params.tangential_stiffness * area;
+        double w_t = tangential_inverse_mass_trace(kin, r_e, n, cap_a, cap_b);
+        double k_t = max_(seed_t, resolved_stiffness(w_t, dt));
+        double root_t = sqrt_(k_t);
+        V3<double> old = state->spring;
+        V3<double> in_plane = old - n * dot(old, n);
+        double len = norm(in_plane);
+        V3<double> carried = len > 0.0 ? in_plane * (norm(old) / len) : zero3<double>();
+        double c_t = lock_coefficient(share, w_t, dt);
+        double cap = params.friction * f_normal;
+        V3<double> xi = slip_step(stretch(carried, root_t), v_t, k_t, c_t, cap, dt, &tangential);
+        state->spring = xi * root_t;
+        double w_n = weighted_inverse_inertia(kin, n, cap_a, cap_b);
+        double k_tw = max_(0.5 * seed_t * disk, resolved_stiffness(w_n, dt));
+        double root_tw = sqrt_(k_tw);
+        double c_tw = lock_coefficient(share, w_n, dt);
+        double cap_tw = cap * (2.0 / 3.0) * sqrt_(disk);
+        double phi = slip_step(stretch(state->twist, root_tw), wn, k_tw, c_tw, cap_tw, dt, &m_tw);
+        state->twist = phi * root_tw;
+    } else {
+        state->spring = zero3<double>();
+        state->twist = 0.0;
+    }
+
+    // Rocking damping of the contact area: the normal dashpot spread over its disk.
+    V3<double> couple_b = n * m_tw;
     double rocking = norm(w_perp);
     if (params.rocking && c_n > 0.0 && rocking > 0.0) {
         double c_roll = 0.25 * c_n * disk;
@@ -359,33 +435,13 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
         }
         couple_b -= w_perp * c_roll;
     }
-    if (params.friction > 0.0) {
-        double k_tw = 0.5 * k_t * disk;
-        double c_tw = 0.5 * c_t * disk;
-        double inverse = weighted_inverse_inertia(kin, n, cap_a, cap_b);
-        if (dt > 0.0 && inverse > 0.0) {
-            c_tw = min_(c_tw, 1.0 / (dt * inverse));
-        }
-        double phi = state->twist + wn * dt;
-        double m_tw = -k_tw * phi - c_tw * wn;
-        double cap = params.friction * f_normal * (2.0 / 3.0) * sqrt_(disk);
-        if (abs_(m_tw) > cap) {
-            m_tw = copysign(cap, m_tw);
-            phi = k_tw > 0.0 ? -m_tw / k_tw : 0.0;
-        }
-        state->twist = phi;
-        couple_b += n * m_tw;
-    } else {
-        state->twist = 0.0;
-    }
 
     V3<double> f_line = n * (f_normal - f_elastic) + tangential;
     ContactForces out;
     out.force_b = n * f_normal + tangential;
     out.torque_b = torque_b_el + cross(r_e - kin.x_b, f_line) + couple_b;
     out.torque_a = torque_a_el + cross(r_e - kin.x_a, -f_line) - couple_b;
-    out.elastic_energy =
-        energy + 0.5 * k_t * norm2(state->spring) + 0.25 * k_t * disk * state->twist * state->twist;
+    out.elastic_energy = energy + 0.5 * norm2(state->spring) + 0.5 * state->twist * state->twist;
     return out;
 }
 

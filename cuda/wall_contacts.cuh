@@ -377,6 +377,8 @@ extern "C" __global__ void wall_contacts(WallContactsParams args) {
         kin.inverse_inertia_b = zero3<double>();
         kin.sphere_radius_a = PD_SPHERES ? p.radius[i] : 0.0;
         kin.sphere_radius_b = 0.0;
+        kin.inverse_mass_a = 1.0 / p.mass[i];
+        kin.inverse_mass_b = 0.0;
         kin.split_a = mass_share(p.contacts[i]);
         kin.split_b = 1.0;
         double area = norm(world.dv_dxb);

@@ -8,6 +8,7 @@
 #   bash scripts/gpu_session.sh tests     # the GPU tests, several processes at once (~5-8 min)
 #   bash scripts/gpu_session.sh benches   # the A/B benches, one at a time on an idle GPU
 #   bash scripts/gpu_session.sh all       # both
+#   ONLY="gpu_pipeline validation_friction" bash scripts/gpu_session.sh tests   # some groups
 # Results go to $OUT (the device call's folder; out/gpu_session here): summary.txt (one line a
 # test or bench), logs.tgz (every log) and benches.jsonl (every bench report, tagged).
 #
@@ -45,7 +46,20 @@ tests=(
   "mixed_flat_contacts|$T/mixed_flat_contacts --ignored"
   "cuda_geometry|$T/cuda_geometry_host --ignored"
   "validation_contact|$T/validation_contact --ignored --test-threads 2"
+  "validation_friction|$T/validation_friction --ignored --test-threads 2"
+  "validation_spheres|$T/validation_spheres --ignored --test-threads 2"
+  "validation_moving_walls|$T/validation_moving_walls --ignored --test-threads 2"
+  "validation_impact|$T/validation_impact --ignored"
+  "stability_guard|$T/stability --ignored --exact the_guard_stops_gpu_runs_at_the_same_steps"
 )
+# ONLY="name name ..." runs just those groups (the names before the '|').
+if [ -n "${ONLY:-}" ]; then
+  chosen=()
+  for entry in "${tests[@]}"; do
+    case " $ONLY " in *" ${entry%%|*} "*) chosen+=("$entry") ;; esac
+  done
+  tests=("${chosen[@]}")
+fi
 
 # Runs "name|command" lines, at most $2 at a time, each within $3 seconds.
 run_parallel() {

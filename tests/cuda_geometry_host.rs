@@ -1338,6 +1338,12 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             w_a: rand3(&mut rng, -1.0, 1.0) * (speed * 100.0),
             w_b: rand3(&mut rng, -1.0, 1.0) * (speed * 100.0),
             effective_mass: 10f64.powf(rng.range(-4.0, -2.0)),
+            inverse_mass_a: 10f64.powf(rng.range(2.0, 4.0)),
+            inverse_mass_b: if i % 6 == 1 {
+                0.0
+            } else {
+                10f64.powf(rng.range(2.0, 4.0))
+            },
             q_a: UnitQuaternion::from_quaternion(nalgebra::Quaternion::from(
                 nalgebra::Vector4::from(rng.unit_quaternion()),
             )),
@@ -1425,6 +1431,8 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             hex3(&mut text, &v);
         }
         hex(&mut text, kin.effective_mass);
+        hex(&mut text, kin.inverse_mass_a);
+        hex(&mut text, kin.inverse_mass_b);
         for q in [kin.q_a, kin.q_b] {
             for x in [q.w, q.i, q.j, q.k] {
                 hex(&mut text, x);
@@ -1462,19 +1470,23 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             windowed && vn > 0.0 && depth - vn * dt <= 0.0 && depth - 0.5 * vn * dt > 0.0,
         );
         branches[2] += usize::from(inside);
-        // Sliding: the spring holds exactly the Coulomb force; the twist likewise its cap.
+        // Sliding: the friction force is exactly the Coulomb force; the twist likewise its cap.
         let n_used = -overlap.dv_dxb / area;
         let f_normal = f.force_b.dot(&n_used);
-        let k_t = params.tangential_stiffness * area;
+        let f_tangential = (f.force_b - n_used * f_normal).norm();
         let disk = area / std::f64::consts::PI;
         let near = |a: f64, b: f64| b > 0.0 && (a - b).abs() <= 1e-9 * b;
-        branches[3] += usize::from(mu > 0.0 && near(after.spring.norm() * k_t, mu * f_normal));
+        branches[3] += usize::from(mu > 0.0 && near(f_tangential, mu * f_normal));
+        let (twist_before, twist_after) = (state.twist, after.twist);
         branches[4] += usize::from(
-            mu > 0.0
-                && near(
-                    0.5 * k_t * disk * after.twist.abs(),
-                    mu * f_normal * (2.0 / 3.0) * disk.sqrt(),
-                ),
+            mu > 0.0 && twist_after != 0.0 && twist_before != 0.0 && {
+                // The twisting couple is capped where the element slipped: its stored state is
+                // not the stick step's.
+                let k_tw = 0.5 * params.tangential_stiffness * area * disk;
+                let w_rel = kin.w_b - kin.w_a;
+                let stick = twist_before + w_rel.dot(&n_used) * dt * k_tw.sqrt();
+                (twist_after - stick).abs() > 1e-9 * stick.abs().max(twist_after.abs())
+            },
         );
         branches[5] += usize::from(sphere);
         // The caps' mass splitting changed the outcome (the same contact with whole masses).

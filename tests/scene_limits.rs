@@ -109,8 +109,8 @@ fn run_logs_the_step_warnings_of_check() {
     let warnings: Vec<String> = serde_json::from_value(report["warnings"].clone()).unwrap();
     assert_eq!(warnings.len(), 1, "{report}");
     assert!(
-        warnings[0].contains("exceeds 0.05 of the face-to-face contact time")
-            && warnings[0].contains("(1.000 × it)"),
+        warnings[0].contains("is 1.000 of the face-to-face contact time")
+            && warnings[0].contains("above 0.05 of it"),
         "{}",
         warnings[0]
     );

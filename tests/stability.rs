@@ -414,6 +414,8 @@ fn a_body_wholly_inside_another_is_pushed_out_along_the_line_of_centres() {
             w_a: Vector3::zeros(),
             w_b: Vector3::zeros(),
             effective_mass: 1.0,
+            inverse_mass_a: 1.0,
+            inverse_mass_b: 1.0,
             q_a: q,
             q_b: UnitQuaternion::identity(),
             inverse_inertia_a: Vector3::repeat(1.0),

@@ -485,14 +485,15 @@ fn oblique_sliding_impacts(device: Device) {
 /// m/s, no spin, Δt = t_c/40): the rigid-body solution slides through the whole impact from
 /// `tan θ* = 3.5 μ (1 + e)`, θ* = 57.6°, where the tangential impulse reaches `μ` times the
 /// normal one. Above it (57.8°, 60°) the ratio must be 1 within 1e-4 (measured 1.00000). Below
-/// it the contact point stops slipping during the impact and the ratio falls: below 0.995 at
-/// 55° and 0.97 at 50° (measured 0.992 and 0.961), and above the rigid, stiff-contact value
-/// `tan θ / tan θ*` (0.91, 0.76), since the tangential spring's recoil returns part of the
-/// shortfall (the compliant impacts of Maw, Barber & Fawcett, Wear 38, 1976).
+/// it the contact point stops slipping during the impact and rolls off: the ratio is the rigid
+/// one, `tan θ / tan θ*` (0.91 at 55°, 0.76 at 50°), within 1e-3. (With the friction spring of
+/// the earlier law the contact recoiled on its spring, the compliant impacts of Maw, Barber &
+/// Fawcett, Wear 38, 1976, and the ratio was 0.992 and 0.961: the sphere left spinning faster
+/// than it rolls; docs/contact.md §4.)
 fn sliding_onset(device: Device) {
     let (m, r, mu, e): (Material, f64, f64, f64) = (soft(), 0.01, 0.3, 0.5);
     let onset = (3.5 * mu * (1.0 + e)).atan();
-    for (theta, below) in [(50.0f64, 0.97), (55.0, 0.995), (57.8, 1.0), (60.0, 1.0)] {
+    for theta in [50.0f64, 55.0, 57.8, 60.0] {
         let th = theta.to_radians();
         let (vn, vt) = (th.cos(), th.sin());
         let mass = m.rho * 4.0 / 3.0 * PI * r.powi(3);
@@ -503,18 +504,16 @@ fn sliding_onset(device: Device) {
             "{device:?} θ {theta}° (onset {:.2}°): J_t/(μ J_n) {ratio:.5}",
             onset.to_degrees()
         );
-        if th > onset {
-            assert!(
-                (ratio - 1.0).abs() <= 1e-4,
-                "θ {theta}°: J_t/(μ J_n) {ratio}"
-            );
+        let want = if th > onset {
+            1.0
         } else {
-            assert!(
-                ratio < below && ratio > th.tan() / onset.tan(),
-                "θ {theta}°: J_t/(μ J_n) {ratio}, outside ({}, {below})",
-                th.tan() / onset.tan()
-            );
-        }
+            th.tan() / onset.tan()
+        };
+        let tolerance = if th > onset { 1e-4 } else { 1e-3 };
+        assert!(
+            (ratio - want).abs() <= tolerance * want,
+            "θ {theta}°: J_t/(μ J_n) {ratio}, want {want}"
+        );
     }
 }
 

@@ -28,7 +28,7 @@
 //   L i {volume centroid(3) S(3) M(3) depth thickness} and C i {the same}.
 // Law input: "sincos N" N × { x }, "cbrt N" N × { x }, "pow N" N × { x y }, "law N" N × { c_n c_t e mu damping ln_e
 //   log_norm rocking(1.0/0.0)  volume centroid(3) S(3) M(3) depth thickness  x_a x_b v_a v_b w_a
-//   w_b (3 each) m_eff q_a(w x y z) q_b inv_inertia_a(3) inv_inertia_b(3) r_sphere_a r_sphere_b
+//   w_b (3 each) m_eff inv_m_a inv_m_b q_a(w x y z) q_b inv_inertia_a(3) inv_inertia_b(3) r_sphere_a r_sphere_b
 //   spring(3) approach twist dt }; output S i {sin cos}, R i {cbrt}, P i {ln x, exp y, x^y}, W i {force_b(3) torque_a(3)
 //   torque_b(3) energy spring(3) approach twist}.
 
@@ -265,6 +265,8 @@ int run_law(const char* path) {
         kin.w_a = read_v3();
         kin.w_b = read_v3();
         kin.effective_mass = read_f64();
+        kin.inverse_mass_a = read_f64();
+        kin.inverse_mass_b = read_f64();
         kin.q_a = read_quat();
         kin.q_b = read_quat();
         kin.inverse_inertia_a = read_v3();

@@ -13,6 +13,8 @@
 //! | `elastic_energy` | energy conservation, e = 1: 27 aligned cubes in a periodic box (docs/validation.md §3) | `|ΔE|/E` over the run |
 //! | `mesh_independence` | the cuboid pushed across a flat wall meshed at λ = 0.5 and 4 (docs/validation.md §2): the same force curve | max force difference over the force scale |
 //! | `sphere_oblique` | rigid-body gross sliding (Chung & Ooi test 6 and the soft sphere at 70°) | max relative error of v_n', v_t', ω' |
+//! | `sphere_sticking` | rigid-body sticking: the sphere rolls off (the soft sphere at 15°–55°, test 6 at 2 rad/s) | max relative error of v_n', v_t', ω' |
+//! | `friction_energy` | the soft sphere at 30°, μ 0.1–0.7, e 0.1–1: the rigid-body kinetic energy after the impact | max `|ΔK|/K_in` (the detail: the largest change, never a gain) |
 //! | `pour_packing` (full only) | `launch/validation/pour.toml`'s bulk packing fraction at the finest step | relative difference |
 //!
 //! Results go to `accuracy.csv` and the Pareto plot `accuracy.svg` (error against run time,
@@ -67,13 +69,15 @@ pub struct AccuracyOptions {
 }
 
 /// The cases in order.
-pub const CASES: [&str; 7] = [
+pub const CASES: [&str; 9] = [
     "cylinder_impact",
     "restitution",
     "elastic_impact",
     "elastic_energy",
     "mesh_independence",
     "sphere_oblique",
+    "sphere_sticking",
+    "friction_energy",
     "pour_packing",
 ];
 

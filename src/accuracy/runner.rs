@@ -149,6 +149,8 @@ dir = "{}"
             "elastic_energy" => self.elastic_energy(device, f),
             "mesh_independence" => self.mesh_independence(device, f),
             "sphere_oblique" => self.sphere_oblique(device, f),
+            "sphere_sticking" => self.sphere_sticking(device, f),
+            "friction_energy" => self.friction_energy(device, f),
             "pour_packing" => self.pour_packing(device, f),
             _ => Err(anyhow!("unknown accuracy case {case}")),
         }

@@ -43,7 +43,9 @@ impl ContactKey {
 /// State carried by one contact from step to step.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ContactState {
-    /// Tangential spring displacement ξ (Cundall–Strack), kept in the current tangent plane.
+    /// Tangential spring, kept in the current tangent plane, as `√k_t ξ` (ξ the stretch,
+    /// √(N·m)): its energy `|s|²/2` does not change with the contact's stiffness
+    /// ([`crate::contact::friction::stretch`]).
     pub spring: Vector3<f64>,
     /// Normal approach speed of the contact's current loading cycle, the Hunt–Crossley
     /// damping's reference speed, signed by the cycle's phase: positive while loading, negative
@@ -51,8 +53,8 @@ pub struct ContactState {
     /// marks a contact that has not been evaluated yet.
     #[serde(default)]
     pub approach_speed: f64,
-    /// Relative twist angle about the normal held by the torsional spring of twisting friction
-    /// (radians).
+    /// The torsional spring of twisting friction as `√k_tw φ` (φ the twist angle it holds,
+    /// √(N·m)), carried at constant energy like the tangential spring.
     #[serde(default)]
     pub twist: f64,
 }

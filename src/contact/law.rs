@@ -23,19 +23,24 @@
 //! - The normal force acts on the elastic force's line of action, through
 //!   `r_e = c_V + (S × M_B)/|S|²`: a dashpot at the overlap centroid has the lever
 //!   `θ L²/(12 δ)` on a tilted face and pumps its rocking.
-//! - Tangential: Cundall–Strack spring (seed Eq. 17–20) at `r_e`, rotated into the current
-//!   tangent plane each step, capped at `μ |F_n|`.
+//! - Friction ([`super::friction`]): at `r_e`, a spring and a dashpot side by side in series
+//!   with a Coulomb slider (`μ |F_n|`), the spring rotated into the current tangent plane each
+//!   step and carried at constant energy, the dashpot the step's lock (the slip of one step,
+//!   against the mass the slip sees). It never does positive work over a contact's life, and
+//!   a sticking impact ends rolling, as rigid-body theory with Coulomb friction has it.
 //! - Rocking damping of a polyhedron's contact area: the normal dashpot spread over the
 //!   contact disk of area `A_n` resists the relative rotation about tangent axes with the
 //!   couple `−c_n A_n/(4π) ω⊥` (`c_n = ᾱ F_e / v_ref`). Spheres have none: they have no face to
 //!   rock on, and it would brake their rolling.
-//! - Twisting friction: the tangential spring and dashpot spread over the same disk give a
-//!   torsional spring `k_t A_n/(2π)` on the relative twist angle (contact history) and dashpot
-//!   `c_t A_n/(2π)`, capped at `μ |F_n| (2/3) √(A_n/π)`, the Coulomb limit of a disk.
+//! - Twisting friction: the same element as the tangential one about the normal, its spring
+//!   the tangential spring spread over the contact disk (`k_t A_n/(2π)`), its lock against the
+//!   moments of inertia about the normal, its slider `μ |F_n| (2/3) √(A_n/π)`, the Coulomb
+//!   limit of a disk.
 //!
 //! Every dissipative term is bounded by what one explicit step can remove: its impulse never
 //! reverses the relative velocity it acts on.
 
+use super::friction::{lock_coefficient, resolved_stiffness, slip_step, stretch};
 use super::history::ContactState;
 use super::potential::{LocalPowerLaw, resolved_pressure};
 pub use super::potential::{
@@ -78,6 +83,9 @@ pub struct ContactKinematics {
     pub w_b: Vector3<f64>,
     /// Effective mass `(1/m_A + 1/m_B)^{-1}` (m_A for a wall contact).
     pub effective_mass: f64,
+    /// Inverse masses `1/m_A`, `1/m_B` (zero for a wall).
+    pub inverse_mass_a: f64,
+    pub inverse_mass_b: f64,
     /// Orientations (body → world) of A and B.
     pub q_a: UnitQuaternion<f64>,
     pub q_b: UnitQuaternion<f64>,
@@ -113,13 +121,53 @@ impl ContactKinematics {
         self.weighted_inverse_inertia(u, self.split_a, self.split_b)
     }
 
-    fn weighted_inverse_inertia(&self, u: &Vector3<f64>, k_a: f64, k_b: f64) -> f64 {
+    /// `u·(k_A I_A⁻¹ + k_B I_B⁻¹)u` for the shares `k_a`, `k_b`.
+    pub fn weighted_inverse_inertia(&self, u: &Vector3<f64>, k_a: f64, k_b: f64) -> f64 {
         let term = |q: &UnitQuaternion<f64>, inv: &Vector3<f64>| {
             let b = q.inverse_transform_vector(u);
             b.component_mul(inv).dot(&b)
         };
         k_a * term(&self.q_a, &self.inverse_inertia_a)
             + k_b * term(&self.q_b, &self.inverse_inertia_b)
+    }
+
+    /// The inverse mass a tangential force at the point `r` sees, summed over the two
+    /// directions of the tangent plane of the unit normal `n`: the trace of the tangential
+    /// block of `W = Σ k (1/m − [r − x]× I⁻¹ [r − x]×)` over the two bodies, each term
+    /// multiplied by its share `k_a`, `k_b` (a wall's term is zero), computed without a basis
+    /// as `tr W − n·W n`. The trace bounds the block's largest eigenvalue, so friction's lock
+    /// and spring sized by it ([`super::friction`]) take at most their share of the motion
+    /// in any tangential direction; for a sphere, or any body whose block is isotropic, it is
+    /// twice the inverse mass along each direction.
+    pub fn tangential_inverse_mass_trace(
+        &self,
+        r: &Vector3<f64>,
+        n: &Vector3<f64>,
+        k_a: f64,
+        k_b: f64,
+    ) -> f64 {
+        let term = |x: &Vector3<f64>, q: &UnitQuaternion<f64>, d: &Vector3<f64>, m: f64| {
+            let b = q.inverse_transform_vector(&(r - x));
+            let nb = q.inverse_transform_vector(n);
+            let (x2, y2, z2) = (b.x * b.x, b.y * b.y, b.z * b.z);
+            let trace = d.x * (y2 + z2) + d.y * (x2 + z2) + d.z * (x2 + y2);
+            let a = b.cross(&nb);
+            2.0 * m + (trace - a.component_mul(d).dot(&a))
+        };
+        let sum =
+            k_a * term(
+                &self.x_a,
+                &self.q_a,
+                &self.inverse_inertia_a,
+                self.inverse_mass_a,
+            ) + k_b
+                * term(
+                    &self.x_b,
+                    &self.q_b,
+                    &self.inverse_inertia_b,
+                    self.inverse_mass_b,
+                );
+        sum.max(0.0)
     }
 }
 
@@ -138,7 +186,8 @@ pub struct ContactForces {
     pub torque_a: Vector3<f64>,
     /// Torque on B about its centre.
     pub torque_b: Vector3<f64>,
-    /// Elastic energy stored: `(3/4) c V^{4/3} + k_t |ξ|² / 2 + k_tw φ² / 2`.
+    /// Elastic energy stored: `W(V) + k_t |ξ|² / 2 + k_tw φ² / 2` (the potential and the
+    /// friction springs).
     pub elastic_energy: f64,
 }
 
@@ -339,13 +388,13 @@ pub fn contact_forces(
     } else {
         (1.0, kin.effective_mass)
     };
-    let cap_inverse_inertia = |u: &Vector3<f64>| {
-        if at_floor {
-            kin.split_inverse_inertia_about(u)
-        } else {
-            kin.inverse_inertia_about(u)
-        }
+    // The bodies' shares in the caps' and locks' mass splitting.
+    let (cap_a, cap_b) = if at_floor {
+        (kin.split_a, kin.split_b)
+    } else {
+        (1.0, 1.0)
     };
+    let cap_inverse_inertia = |u: &Vector3<f64>| kin.weighted_inverse_inertia(u, cap_a, cap_b);
     let normal = |pressure: f64| {
         let f_elastic = pressure * area;
         let c_n = params.damping * f_elastic / v_ref;
@@ -376,56 +425,54 @@ pub fn contact_forces(
     let torque_b_el = -(overlap.moment_b + (c - kin.x_b).cross(&s_vec)) * pressure;
     let torque_a_el = -(-overlap.moment_b + (c - kin.x_a).cross(&(-s_vec))) * pressure;
 
-    // Tangential spring, at r_e.
+    // The relative rotation: about the normal (twist) and about tangent axes (rocking).
+    let w_rel = kin.w_b - kin.w_a;
+    let wn = w_rel.dot(&n);
+    let w_perp = w_rel - n * wn;
+
+    // Friction at r_e: the tangential Kelvin–Voigt element in series with the Coulomb slider
+    // (friction.rs), its dashpot the step's lock against the mass the slip sees.
     let v_t = v_rel - n * vn;
-    let k_t = params.tangential_stiffness * area;
-    let e = params.restitution;
-    let c_t = if e < 1.0 && params.friction > 0.0 {
-        2.0 * e.ln().abs() * (k_t * kin.effective_mass).sqrt()
-            / (e.ln().powi(2) + std::f64::consts::PI.powi(2)).sqrt()
-    } else {
-        0.0
-    };
+    let disk = area / std::f64::consts::PI; // a² of the disk of area A_n
     let mut tangential = Vector3::zeros();
+    let mut m_tw = 0.0;
     if params.friction > 0.0 {
+        // The element's spring: the seed's (Eq. 17) or, where that is softer, the stiffest the
+        // step resolves; its dashpot the step's lock (friction.rs).
+        let seed_t = params.tangential_stiffness * area;
+        let w_t = kin.tangential_inverse_mass_trace(&r_e, &n, cap_a, cap_b);
+        let k_t = seed_t.max(resolved_stiffness(w_t, dt));
+        let root_t = k_t.sqrt();
+        // The stored state, carried into the current tangent plane at its length.
         let old = state.spring;
         let in_plane = old - n * old.dot(&n);
         let len = in_plane.norm();
-        let rotated = if len > 0.0 {
+        let carried = if len > 0.0 {
             in_plane * (old.norm() / len)
         } else {
             Vector3::zeros()
         };
-        let mut xi = rotated + v_t * dt;
-        // Force on B from the spring and dashpot, opposing B's slip relative to A.
-        let mut f_t = -xi * k_t - v_t * c_t;
+        let c_t = lock_coefficient(share, w_t, dt);
         let cap = params.friction * f_normal;
-        let magnitude = f_t.norm();
-        if magnitude > cap {
-            // Sliding: the spring carries exactly the Coulomb force.
-            f_t *= if magnitude > 0.0 {
-                cap / magnitude
-            } else {
-                0.0
-            };
-            xi = if k_t > 0.0 {
-                -f_t / k_t
-            } else {
-                Vector3::zeros()
-            };
-        }
-        state.spring = xi;
+        let (f_t, xi) = slip_step(stretch(carried, root_t), v_t, k_t, c_t, cap, dt);
+        state.spring = xi * root_t;
         tangential = f_t;
+        // Twisting friction: the same element about the normal, on the disk of area A_n.
+        let w_n = cap_inverse_inertia(&n);
+        let k_tw = (0.5 * seed_t * disk).max(resolved_stiffness(w_n, dt));
+        let root_tw = k_tw.sqrt();
+        let c_tw = lock_coefficient(share, w_n, dt);
+        let cap_tw = cap * (2.0 / 3.0) * disk.sqrt();
+        let (m, phi) = slip_step(stretch(state.twist, root_tw), wn, k_tw, c_tw, cap_tw, dt);
+        state.twist = phi * root_tw;
+        m_tw = m;
     } else {
         state.spring = Vector3::zeros();
+        state.twist = 0.0;
     }
 
-    // Couples of the contact area: rocking damping and twisting friction.
-    let w_rel = kin.w_b - kin.w_a;
-    let wn = w_rel.dot(&n);
-    let w_perp = w_rel - n * wn;
-    let mut couple_b = Vector3::zeros();
-    let disk = area / std::f64::consts::PI; // a² of the disk of area A_n
+    // Rocking damping of the contact area: the normal dashpot spread over its disk.
+    let mut couple_b = n * m_tw;
     let rocking = w_perp.norm();
     if params.rocking && c_n > 0.0 && rocking > 0.0 {
         let mut c_roll = 0.25 * c_n * disk;
@@ -434,25 +481,6 @@ pub fn contact_forces(
             c_roll = c_roll.min(share / (dt * inverse));
         }
         couple_b -= w_perp * c_roll;
-    }
-    if params.friction > 0.0 {
-        let k_tw = 0.5 * k_t * disk;
-        let mut c_tw = 0.5 * c_t * disk;
-        let inverse = cap_inverse_inertia(&n);
-        if dt > 0.0 && inverse > 0.0 {
-            c_tw = c_tw.min(1.0 / (dt * inverse));
-        }
-        let mut phi = state.twist + wn * dt;
-        let mut m_tw = -k_tw * phi - c_tw * wn;
-        let cap = params.friction * f_normal * (2.0 / 3.0) * disk.sqrt();
-        if m_tw.abs() > cap {
-            m_tw = cap.copysign(m_tw);
-            phi = if k_tw > 0.0 { -m_tw / k_tw } else { 0.0 };
-        }
-        state.twist = phi;
-        couple_b += n * m_tw;
-    } else {
-        state.twist = 0.0;
     }
 
     // The elastic force and torque as the potential gives them; the damping and the friction
@@ -466,8 +494,8 @@ pub fn contact_forces(
         torque_a,
         torque_b,
         elastic_energy: energy
-            + 0.5 * k_t * state.spring.norm_squared()
-            + 0.25 * k_t * disk * state.twist * state.twist,
+            + 0.5 * state.spring.norm_squared()
+            + 0.5 * state.twist * state.twist,
     }
 }
 

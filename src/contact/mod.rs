@@ -2,6 +2,7 @@
 //! contacts.
 
 mod facet_grid;
+pub mod friction;
 pub mod history;
 pub mod law;
 pub mod potential;

@@ -12,7 +12,9 @@
 //!     velocity 3×f64, orientation 4×f64 (nalgebra storage order i, j, k, w; not renormalised),
 //!     angular_velocity 3×f64, force 3×f64, torque 3×f64, mass f64, inertia 3×f64
 //!   contacts u64; per contact: a u64, b u64, spring 3×f64, approach_speed f64, twist f64
-//!     (sorted by key; version 1 has the spring only, read with the other two 0)
+//!     (sorted by key; version 1 has the spring only, read with the other two 0; before
+//!     version 3 spring and twist were stretches, read as 0: the energy-scaled states
+//!     `√k ξ` of the current friction cannot be made from them)
 //!   inserter: len u64, bytes
 //!   extra: count u64; per entry: name len u64, UTF-8 name, data len u64, bytes
 //! checksum: u64         FNV-1a 64 of everything before it
@@ -33,7 +35,7 @@ use std::path::{Path, PathBuf};
 /// First bytes of every checkpoint file.
 pub const MAGIC: &[u8; 8] = b"PDMCKPT1";
 /// Version of the layout above; bump it when the payload changes.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// The oldest version this build still reads.
 pub const OLDEST_VERSION: u32 = 1;
 const HEADER_LEN: usize = 8 + 4 + 8;
@@ -493,6 +495,16 @@ fn decode_payload(r: &mut Reader, version: u32) -> Result<Checkpoint, ReadFail> 
             (r.f64(w)?, r.f64(w)?)
         } else {
             (0.0, 0.0)
+        };
+        // Before version 3 the springs held stretches (m, rad) of a law whose friction could
+        // store energy no motion put in; the energy-scaled state of the current law
+        // (`contact::friction::stretch`) cannot be made from them without the contact's area,
+        // so they start unstretched: the lock re-forms a sticking contact's spring within a
+        // few steps.
+        let (spring, twist) = if version >= 3 {
+            (spring, twist)
+        } else {
+            (Vector3::zeros(), 0.0)
         };
         let state = ContactState {
             spring,

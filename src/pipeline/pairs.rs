@@ -272,6 +272,8 @@ impl Simulation {
                     w_a: p.angular_velocity[a],
                     w_b: p.angular_velocity[b],
                     effective_mass,
+                    inverse_mass_a: 1.0 / p.mass[a],
+                    inverse_mass_b: 1.0 / p.mass[b],
                     dashpot_mass,
                     q_a: p.orientation[a],
                     q_b: p.orientation[b],

@@ -127,6 +127,8 @@ impl Simulation {
                             w_a: p.angular_velocity[i],
                             w_b: s.walls[k].motion.angular_velocity(),
                             effective_mass,
+                            inverse_mass_a: 1.0 / p.mass[i],
+                            inverse_mass_b: 0.0,
                             dashpot_mass,
                             q_a: p.orientation[i],
                             q_b: nalgebra::UnitQuaternion::identity(),

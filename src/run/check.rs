@@ -51,7 +51,7 @@ pub fn time_step_warnings(scene: &Scene) -> Vec<String> {
     // can round one ulp above 0.05 × that time, from being flagged.
     if dt > SAFE_FACE_FRACTION * shortest * (1.0 + 1e-12) {
         out.push(format!(
-            "dt = {dt:e} s exceeds {SAFE_FACE_FRACTION} of the face-to-face contact time {shortest:e} s at {v_fall:.2} m/s ({:.3} × it): face impacts leave the 2 % restitution band",
+            "dt = {dt:e} s is {:.3} of the face-to-face contact time {shortest:e} s at {v_fall:.2} m/s, above {SAFE_FACE_FRACTION} of it: face impacts leave the 2 % restitution band",
             dt / shortest
         ));
     }
