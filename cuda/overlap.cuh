@@ -377,6 +377,56 @@ struct BodyRef {
     Quat<double> rot;
 };
 
+// Rust geometry/contained.rs `inside`: whether the inner body lies wholly inside the outer one
+// (every vertex within 64 ε (r_i + r_o) of its planes; tested only when the inner centre lies in
+// the outer's circumscribed ball), and then its overlap: the inner body's volume from its faces,
+// its centroid, S = 0, no surface moment. In f64 whatever the pair's precision, the same
+// operations in the same order as the CPU's.
+PD_HD bool contained_inside(const BodyRef& in, const BodyRef& outer, Overlap<double>* out) {
+    V3<double> d = in.pos - outer.pos;
+    double ri = in.tpl.circumscribed_radius * in.scale, ro = outer.tpl.circumscribed_radius * outer.scale;
+    if (dot(d, d) > ro * ro) return false;
+    double tol = 64.0 * 2.220446049250313e-16 * (ri + ro);
+    Quat<double> inv;
+    inv.w = outer.rot.w;
+    inv.x = -outer.rot.x;
+    inv.y = -outer.rot.y;
+    inv.z = -outer.rot.z;
+    for (int v = 0; v < in.tpl.n_vertices; ++v) {
+        V3<double> w = rotate(inv, rotate(in.rot, template_vertex(in.tpl, v) * in.scale) + d);
+        for (int f = 0; f < outer.tpl.n_faces; ++f) {
+            if (dot(template_normal(outer.tpl, f), w) - outer.tpl.offsets[f] * outer.scale > tol) return false;
+        }
+    }
+    // The volume, Σ offset · area / 3, each face's area by a fan from its first corner.
+    double volume = 0.0, least = bits_double(0x7ff0000000000000ULL); // +infinity
+    for (int f = 0; f < in.tpl.n_faces; ++f) {
+        const double* c = in.tpl.face_points + 3 * (int)in.tpl.face_start[f];
+        int m = (int)in.tpl.face_start[f + 1] - (int)in.tpl.face_start[f];
+        V3<double> p0 = v3(c[0], c[1], c[2]), nf = template_normal(in.tpl, f);
+        double twice_area = 0.0;
+        for (int k = 1; k + 1 < m; ++k) {
+            V3<double> p1 = v3(c[3 * k], c[3 * k + 1], c[3 * k + 2]);
+            V3<double> p2 = v3(c[3 * k + 3], c[3 * k + 4], c[3 * k + 5]);
+            twice_area += dot(nf, cross(p1 - p0, p2 - p0));
+        }
+        volume += in.tpl.offsets[f] * (0.5 * twice_area);
+        least = in.tpl.offsets[f] < least ? in.tpl.offsets[f] : least;
+    }
+    out->volume = volume / 3.0 * (in.scale * in.scale * in.scale);
+    out->centroid = in.pos;
+    out->dv_dxb = zero3<double>();
+    out->moment_b = zero3<double>();
+    out->depth = least * in.scale;
+    out->thickness = 0.0;
+    return true;
+}
+
+// Rust contained_overlap: B inside A, else A inside B.
+PD_HD bool contained_overlap(const BodyRef& A, const BodyRef& B, Overlap<double>* out) {
+    return contained_inside(B, A, out) || contained_inside(A, B, out);
+}
+
 // Contact geometry of one particle pair in world coordinates (Rust `PairGeometry`).
 struct PairGeometry {
     // Narrow-phase (GJK) verdict.
@@ -447,6 +497,16 @@ PD_HD int pair_planes_t(PairWorkspace<T>& ws, const BodyRef& A, const BodyRef& B
     out->intersects = 0;
     out->separating_axis = zero3<double>();
     out->overlap = overlap_zero<double>();
+    // A body wholly inside the other (geometry/contained.rs): answered before any plane is
+    // placed, in f64; the lean pass leaves it to the full one.
+    if (contained_overlap(A, B, &out->overlap)) {
+        if (!kFull) {
+            out->overlap = overlap_zero<double>();
+            return STATUS_DEFERRED;
+        }
+        out->intersects = 1;
+        return STATUS_OK;
+    }
     V3<double> xa = A.pos, xb = B.pos;
     double ra = A.tpl.circumscribed_radius * A.scale, rb = B.tpl.circumscribed_radius * B.scale;
     V3<double> origin = xa + (xb - xa) * (ra / (ra + rb));

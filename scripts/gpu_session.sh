@@ -103,7 +103,7 @@ PY
 }
 
 if [ "$what" = tests ] || [ "$what" = all ]; then
-  run_parallel tests 6 540
+  run_parallel tests "${PARALLEL:-6}" "${LIMIT:-540}"
 fi
 if [ "$what" = benches ] || [ "$what" = all ]; then
   mpi2="mpirun --oversubscribe -n 2 polydem bench"

@@ -729,6 +729,32 @@ fn parity(what: &str, produce: Producer) {
         margin: 0.0,
         kind: "touching below the dual's resolution",
     });
+    // A body on itself, and one wholly inside another, from either side: the defined answer of
+    // geometry/contained.rs (inner volume from its faces, S = 0) in both precisions.
+    let mut rng_inside = Rng::new(17);
+    for k in 0..shapes.len().min(8) {
+        let q = random_rotation(&mut rng_inside);
+        let q_small = random_rotation(&mut rng_inside);
+        let x = Vector3::new(0.3, -0.2, 0.1) * k as f64;
+        let (big, small) = (pose(x, q), pose(x + Vector3::new(0.02, 0.01, 0.0), q_small));
+        for (sa, pa, sb, pb, kind) in [
+            (1.0, big, 1.0, big, "coincident"),
+            (1.0, big, 0.05, small, "B inside A"),
+            (0.05, small, 1.0, big, "A inside B"),
+        ] {
+            pairs.push(PairCase {
+                a: k,
+                b: k,
+                sa,
+                sb,
+                pose_a: pa,
+                pose_b: pb,
+                axis: Vector3::zeros(),
+                margin: 0.0,
+                kind,
+            });
+        }
+    }
     let facets = facet_cases(&shapes, N_FACETS, 99);
 
     // Rust reference results; the axis for axis_separates is GJK's (a separating one) for

@@ -480,3 +480,62 @@ fn touching_below_what_the_dual_resolves_has_no_volume() {
     }
     assert!(r64.intersects && mixed.intersects);
 }
+
+/// A body on itself and a body wholly inside another have one defined answer in every
+/// precision (geometry/contained.rs): the inner body's volume, its centroid, `S = 0`. Random
+/// 12-point hulls (20 faces) on themselves at random poses, and a small one inside a large one
+/// from either side, in f64, f32 and mixed: the volume is the template's to 1e-12, S is zero
+/// and the three agree bit for bit. (f32 once gave two coincident hulls 2.8–5.6 % too little
+/// volume and a normal; f64 a normal for some poses.)
+#[test]
+fn coincident_and_contained_bodies_give_one_answer_in_every_precision() {
+    use polydem::geometry::pair::overlap_pair_mixed;
+    use polydem::rng::Rng;
+    let mut rng = Rng::new(31);
+    let mut w64 = PairWorkspace::<f64>::boxed();
+    let mut w32 = PairWorkspace::<f32>::boxed();
+    for seed in 0..40u64 {
+        let t = Generator::RandomHull {
+            points: 12,
+            size: 1.0,
+            seed,
+            aspect: [1.0, 0.8, 0.6],
+        }
+        .build()
+        .unwrap();
+        let x = Vector3::new(
+            rng.range(-5.0, 5.0),
+            rng.range(-5.0, 5.0),
+            rng.range(-5.0, 5.0),
+        );
+        let big = pose(x, random_rotation(&mut rng));
+        let small = pose(
+            x + Vector3::new(0.0005, -0.0005, 0.0003),
+            random_rotation(&mut rng),
+        );
+        for ((sa, pa), (sb, pb), inner) in [
+            ((0.02, &big), (0.02, &big), 0.02),
+            ((0.02, &big), (0.002, &small), 0.002),
+            ((0.002, &small), (0.02, &big), 0.002),
+        ] {
+            let (a, b) = ((&t, sa, pa), (&t, sb, pb));
+            let results = [
+                overlap_pair(&mut w64, a, b).unwrap(),
+                overlap_pair(&mut w32, a, b).unwrap(),
+                overlap_pair_mixed(&mut w32, &mut w64, a, b).unwrap(),
+            ];
+            let want = t.volume * inner * inner * inner;
+            for g in &results {
+                assert!(g.intersects);
+                assert!(
+                    (g.overlap.volume - want).abs() <= 1e-12 * want,
+                    "hull {seed}: volume {} vs {want}",
+                    g.overlap.volume
+                );
+                assert_eq!(g.overlap.dv_dxb, Vector3::zeros(), "hull {seed}");
+                assert!(g.overlap.normal().is_none());
+                assert_eq!(g.overlap, results[0].overlap, "hull {seed}");
+            }
+        }
+    }
+}

@@ -17,6 +17,7 @@
 //! - [`sphere`]: the sphere fast path: lens and cap overlaps in closed form.
 
 pub mod clip;
+pub mod contained;
 pub mod gjk;
 pub mod interior;
 pub mod overlap;

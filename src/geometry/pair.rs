@@ -9,6 +9,7 @@
 //! or f64 as the GPU's mixed precision does.
 
 use super::Real;
+use super::contained::contained_overlap;
 use super::gjk::gjk_separating_axis;
 use super::interior::{ChebyshevCentre, chebyshev_centre, chebyshev_centre_wide};
 use super::overlap::{Overlap, OverlapError, OverlapWorkspace, overlap_about};
@@ -59,6 +60,17 @@ pub struct PairGeometry {
     pub overlap: Overlap<f64>,
 }
 
+impl PairGeometry {
+    /// The geometry of a body wholly inside the other ([`super::contained`]).
+    fn contained(overlap: Overlap<f64>) -> Self {
+        PairGeometry {
+            intersects: true,
+            separating_axis: None,
+            overlap,
+        }
+    }
+}
+
 /// Whether the plane with normal `axis` separates template `ta` (scale `sa`, at `pose_a`) from
 /// `tb` by a gap of more than `margin`: `min_A axis·a − max_B axis·b > margin |axis|`. Two support
 /// evaluations over the template vertices, in each body's own frame.
@@ -103,6 +115,9 @@ pub fn overlap_pair<T: Real>(
     a: (&ConvexTemplate, f64, &Isometry3<f64>),
     b: (&ConvexTemplate, f64, &Isometry3<f64>),
 ) -> Result<PairGeometry, OverlapError> {
+    if let Some(overlap) = contained_overlap(a, b) {
+        return Ok(PairGeometry::contained(overlap));
+    }
     let ((ta, sa, pose_a), (tb, sb, pose_b)) = (a, b);
     let CentredPlanes {
         origin,
@@ -281,6 +296,9 @@ pub fn overlap_pair_mixed_with(
     b: (&ConvexTemplate, f64, &Isometry3<f64>),
     wide_lp: bool,
 ) -> Result<PairGeometry, OverlapError> {
+    if let Some(overlap) = contained_overlap(a, b) {
+        return Ok(PairGeometry::contained(overlap));
+    }
     let ((ta, sa, _), (tb, sb, _)) = (a, b);
     let (ra, rb) = (ta.circumscribed_radius * sa, tb.circumscribed_radius * sb);
     let CentredPlanes {
