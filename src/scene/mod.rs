@@ -148,9 +148,11 @@ pub struct Scene {
 /// Reads, validates and resolves the scene in `path`, loading its templates and wall meshes
 /// (paths in the file are relative to its directory).
 pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SceneError::Read {
-        file: path.display().to_string(),
-        message: e.to_string(),
+    let text = crate::io::read_bounded_text(path, crate::io::InputKind::Scene).map_err(|e| {
+        SceneError::Read {
+            file: path.display().to_string(),
+            message: e.to_string(),
+        }
     })?;
     let base = path.parent().unwrap_or(Path::new("."));
     let mut scene = validate::build(&text, base, &path.display().to_string())?;

@@ -144,7 +144,8 @@ pub fn load_mesh(path: &Path) -> Result<MeshFile, ShapeError> {
             ),
         ));
     }
-    let bytes = std::fs::read(path).map_err(|e| unreadable(path, e.to_string()))?;
+    let bytes = crate::io::read_bounded(path, crate::io::InputKind::Mesh)
+        .map_err(|e| unreadable(path, e.to_string()))?;
     let mesh = if ext == "stl" {
         parse_stl(&bytes).map_err(|e| unreadable(path, format!("invalid STL: {e}")))?
     } else {
