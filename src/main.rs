@@ -40,7 +40,7 @@ enum Command {
         #[arg(long)]
         restart: Option<PathBuf>,
         /// Stop after this many steps.
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         max_steps: Option<u64>,
         /// Pair-geometry arithmetic on the GPU: all f64, or f32 in the contact-centred pair
         /// frame with f64 state. With `--backend cpu`, `mixed` evaluates the polyhedral pairs
@@ -77,10 +77,10 @@ enum Command {
         #[arg(long, value_enum)]
         neighbor_mode: Option<polydem::scene::NeighborMode>,
         /// Steps before timing.
-        #[arg(long, default_value_t = 20)]
+        #[arg(long, default_value_t = 20, allow_negative_numbers = true)]
         warmup: u64,
         /// Steps timed.
-        #[arg(long, default_value_t = 200)]
+        #[arg(long, default_value_t = 200, allow_negative_numbers = true)]
         steps: u64,
         /// Print JSON only (the default output is JSON as well; kept for scripts).
         #[arg(long)]
@@ -89,8 +89,8 @@ enum Command {
         /// three).
         #[arg(long)]
         full: bool,
-        /// `bench accuracy`: the step fractions to run, comma-separated.
-        #[arg(long, value_delimiter = ',')]
+        /// `bench accuracy`: the step fractions to run, comma-separated, each in (0, 1].
+        #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = step_fraction)]
         fractions: Option<Vec<f64>>,
         /// `bench accuracy`: output folder.
         #[arg(long, default_value = "accuracy")]
@@ -106,8 +106,8 @@ enum Command {
     Pack {
         /// Scene file: periodic on every axis, no gravity, no walls.
         scene: PathBuf,
-        /// Target contacts per particle (2 × contacts / particles, after settling).
-        #[arg(long)]
+        /// Target contacts per particle (2 × contacts / particles, after settling), in (0, 30].
+        #[arg(long, allow_negative_numbers = true, value_parser = contacts_per_particle)]
         contacts: f64,
         /// The packing file to write.
         #[arg(long)]
@@ -155,10 +155,52 @@ enum ShapeAction {
         /// STL or OBJ file, or a generator name (tetrahedron, cube, octahedron, dodecahedron,
         /// icosahedron).
         shape: String,
-        /// Circumscribed diameter for a generator.
-        #[arg(long, default_value_t = 1.0)]
+        /// Circumscribed diameter for a generator (m), in (0, 1e6].
+        #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = shape_size)]
         size: f64,
     },
+}
+
+/// A real number in `[lo, hi]` (`lo` excluded when `open`), or the error clap prints after
+/// the option's name: what was given and what is allowed.
+fn bounded_real(text: &str, lo: f64, open: bool, hi: f64, what: &str) -> Result<f64, String> {
+    let x: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("not a number; {what}"))?;
+    let above = if open { x > lo } else { x >= lo };
+    if x.is_finite() && above && x <= hi {
+        Ok(x)
+    } else {
+        Err(format!("out of range; {what}"))
+    }
+}
+
+/// `shape info --size`: a circumscribed diameter.
+fn shape_size(text: &str) -> Result<f64, String> {
+    bounded_real(text, 0.0, true, 1e6, "the size is a length in (0, 1e6] m")
+}
+
+/// `pack --contacts`: a target number of contacts per particle.
+fn contacts_per_particle(text: &str) -> Result<f64, String> {
+    bounded_real(
+        text,
+        0.0,
+        true,
+        30.0,
+        "the target is contacts per particle in (0, 30]",
+    )
+}
+
+/// `bench accuracy --fractions`: a step as a fraction of the critical step.
+fn step_fraction(text: &str) -> Result<f64, String> {
+    bounded_real(
+        text,
+        0.0,
+        true,
+        1.0,
+        "each is a fraction of the critical step in (0, 1]",
+    )
 }
 
 /// The communicator of this process: MPI's world when started by an MPI launcher (and built

@@ -678,3 +678,82 @@ fn a_pair_list_beyond_gpu_memory_is_named_with_its_bytes() {
     println!("device bytes {bytes}, named {need}");
     assert!(bytes > *need, "{bytes} ≤ {need}");
 }
+
+/// Bad command-line numbers name their option and what it allows (they were "unexpected
+/// argument '-1' found", or an overflow that named nothing), input files that are not regular
+/// files are refused before they are read (`check /dev/zero` once grew to 16.6 GB), and an
+/// `--out` at a dangling symbolic link names the link and its target (it was "File exists").
+#[test]
+fn bad_numbers_devices_and_dangling_links_are_named() {
+    let dir = temp_dir("cli-bounds");
+    let fail = |args: &[&str]| {
+        let out = std::process::Command::new(polydem_bin())
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?} succeeded");
+        String::from_utf8_lossy(&out.stderr).to_string()
+    };
+    for (args, want) in [
+        (
+            vec!["shape", "info", "cube", "--size", "-1"],
+            "'--size <SIZE>'",
+        ),
+        (
+            vec!["shape", "info", "cube", "--size", "1e300"],
+            "(0, 1e6] m",
+        ),
+        (
+            vec!["shape", "info", "cube", "--size", "inf"],
+            "'--size <SIZE>'",
+        ),
+        (
+            vec!["pack", "x.toml", "--contacts", "-1", "--out", "p"],
+            "contacts per particle in (0, 30]",
+        ),
+        (
+            vec!["run", "x.toml", "--max-steps", "-1"],
+            "'--max-steps <MAX_STEPS>'",
+        ),
+        (
+            vec!["bench", "accuracy", "--fractions", "0.1,2"],
+            "fraction of the critical step in (0, 1]",
+        ),
+        (vec!["check", "/dev/zero"], "a character device"),
+    ] {
+        let err = fail(&args);
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    let fifo = dir.join("scene.fifo");
+    let _ = std::fs::remove_file(&fifo);
+    if std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .is_ok_and(|s| s.success())
+    {
+        let err = fail(&["check", fifo.to_str().unwrap()]);
+        assert!(
+            err.contains("a FIFO (a scene file must be a regular file)"),
+            "{err}"
+        );
+    }
+    let link = dir.join("out-link");
+    let _ = std::fs::remove_file(&link);
+    std::os::unix::fs::symlink(dir.join("nowhere/deeper"), &link).unwrap();
+    let scene = dir.join("scene.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    let err = fail(&[
+        "run",
+        "--backend",
+        "cpu",
+        "--max-steps",
+        "1",
+        "--out",
+        link.to_str().unwrap(),
+        scene.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("is a symbolic link to") && err.contains("nowhere/deeper"),
+        "{err}"
+    );
+}

@@ -40,6 +40,21 @@ fn is_run_output(name: &str) -> bool {
 ///   outputs are removed ([`OUTPUT_ENTRIES`]); other files are kept and named in the log.
 /// - A restart (`restart`) continues in the folder as it is.
 pub fn prepare_output_dir(dir: &Path, overwrite: bool, restart: bool) -> Result<()> {
+    // A symbolic link whose target does not exist: creating the folder fails with "File
+    // exists", which names neither the link nor its target.
+    if let Ok(m) = std::fs::symlink_metadata(dir)
+        && m.file_type().is_symlink()
+        && std::fs::metadata(dir).is_err()
+    {
+        let target = std::fs::read_link(dir)
+            .map(|t| t.display().to_string())
+            .unwrap_or_else(|_| "?".into());
+        bail!(
+            "{}: is a symbolic link to {target}, which does not exist; create that folder or \
+             give another --out (or output.dir)",
+            dir.display()
+        );
+    }
     // The nearest part of the path that exists must be a folder.
     for ancestor in dir.ancestors() {
         match std::fs::metadata(ancestor) {
