@@ -159,6 +159,8 @@ struct LoopEnd {
     particle_steps: u64,
     /// The signal that stopped the run (number, name), if one did.
     stopped_by: Option<(i32, &'static str)>,
+    /// Whether `--max-steps` stopped the run before its end time.
+    max_steps_reached: bool,
 }
 
 /// Steps to the end time (or `--max-steps`), writing the scheduled frames, series rows and
@@ -197,11 +199,13 @@ fn step_loop(
     let start = Instant::now();
     let (step0, mut particle_steps) = (engine.host().step, 0u64);
     let mut stopped_by: Option<(i32, &str)> = None;
+    let mut max_steps_reached = false;
     while engine.host().time + 0.5 * engine.host().dt < end_time {
         if opts
             .max_steps
             .is_some_and(|m| engine.host().step - step0 >= m)
         {
+            max_steps_reached = true;
             break;
         }
         if let Err(e) = engine.step() {
@@ -290,11 +294,13 @@ fn step_loop(
         wall: start.elapsed().as_secs_f64(),
         particle_steps,
         stopped_by,
+        max_steps_reached,
     })
 }
 
-/// The closing frame, series row and checkpoint of a run that reached its end (not of one
-/// stopped by a signal, whose checkpoint is written), and `summary.json` (rank 0).
+/// The closing frame, series row and checkpoint of a run that reached its end (the checkpoint
+/// alone after `--max-steps`; nothing of one stopped by a signal, whose checkpoint is written),
+/// and `summary.json` (rank 0).
 fn finish(
     opts: &RunOptions,
     engine: &mut Engine,
@@ -314,8 +320,13 @@ fn finish(
     }
     let sim = engine.synced()?;
     if ended.stopped_by.is_none() {
-        out.frame(sim)?;
-        out.series(sim)?;
+        // A `--max-steps` stop, like a signal's, writes no frame or series row off the
+        // schedule: restarted, the run then gives the uninterrupted run's series byte for byte
+        // (the closing row once stayed in the series as an extra line).
+        if !ended.max_steps_reached {
+            out.frame(sim)?;
+            out.series(sim)?;
+        }
         if sim.scene.output.checkpoint_interval.is_some() {
             save_checkpoint(&*comm, sim, &dir, id)?;
         }
