@@ -250,7 +250,7 @@ pub fn overlap_json(intersects: bool, o: &Overlap<f64>) -> Value {
 }
 
 fn read_input(path: &Path) -> Result<(String, &Path)> {
-    let text = crate::io::read_bounded_text(path, crate::io::InputKind::Probe)
+    let text = crate::input::read_bounded_text(path, crate::input::InputKind::Probe)
         .with_context(|| format!("{}: cannot read", path.display()))?;
     Ok((text, path.parent().unwrap_or(Path::new("."))))
 }

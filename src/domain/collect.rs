@@ -5,6 +5,7 @@
 use super::comm::Comm;
 use super::migration::{pack_particles, unpack_particles};
 use crate::contact::ContactHistory;
+use crate::exact_sum::{DiagnosticSums, ExactSum};
 use crate::state::{Particles, StepStats};
 use nalgebra::Vector3;
 
@@ -17,11 +18,12 @@ pub trait RankState {
     fn contact_history(&self) -> &ContactHistory;
     /// Observables of the last force evaluation.
     fn step_stats(&self) -> &StepStats;
-    /// This rank's particles' share of the force on each wall.
-    fn wall_force_shares(&self) -> &[Vector3<f64>];
     /// Kinetic (translational, rotational) and gravitational potential energy of this rank's
-    /// particles.
-    fn energy_terms(&self) -> (f64, f64, f64);
+    /// particles, as exact sums.
+    fn energy_sums(&self) -> [ExactSum; 3];
+    /// This rank's elastic energy and its particles' shares of the walls' forces, as exact
+    /// sums.
+    fn diagnostic_sums(&self) -> &DiagnosticSums;
 }
 
 /// Observables of the whole run.
@@ -36,13 +38,23 @@ pub struct GlobalStats {
 
 /// Sums this rank's observables with every other rank's (a collective call).
 pub fn global_stats(comm: &dyn Comm, sim: &impl RankState) -> GlobalStats {
-    let (kt, kr, pg) = sim.energy_terms();
-    let s = sim.step_stats();
-    let mut f = vec![kt, kr, pg, s.elastic_energy];
-    for w in sim.wall_force_shares() {
-        f.extend_from_slice(w.as_slice());
+    // Exact sums merged across ranks (crate::exact_sum): the values are the bits one rank
+    // gives, whatever the decomposition.
+    let (d, energies) = (sim.diagnostic_sums(), sim.energy_sums());
+    let mut sums: Vec<&ExactSum> = energies.iter().collect();
+    sums.push(&d.elastic);
+    for w in &d.wall_forces {
+        sums.extend(w.iter());
     }
-    let f = comm.sum_f64(&f);
+    let words: Vec<u64> = sums.iter().flat_map(|s| s.words()).collect();
+    let specials: Vec<f64> = sums.iter().map(|s| s.special()).collect();
+    let (words, specials) = (comm.sum_u64(&words), comm.sum_f64(&specials));
+    let f: Vec<f64> = words
+        .chunks_exact(ExactSum::WORDS)
+        .zip(&specials)
+        .map(|(w, &x)| ExactSum::from_sums(w, x).value())
+        .collect();
+    let s = sim.step_stats();
     let u = comm.sum_u64(&[
         sim.owned_particles().len() as u64,
         s.contacts,

@@ -12,13 +12,11 @@
 //! written whole to a temporary file beside it and renamed over the target, so a reader or a
 //! restart never sees half a file; the time series is appended and flushed row by row instead.
 
-pub mod bounded;
 pub mod checkpoint;
 pub mod csv;
 pub mod packing;
 pub mod vtk;
 
-pub use bounded::{InputKind, read_bounded, read_bounded_text};
 pub use checkpoint::{
     Checkpoint, CheckpointError, decode_checkpoint, encode_checkpoint, read_checkpoint,
     write_checkpoint,

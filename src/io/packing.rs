@@ -102,12 +102,11 @@ impl Packing {
 
     /// Reads a packing file.
     pub fn read(path: &Path) -> Result<Self, PackingError> {
-        let text = super::read_bounded_text(path, super::InputKind::Packing).map_err(|source| {
-            PackingError::Io {
+        let text = crate::input::read_bounded_text(path, crate::input::InputKind::Packing)
+            .map_err(|source| PackingError::Io {
                 path: path.display().to_string(),
                 source,
-            }
-        })?;
+            })?;
         Self::parse(&text, &path.display().to_string())
     }
 

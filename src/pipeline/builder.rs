@@ -182,6 +182,7 @@ impl Simulation {
             timers: StageTimers::default(),
             stats: StepStats::default(),
             wall_forces: vec![Vector3::zeros(); n_walls],
+            sums: crate::exact_sum::DiagnosticSums::new(n_walls),
             parallel,
             pairs: PairList::default(),
             separating_axes: Vec::new(),

@@ -74,6 +74,9 @@ pub struct Simulation {
     /// Force on each wall from the last force evaluation (this rank's particles' share in a
     /// decomposed run).
     pub wall_forces: Vec<Vector3<f64>>,
+    /// The last evaluation's elastic energy and wall forces as exact sums, which the ranks of a
+    /// decomposed run merge into the whole run's (`crate::exact_sum`).
+    pub sums: crate::exact_sum::DiagnosticSums,
     /// This rank's part of a decomposed run (`None`: one rank, the whole domain).
     pub parallel: Option<Box<Parallel>>,
     pairs: PairList,
@@ -232,6 +235,12 @@ impl Simulation {
     /// Kinetic energy (translational, rotational) and gravitational potential energy
     /// (relative to the origin).
     pub fn energies(&self) -> (f64, f64, f64) {
+        let [kt, kr, pg] = self.energy_sums();
+        (kt.value(), kr.value(), pg.value())
+    }
+
+    /// The energies of [`Simulation::energies`] as exact sums, which ranks merge.
+    pub fn energy_sums(&self) -> [crate::exact_sum::ExactSum; 3] {
         let p = &self.particles;
         let g = self.scene.gravity;
         let terms: Vec<[f64; 3]> = (0..p.len())
@@ -246,14 +255,15 @@ impl Simulation {
                 ]
             })
             .collect();
-        // Summed one by one in id order: a parallel reduction's grouping varies with the
-        // threads' work stealing, and the local order with the backend and a restart, either of
-        // which would change the last bits of a value that the state alone determines.
-        let order = p.id_order(p.len());
-        (0..terms.len()).fold((0.0, 0.0, 0.0), |a, j| {
-            let e = &terms[order.as_ref().map_or(j, |o| o[j])];
-            (a.0 + e[0], a.1 + e[1], a.2 + e[2])
-        })
+        // Exact sums: the same bits whatever the order of the particles, their grouping into
+        // threads or ranks, the backend or a restart.
+        let mut sums: [crate::exact_sum::ExactSum; 3] = Default::default();
+        for t in &terms {
+            for (s, x) in sums.iter_mut().zip(t) {
+                s.add(*x);
+            }
+        }
+        sums
     }
 }
 
@@ -271,11 +281,11 @@ impl RankState for Simulation {
         &self.stats
     }
 
-    fn wall_force_shares(&self) -> &[Vector3<f64>] {
-        &self.wall_forces
+    fn energy_sums(&self) -> [crate::exact_sum::ExactSum; 3] {
+        Simulation::energy_sums(self)
     }
 
-    fn energy_terms(&self) -> (f64, f64, f64) {
-        self.energies()
+    fn diagnostic_sums(&self) -> &crate::exact_sum::DiagnosticSums {
+        &self.sums
     }
 }

@@ -81,22 +81,20 @@ impl Simulation {
         // ghost come after, and the adaptive sort of `from_entries` merges that short tail
         // instead of sorting every contact each step.
         let mut entries: Vec<(ContactKey, ContactState)> = Vec::with_capacity(outcomes.len());
-        let mut wall_forces = vec![Vector3::zeros(); self.walls.len()];
         // A pair across two ranks is evaluated on both; it counts where its lower-id member
         // (the pair's first) is owned, so that sums over ranks count it once.
         let counted = |k: usize| self.pairs.pairs[k][0] < owned as u32;
-        // Summed per particle in global id order, each particle's pairs by partner id (the
-        // order of the force reduction above), then each particle's walls: not in pair-list
-        // order, which depends on the step the list was built at, nor in local order, which a
-        // restart from the GPU's order or a migration changes; the GPU backend sums in this
-        // order too, so the diagnostics match across restarts and backends.
+        // The history in global id order, each particle's pairs by partner id (the order of
+        // the force reduction above), then each particle's walls; the elastic energy and the
+        // walls' forces as exact sums (crate::exact_sum), which no order, backend, restart or
+        // rank count changes.
         // (The ghosts are dropped: the particles are the owned ones, `wall_outcomes` has one
         // per particle or none.)
         let listed = owned.min(pairs.offsets.len().saturating_sub(1));
         let n = self.particles.len();
         let order = self.particles.id_order(n);
         let at = |j: usize| order.as_ref().map_or(j, |o| o[j]);
-        let mut energy: f64 = 0.0;
+        let mut sums = crate::exact_sum::DiagnosticSums::new(self.walls.len());
         for j in 0..n {
             let i = at(j);
             // A particle past the listed ones has no pairs, but its walls count.
@@ -104,7 +102,7 @@ impl Simulation {
                 for r in pairs.of(i) {
                     if !r.is_b && counted(r.pair as usize) {
                         let o = &outcomes[r.pair as usize];
-                        energy += o.forces.elastic_energy;
+                        sums.elastic.add(o.forces.elastic_energy);
                         entries.extend(o.state);
                     }
                 }
@@ -126,10 +124,10 @@ impl Simulation {
             let Some(w) = wall_outcomes.get(at(j)) else {
                 continue;
             };
-            energy += w.energy;
+            sums.elastic.add(w.energy);
             wall_contacts += w.states.len() as u64;
             for (k, f) in &w.per_wall {
-                wall_forces[*k] += f;
+                sums.add_wall_force(*k, f);
             }
         }
         self.stats.contacts = outcomes
@@ -138,8 +136,9 @@ impl Simulation {
             .filter(|(k, o)| o.state.is_some() && counted(*k))
             .count() as u64;
         self.stats.wall_contacts = wall_contacts;
-        self.stats.elastic_energy = energy;
-        self.wall_forces = wall_forces;
+        self.stats.elastic_energy = sums.elastic.value();
+        self.wall_forces = sums.wall_force_values();
+        self.sums = sums;
         self.history = ContactHistory::from_entries(entries);
     }
 

@@ -148,12 +148,13 @@ pub struct Scene {
 /// Reads, validates and resolves the scene in `path`, loading its templates and wall meshes
 /// (paths in the file are relative to its directory).
 pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
-    let text = crate::io::read_bounded_text(path, crate::io::InputKind::Scene).map_err(|e| {
-        SceneError::Read {
-            file: path.display().to_string(),
-            message: e.to_string(),
-        }
-    })?;
+    let text =
+        crate::input::read_bounded_text(path, crate::input::InputKind::Scene).map_err(|e| {
+            SceneError::Read {
+                file: path.display().to_string(),
+                message: e.to_string(),
+            }
+        })?;
     let base = path.parent().unwrap_or(Path::new("."));
     let mut scene = validate::build(&text, base, &path.display().to_string())?;
     scene.file = path.to_path_buf();

@@ -144,7 +144,7 @@ pub fn load_mesh(path: &Path) -> Result<MeshFile, ShapeError> {
             ),
         ));
     }
-    let bytes = crate::io::read_bounded(path, crate::io::InputKind::Mesh)
+    let bytes = crate::input::read_bounded(path, crate::input::InputKind::Mesh)
         .map_err(|e| unreadable(path, e.to_string()))?;
     let mesh = if ext == "stl" {
         parse_stl(&bytes).map_err(|e| unreadable(path, format!("invalid STL: {e}")))?

@@ -81,9 +81,9 @@ pub(super) struct GatheredContacts {
     /// Pair contacts whose lower-id member is owned (a pair across two ranks counts once).
     pub(super) contacts: u64,
     pub(super) wall_contacts: u64,
-    /// The pairs' elastic energy (those counted), then the owned particles' wall contacts'.
-    pub(super) energy: f64,
-    pub(super) wall_forces: Vec<Vector3<f64>>,
+    /// The pairs' elastic energy (those counted) and the owned particles' wall contacts', and
+    /// the walls' forces, as exact sums.
+    pub(super) sums: crate::exact_sum::DiagnosticSums,
 }
 
 /// The history, counts, elastic energy and walls' forces of slots with global ids `ids` (a
@@ -105,7 +105,8 @@ pub(super) fn gather_contacts(
     walls: Option<&WallOutcomes>,
 ) -> GatheredContacts {
     let order = id_order(ids).unwrap_or_else(|| (0..ids.len()).collect());
-    let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
+    let (mut contacts, mut wall_contacts) = (0u64, 0u64);
+    let mut sums = crate::exact_sum::DiagnosticSums::new(walls.map_or(0, |w| w.walls));
     let mut entries = Vec::new();
     let mut ghost_entries = Vec::new();
     for &i in &order {
@@ -113,7 +114,7 @@ pub(super) fn gather_contacts(
         if let Some(out) = pairs {
             for k in out.first_of(i) {
                 if owned {
-                    energy += out.energy[k];
+                    sums.elastic.add(out.energy[k]);
                 }
                 if out.contact[k] == CONTACT_LIVE {
                     contacts += u64::from(owned);
@@ -139,15 +140,14 @@ pub(super) fn gather_contacts(
         }
     }
     entries.append(&mut ghost_entries);
-    let mut wall_forces = vec![Vector3::zeros(); walls.map_or(0, |w| w.walls)];
     if let Some(w) = walls {
         for &i in order.iter().filter(|&&i| !ghost[i]) {
-            energy += w.energy[i];
-            for (k, wf) in wall_forces.iter_mut().enumerate() {
+            sums.elastic.add(w.energy[i]);
+            for k in 0..w.walls {
                 let s = w.slot(i, k);
                 if w.contact[s] == CONTACT_LIVE {
                     wall_contacts += 1;
-                    *wf += w.force(s);
+                    sums.add_wall_force(k, &w.force(s));
                 }
             }
         }
@@ -156,8 +156,7 @@ pub(super) fn gather_contacts(
         history: ContactHistory::from_entries(entries),
         contacts,
         wall_contacts,
-        energy,
-        wall_forces,
+        sums,
     }
 }
 
@@ -327,7 +326,8 @@ mod tests {
         pairs: &PairOutcomes,
         walls: &WallOutcomes,
     ) -> GatheredContacts {
-        let (mut contacts, mut wall_contacts, mut energy) = (0u64, 0u64, 0.0f64);
+        let (mut contacts, mut wall_contacts) = (0u64, 0u64);
+        let mut sums = crate::exact_sum::DiagnosticSums::new(walls.walls);
         let mut entries = Vec::new();
         let mut pair_energy = Vec::new();
         for (k, &[a, b]) in pairs.slots.iter().enumerate() {
@@ -344,20 +344,20 @@ mod tests {
             }
         }
         pair_energy.sort_unstable_by_key(|&(a, b, _)| (a, b));
-        for (_, _, e) in &pair_energy {
-            energy += e;
+        // Summed in reverse: exact sums do not depend on the order.
+        for (_, _, e) in pair_energy.iter().rev() {
+            sums.elastic.add(*e);
         }
-        let mut wall_forces = vec![Vector3::zeros(); walls.walls];
         for i in id_order(ids).unwrap_or_else(|| (0..ids.len()).collect()) {
             if ghost[i] {
                 continue;
             }
-            energy += walls.energy[i];
-            for (k, wf) in wall_forces.iter_mut().enumerate() {
+            sums.elastic.add(walls.energy[i]);
+            for k in 0..walls.walls {
                 let s = walls.slot(i, k);
                 if walls.contact[s] == CONTACT_LIVE {
                     wall_contacts += 1;
-                    *wf += walls.force(s);
+                    sums.add_wall_force(k, &walls.force(s));
                     entries.push((ContactKey::wall(ids[i], k), history_state(walls.spring(s))));
                 }
             }
@@ -366,8 +366,7 @@ mod tests {
             history: ContactHistory::from_entries(entries),
             contacts,
             wall_contacts,
-            energy,
-            wall_forces,
+            sums,
         }
     }
 
@@ -377,8 +376,12 @@ mod tests {
             let (ids, ghost, pairs, walls) = outcomes(seed, 60);
             let got = gather_contacts(&ids, &ghost, Some(&pairs), Some(&walls));
             let want = gathered_by_sorting(&ids, &ghost, &pairs, &walls);
-            // Bit for bit: the same sums in the same order, the same entries.
-            assert_eq!(got.energy.to_bits(), want.energy.to_bits(), "seed {seed}");
+            // Bit for bit: the same exact sums, the same entries.
+            assert_eq!(
+                got.sums.elastic.value().to_bits(),
+                want.sums.elastic.value().to_bits(),
+                "seed {seed}"
+            );
             assert_eq!(got, want, "seed {seed}");
             assert!(
                 got.history.len() > 100 && got.contacts > 50,
@@ -388,7 +391,11 @@ mod tests {
         // A run without ghosts or walls, its slots already in id order.
         let ids: Vec<u64> = (0..40).collect();
         let got = gather_contacts(&ids, &[false; 40], None, None);
-        assert!(got.history.is_empty() && got.energy == 0.0 && got.wall_forces.is_empty());
+        assert!(
+            got.history.is_empty()
+                && got.sums.elastic.value() == 0.0
+                && got.sums.wall_forces.is_empty()
+        );
     }
 
     /// The layout as it was written before: a hash map from id to slot and a row per slot.

@@ -50,8 +50,9 @@ impl CudaSimulation {
             self.host.history = gathered.history;
             self.host.stats.contacts = gathered.contacts;
             self.host.stats.wall_contacts = gathered.wall_contacts;
-            self.host.stats.elastic_energy = gathered.energy;
-            self.host.wall_forces = gathered.wall_forces;
+            self.host.stats.elastic_energy = gathered.sums.elastic.value();
+            self.host.wall_forces = gathered.sums.wall_force_values();
+            self.host.sums = gathered.sums;
         }
         self.host_current = true;
         Ok(&self.host)
