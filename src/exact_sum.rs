@@ -125,16 +125,33 @@ impl ExactSum {
     }
 
     /// The sum, rounded from its exact value the same way whatever order and grouping the terms
-    /// came in: the digits of the canonical form, largest first, each scaled exactly.
+    /// came in: the magnitude's canonical digits, largest first, each scaled exactly (a digit
+    /// below the normal range in two steps), then the sign.
     pub fn value(&self) -> f64 {
         let mut s = self.clone();
         s.normalize();
+        let negative = s.digits[DIGITS - 1] < 0;
+        if negative {
+            for d in s.digits.iter_mut() {
+                *d = -*d;
+            }
+            s.normalize();
+        }
         let mut total = 0.0;
         for (i, &d) in s.digits.iter().enumerate().rev() {
-            if d != 0 {
-                total += d as f64 * power_of_two(LOW + DIGIT_BITS as i32 * i as i32);
+            if d == 0 {
+                continue;
             }
+            let e = LOW + DIGIT_BITS as i32 * i as i32;
+            total += if e > 1023 {
+                f64::INFINITY
+            } else if e < -1022 {
+                d as f64 * power_of_two(e + 128) * power_of_two(-128)
+            } else {
+                d as f64 * power_of_two(e)
+            };
         }
+        let total = if negative { -total } else { total };
         if s.special != 0.0 || s.special.is_nan() {
             total + s.special
         } else {
@@ -225,6 +242,25 @@ mod tests {
             s.add(x);
         }
         assert_eq!(s.value(), 0.1);
+        // Negative sums, subnormal and huge terms: the value is the f64 sum where that is
+        // exact.
+        for (terms, want) in [
+            (vec![-0.1], -0.1),
+            (vec![-3.0, 1.0, -0.5], -2.5),
+            (vec![5e-324, 5e-324, 5e-324], 1.5e-323),
+            (vec![-5e-324, 1e-320], 1e-320 - 5e-324),
+            (vec![1e308, 1e308, -1e308], 1e308),
+            (vec![-1e308, -1e308], f64::NEG_INFINITY),
+            (vec![1.0, -1.0], 0.0),
+        ] {
+            let mut s = ExactSum::new();
+            terms.iter().for_each(|&x| s.add(x));
+            assert_eq!(s.value(), want, "{terms:?}");
+        }
+        // The whole random sum against an f64 sum of the same terms (within its error).
+        let naive: f64 = terms.iter().sum();
+        let scale: f64 = terms.iter().map(|x| x.abs()).sum();
+        assert!((whole.value() - naive).abs() <= 1e-12 * scale);
         let mut t = ExactSum::new();
         t.add(f64::INFINITY);
         t.add(1.0);
