@@ -252,6 +252,15 @@ fn main() {
     match run(cli, comm.clone()) {
         Err(e) => {
             if comm.size() > 1 {
+                // A start-up failure the ranks agreed on: printed once, by the lowest failing
+                // rank, and MPI ended in order.
+                if let Some(stop) = e.downcast_ref::<polydem::run::EveryRankStops>() {
+                    if let Some(error) = &stop.error {
+                        eprintln!("error (rank {} of {}): {error}", comm.rank(), comm.size());
+                    }
+                    drop(comm);
+                    std::process::exit(1);
+                }
                 eprintln!("error (rank {} of {}): {e:#}", comm.rank(), comm.size());
                 // A stop every rank agreed on (the stability guard's, a particle leaving the
                 // domain) ends MPI in order, each rank having said its part; any other error

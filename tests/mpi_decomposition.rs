@@ -407,7 +407,7 @@ fn oracle(mode: &str, file: &Path) -> Value {
     serde_json::from_slice(&out.stdout).expect("oracle JSON")
 }
 
-/// What cannot run is refused on every rank with a message that says why: a grid whose
+/// What cannot run is refused on every rank with a message that says why, once: a grid whose
 /// product is not the rank count, and the GPU backend where there is no GPU.
 #[test]
 fn bad_parallel_requests_are_refused_clearly() {
@@ -419,6 +419,9 @@ fn bad_parallel_requests_are_refused_clearly() {
         err.contains("[parallel] grid = [2, 1, 2]") && err.contains("2 ranks"),
         "{err}"
     );
+    // The ranks agree on a start-up failure: printed once, MPI ended in order, not aborted.
+    assert_eq!(err.matches("has 4 subdomains").count(), 1, "{err}");
+    assert!(!err.contains("MPI_ABORT"), "{err}");
     if polydem::backend::cuda_info().unavailable.is_none() {
         return; // a GPU machine runs the GPU ranks instead (gpu_ranks_* below)
     }

@@ -61,7 +61,18 @@ pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
 /// `polydem run` on the ranks of `comm` (one rank: [`run`]). Rank 0 returns the summary and
 /// writes `summary.json`; the other ranks return the same summary without writing it.
 pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Value> {
-    let mut scene = load_scene(&opts.scene)?;
+    // The start-up checks every rank makes alike (the scene, its decomposition over the ranks)
+    // and rank 0's output folder end in an agreement, so that a failure ends MPI in order on
+    // every rank instead of aborting it (docs/parallel.md, "Failures at start-up").
+    let mut scene = agreed(&*comm, load_scene(&opts.scene).map_err(anyhow::Error::from))?;
+    if comm.size() > 1 {
+        agreed(
+            &*comm,
+            crate::domain::Parallel::new(comm.clone(), &scene)
+                .map(drop)
+                .map_err(anyhow::Error::from),
+        )?;
+    }
     if let Some(out) = &opts.out {
         scene.output.dir = out.clone();
     }
@@ -80,19 +91,24 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
     }
     let id = SceneId::of(&scene, &opts.scene)?;
     let dir = scene.output.dir.clone();
-    if comm.rank() == 0 {
-        prepare_output_dir(&dir, opts.overwrite, opts.restart.is_some())?;
-        // Leftovers of writes killed in an earlier run: never read, they would pile up.
-        let removed = remove_temporary_files(&dir)?;
-        if !removed.is_empty() {
-            tracing::info!(
-                "removed {} temporary file(s) left by a killed run in {}",
-                removed.len(),
-                dir.display()
-            );
-        }
-    }
-    comm.barrier();
+    let prepared = if comm.rank() == 0 {
+        prepare_output_dir(&dir, opts.overwrite, opts.restart.is_some()).and_then(|()| {
+            // Leftovers of writes killed in an earlier run: never read, they would pile up.
+            let removed = remove_temporary_files(&dir)?;
+            if !removed.is_empty() {
+                tracing::info!(
+                    "removed {} temporary file(s) left by a killed run in {}",
+                    removed.len(),
+                    dir.display()
+                );
+            }
+            Ok(())
+        })
+    } else {
+        Ok(())
+    };
+    // In place of a barrier: every rank learns whether rank 0 could prepare the folder.
+    agreed(&*comm, prepared)?;
     let (mut engine, resumed) = start_or_restore(opts, scene, &comm, device, &id)?;
     let mut out = Outputs::open(engine.host(), &dir, comm.clone(), resumed)?;
     if !resumed {
@@ -101,6 +117,37 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
     }
     let ended = step_loop(opts, &mut engine, &mut out, &id)?;
     finish(opts, &mut engine, &mut out, &id, ended, warnings)
+}
+
+/// A failure every rank of a decomposed run knows of at the same point: MPI can be ended in
+/// order on all of them (`polydem`'s main then finalizes and exits 1) instead of aborted,
+/// which Open MPI follows by killing every rank and waiting its `odls_base_sigkill_timeout`
+/// (60 s under `launch/mpirun.sh`) before the job ends. `error` is the message to print, held
+/// by the lowest rank that failed only, so that it is printed once.
+#[derive(Debug, thiserror::Error)]
+#[error("{}", error.as_deref().unwrap_or("another rank could not start the run"))]
+pub struct EveryRankStops {
+    pub error: Option<String>,
+}
+
+/// `result` after every rank of `comm` has said whether its own failed (a collective: every
+/// rank calls it at the same point): a failure on any rank is an [`EveryRankStops`] on all,
+/// its message carried by the lowest failing rank. One rank: `result` as it is.
+fn agreed<T>(comm: &dyn Comm, result: Result<T>) -> Result<T> {
+    if comm.size() == 1 {
+        return result;
+    }
+    let failed = comm.all_gather(&[u8::from(result.is_err())]);
+    let Some(first) = failed.iter().position(|f| f.first() == Some(&1)) else {
+        return result;
+    };
+    Err(EveryRankStops {
+        error: match result {
+            Err(e) if first == comm.rank() => Some(format!("{e:#}")),
+            _ => None,
+        },
+    }
+    .into())
 }
 
 /// The engine of a run on `device`: a new one from `scene`, or with `--restart` the
