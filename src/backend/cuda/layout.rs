@@ -44,8 +44,9 @@ impl GridParams {
     }
 }
 
-/// Doubles per contact in the device's contact history: the tangential spring ξ (3), the
-/// current loading cycle's approach speed, signed by its phase, and the twist angle
+/// Doubles per contact in the device's contact history: the tangential spring `√k_t ξ` (3),
+/// the current loading cycle's approach speed, signed by its phase, and the torsional spring
+/// `√k_tw φ`
 /// (`contact::ContactState`, in that order;
 /// `cuda/contact_law.cuh: PD_HISTORY_WIDTH`).
 pub const HISTORY_WIDTH: usize = 5;
