@@ -87,42 +87,25 @@ impl Body {
 }
 
 /// The scene of one impact: the body's material against itself and the floor, no gravity, the
-/// default step.
+/// default step (`scene_text` without its `dt`).
 fn simulation(m: &Material, body: Body, restitution: f64, friction: f64) -> Simulation {
-    let text = format!(
-        r#"gravity = [0.0, 0.0, 0.0]
-[simulation]
-end_time = 1.0
-[domain]
-min = [-10.0, -10.0, -10.0]
-max = [10.0, 10.0, 10.0]
-[[materials]]
-name = "m"
-youngs_modulus = {:e}
-poisson_ratio = {}
-density = {:e}
-[[material_pairs]]
-materials = ["m", "m"]
-restitution = {restitution}
-friction = {friction}
-[[particle_types]]
-name = "body"
-material = "m"
-generator = {}
-[[walls]]
-name = "floor"
-mesh = "{}"
-material = "m"
-[output]
-dir = "{}"
-"#,
-        m.e,
-        m.nu,
-        m.rho,
-        body.generator(),
-        repo_root().join("meshes/walls/plane.stl").display(),
-        std::env::temp_dir().join("polydem-validation").display()
+    let types = format!(
+        "[[particle_types]]\nname = \"body\"\nmaterial = \"m\"\ngenerator = {}\n",
+        body.generator()
     );
+    let text = scene_text(&SceneSpec {
+        e_modulus: m.e,
+        poisson: m.nu,
+        density: m.rho,
+        restitution,
+        friction,
+        gravity: 0.0,
+        dt: 1.0,
+        wall_scale: Some(1.0),
+        wall_motion: None,
+        types: &types,
+    })
+    .replace("dt = 1e0\n", "");
     let scene = parse_scene(&text, &repo_root(), "friction.toml").unwrap();
     Simulation::builder(scene).build().unwrap()
 }

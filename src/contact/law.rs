@@ -108,20 +108,9 @@ pub struct ContactKinematics {
 }
 
 impl ContactKinematics {
-    /// `u·(I_A⁻¹ + I_B⁻¹)u`: the inverse of the moment of inertia the relative rotation about
-    /// the unit axis `u` sees (world inverse inertia `R diag(1/I) Rᵀ` of each body).
-    pub fn inverse_inertia_about(&self, u: &Vector3<f64>) -> f64 {
-        self.weighted_inverse_inertia(u, 1.0, 1.0)
-    }
-
-    /// `u·(k_A I_A⁻¹ + k_B I_B⁻¹)u`: [`ContactKinematics::inverse_inertia_about`] with each
-    /// body's term multiplied by its share `split_a`, `split_b` (the rotational dashpot caps'
-    /// mass splitting).
-    pub fn split_inverse_inertia_about(&self, u: &Vector3<f64>) -> f64 {
-        self.weighted_inverse_inertia(u, self.split_a, self.split_b)
-    }
-
-    /// `u·(k_A I_A⁻¹ + k_B I_B⁻¹)u` for the shares `k_a`, `k_b`.
+    /// `u·(k_A I_A⁻¹ + k_B I_B⁻¹)u`: the inverse of the moment of inertia the relative rotation
+    /// about the unit axis `u` sees (world inverse inertia `R diag(1/I) Rᵀ` of each body), each
+    /// body's term multiplied by its share `k_a`, `k_b` (1 and 1, or the caps' mass splitting).
     pub fn weighted_inverse_inertia(&self, u: &Vector3<f64>, k_a: f64, k_b: f64) -> f64 {
         let term = |q: &UnitQuaternion<f64>, inv: &Vector3<f64>| {
             let b = q.inverse_transform_vector(u);

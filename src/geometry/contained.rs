@@ -13,27 +13,7 @@
 
 use super::overlap::Overlap;
 use crate::shape::ConvexTemplate;
-use nalgebra::{Isometry3, Quaternion, Vector3};
-
-/// `v` rotated by the unit quaternion `q` as `v + w t + u × t`, `t = 2 u × v` (cuda/common.cuh
-/// `rotate`, bit for bit).
-fn rotate(q: &Quaternion<f64>, v: &Vector3<f64>) -> Vector3<f64> {
-    let u = Vector3::new(q.i, q.j, q.k);
-    let t = cross(&u, v) * 2.0;
-    t * q.w + cross(&u, &t) + v
-}
-
-fn cross(a: &Vector3<f64>, b: &Vector3<f64>) -> Vector3<f64> {
-    Vector3::new(
-        a.y * b.z - a.z * b.y,
-        a.z * b.x - a.x * b.z,
-        a.x * b.y - a.y * b.x,
-    )
-}
-
-fn dot(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
-    a.x * b.x + a.y * b.y + a.z * b.z
-}
+use nalgebra::{Isometry3, Vector3};
 
 /// The overlap of two bodies one of which lies wholly inside the other (every vertex of it
 /// within `64 ε (r_A + r_B)` of the other's planes, r the circumscribed radii), or `None`.
@@ -53,19 +33,19 @@ fn inside(
     let (xi, xo) = (pi.translation.vector, po.translation.vector);
     let (ri, ro) = (ti.circumscribed_radius * si, to.circumscribed_radius * so);
     let d = xi - xo;
-    if dot(&d, &d) > ro * ro {
+    if d.dot(&d) > ro * ro {
         return None;
     }
     let tol = 64.0 * f64::EPSILON * (ri + ro);
-    let qi = pi.rotation.quaternion();
-    let qo = po.rotation.quaternion();
-    let qo_inverse = Quaternion::new(qo.w, -qo.i, -qo.j, -qo.k);
     for v in &ti.vertices {
-        let w = rotate(&qo_inverse, &(rotate(qi, &(v.coords * si)) + d));
+        // nalgebra's rotation is cuda/common.cuh's `rotate`, bit for bit.
+        let w = po
+            .rotation
+            .inverse_transform_vector(&(pi.rotation * (v.coords * si) + d));
         if to
             .faces
             .iter()
-            .any(|f| dot(&f.normal, &w) - f.offset * so > tol)
+            .any(|f| f.normal.dot(&w) - f.offset * so > tol)
         {
             return None;
         }
@@ -95,7 +75,7 @@ fn face_volume(t: &ConvexTemplate) -> f64 {
         for k in 1..f.vertices.len().saturating_sub(1) {
             let p1 = t.vertices[f.vertices[k] as usize].coords;
             let p2 = t.vertices[f.vertices[k + 1] as usize].coords;
-            twice_area += dot(&f.normal, &cross(&(p1 - p0), &(p2 - p0)));
+            twice_area += f.normal.dot(&(p1 - p0).cross(&(p2 - p0)));
         }
         volume += f.offset * (0.5 * twice_area);
     }
