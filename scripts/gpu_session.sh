@@ -10,7 +10,8 @@
 #   bash scripts/gpu_session.sh all       # both
 #   ONLY="gpu_pipeline validation_friction" bash scripts/gpu_session.sh tests   # some groups
 # Results go to $OUT (the device call's folder; out/gpu_session here): summary.txt (one line a
-# test or bench), logs.tgz (every log) and benches.jsonl (every bench report, tagged).
+# test or bench), logs.tgz (every log, each line stamped with the seconds since its test began)
+# and benches.jsonl (every bench report, tagged).
 #
 # The A/B pairs run the same binary with and without one setting, alternating, twice each:
 # - POLYDEM_GPU_EXCHANGE=host against device: a decomposed GPU run's rebuilds through the host
@@ -49,6 +50,21 @@ tests=(
   "validation_friction|$T/validation_friction --ignored --test-threads 2"
   "validation_spheres|$T/validation_spheres --ignored --test-threads 2"
   "validation_moving_walls|$T/validation_moving_walls --ignored --test-threads 2"
+  "vc_elastic_double|$T/validation_contact --ignored --exact elastic_collisions_on_gpu_double --nocapture"
+  "vc_elastic_mixed|$T/validation_contact --ignored --exact elastic_collisions_on_gpu_mixed --nocapture"
+  "vc_restitution_double|$T/validation_contact --ignored --exact restitution_on_gpu_double --nocapture"
+  "vc_restitution_mixed|$T/validation_contact --ignored --exact restitution_on_gpu_mixed --nocapture"
+  "vc_rest_double|$T/validation_contact --ignored --exact rest_on_gpu_double --nocapture"
+  "vc_rest_mixed|$T/validation_contact --ignored --exact rest_on_gpu_mixed --nocapture"
+  "vc_aligned_cubes|$T/validation_contact --ignored --exact aligned_cubes_on_gpu_double --nocapture"
+  "vf_spheres_double|$T/validation_friction --ignored --exact friction_spheres_on_gpu_double --nocapture"
+  "vf_spheres_mixed|$T/validation_friction --ignored --exact friction_spheres_on_gpu_mixed --nocapture"
+  "vf_polyhedra_double|$T/validation_friction --ignored --exact friction_polyhedra_on_gpu_double --nocapture"
+  "vf_polyhedra_mixed|$T/validation_friction --ignored --exact friction_polyhedra_on_gpu_mixed --nocapture"
+  "vs_double|$T/validation_spheres --ignored --exact sphere_cases_on_gpu_double --nocapture"
+  "vs_mixed|$T/validation_spheres --ignored --exact sphere_cases_on_gpu_mixed --nocapture"
+  "vw_resting|$T/validation_moving_walls --ignored --exact resting_faces_at_the_default_step_on_gpu --nocapture"
+  "vw_lattice|$T/validation_moving_walls --ignored --exact a_compressed_lattice_of_low_restitution_cubes_on_gpu_is_the_cpus --nocapture"
   "validation_impact|$T/validation_impact --ignored"
   "stability_guard|$T/stability --ignored --exact the_guard_stops_gpu_runs_at_the_same_steps"
 )
@@ -70,10 +86,14 @@ run_parallel() {
     (
       name=${entry%%|*}
       start=$(date +%s)
-      timeout "$limit" bash -c "${entry#*|}" > "$logs/$name.log" 2>&1
-      rc=$?
+      # Each line stamped with the seconds since the test began: where the time goes.
+      timeout "$limit" bash -c "${entry#*|}" 2>&1 | while IFS= read -r line; do
+        printf -v now '%(%s)T' -1
+        printf '%4d %s\n' "$((now - start))" "$line"
+      done > "$logs/$name.log"
+      rc=${PIPESTATUS[0]}
       printf '%-22s rc=%-3s %4ss  %s\n' "$name" "$rc" "$(($(date +%s) - start))" \
-        "$(grep -E '^test result' "$logs/$name.log" | tail -1)" >> "$summary"
+        "$(grep -E '^ *[0-9]+ test result' "$logs/$name.log" | tail -1)" >> "$summary"
     ) &
   done
   wait
