@@ -13,8 +13,10 @@
 #   MPIRUN_ARGS      extra launcher arguments (e.g. "--hostfile hosts")
 #   RAYON_NUM_THREADS  threads per rank (default: cores / N, at least 1)
 #   POLYDEM_BACKEND  cpu, cuda or auto (default)
-#   POLYDEM_SIGKILL_TIMEOUT  seconds mpirun waits between SIGTERM and SIGKILL when interrupted
-#                    (default 60: time for the interrupt checkpoint)
+#
+# Ctrl-C, `kill` (SIGTERM) or SIGHUP on this script stop every rank after the same step with
+# the interrupt checkpoint written, however long that takes, and the script exits 130, 143 or
+# 129; a second signal ends the job at once (docs/parallel.md, "Interrupting a run").
 #
 # On a GPU machine each rank drives the GPU of its node-local rank modulo the visible GPUs
 # (docs/design.md §6); POLYDEM_BACKEND=cpu|cuda|auto (default auto) picks the backend.
@@ -22,7 +24,7 @@ set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 if (($# < 2)); then
-    sed -n '2,18p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
+    sed -n '2,21p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
     exit 2
 fi
 ranks="$1"
@@ -50,14 +52,46 @@ if ((ranks * threads > cores)); then
 else
     launcher_args+=(--map-by "slot:PE=$threads" --bind-to core)
 fi
-# Ctrl-C or `kill` on mpirun: Open MPI sends every rank SIGTERM, then SIGKILL after
-# odls_base_sigkill_timeout seconds (1 by default). The ranks agree on the signal after the
-# step they are in and write the interrupt checkpoint; give them a minute for a large one.
-launcher_args+=(--mca odls_base_sigkill_timeout "${POLYDEM_SIGKILL_TIMEOUT:-60}")
 if [[ "$(id -u)" == 0 ]]; then
     # Open MPI refuses root without these (containers, CI).
     export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 fi
+# Open MPI 4 does not forward SIGINT or SIGTERM: interrupted, mpirun sends the ranks SIGCONT,
+# waits odls_base_sigkill_timeout (1 s), sends SIGTERM, waits again and sends SIGKILL, reaping
+# nothing and forwarding no output while it waits. That leaves a large run a second for its
+# checkpoint, and a longer timeout holds every failed job for as long (a rank's non-zero exit
+# takes the same path). SIGUSR1 mpirun forwards to every rank and then waits for them, and
+# polydem stops on it as on SIGINT (src/interrupt.rs). So mpirun runs in a session of its own
+# (a terminal's Ctrl-C reaches this script, not mpirun), with no terminal input (a job outside
+# the terminal's foreground group would stop at its first read), and the first SIGINT, SIGTERM
+# or SIGHUP here becomes SIGUSR1 for mpirun; a second is passed on as it is.
+first=0
+pass_on() { # the signal's number
+    if ((first == 0)); then
+        first=$1
+        kill -USR1 "$job" 2> /dev/null || true
+    else
+        kill "-$1" "$job" 2> /dev/null || true
+    fi
+}
+trap 'pass_on 2' INT
+trap 'pass_on 15' TERM
+trap 'pass_on 1' HUP
 # shellcheck disable=SC2086
-exec "${MPIRUN:-mpirun}" "${launcher_args[@]}" ${MPIRUN_ARGS:-} \
-    "$bin" "${POLYDEM_COMMAND:-run}" "$scene" --backend "${POLYDEM_BACKEND:-auto}" "$@"
+setsid "${MPIRUN:-mpirun}" "${launcher_args[@]}" ${MPIRUN_ARGS:-} \
+    "$bin" "${POLYDEM_COMMAND:-run}" "$scene" --backend "${POLYDEM_BACKEND:-auto}" "$@" \
+    < /dev/null &
+job=$!
+# `wait` returns early (> 128) when a trapped signal arrives; mpirun is then still running.
+status=0
+while :; do
+    status=0
+    wait "$job" || status=$?
+    kill -0 "$job" 2> /dev/null || break
+done
+# The ranks end a stop on SIGUSR1 with status 0 (src/interrupt.rs); the script reports the
+# signal it was sent, with the shell's 128 + signal.
+if ((first != 0)); then
+    exit $((128 + first))
+fi
+exit "$status"

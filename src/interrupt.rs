@@ -1,7 +1,9 @@
 //! Stopping a run cleanly on a signal: SIGINT (Ctrl-C; a terminal sends it to the whole
-//! foreground process group, `mpirun` and its ranks included) and SIGTERM (what `mpirun` sends
-//! every rank when it is itself interrupted or terminated, and what Slurm sends a job's tasks
-//! at its time limit, before SIGKILL).
+//! foreground process group), SIGTERM (what `mpirun` sends every rank when it is itself
+//! interrupted or terminated, and what Slurm sends a job's tasks at its time limit or on
+//! `scancel`, before SIGKILL) and SIGUSR1 (the batch systems' "checkpoint and stop" request,
+//! Slurm's `--signal=USR1@…`, and the one signal `mpirun` passes on to every rank and then
+//! waits for them: `launch/mpirun.sh` turns a Ctrl-C or a SIGTERM into it, docs/parallel.md).
 //!
 //! A handler only raises a flag; the run loop polls it between steps, every rank of a
 //! decomposed run agrees on it (so all stop after the same step), writes the interrupt
@@ -15,12 +17,15 @@
 //! by `mpirun`; taking such a duplicate for a second request would end the run without its
 //! checkpoint (one `timeout -s INT` in six did so).
 //!
-//! `mpirun` (Open MPI) follows its SIGTERM with SIGKILL after `odls_base_sigkill_timeout`
-//! seconds, 1 by default: long enough for the agreement and the checkpoint of a small run, not
-//! for a large one, which should be launched with `--mca odls_base_sigkill_timeout 60`
-//! (docs/parallel.md).
+//! `mpirun` (Open MPI 4) does not forward SIGINT or SIGTERM: interrupted, it sends every rank
+//! SIGCONT, waits `odls_base_sigkill_timeout` seconds (1 by default), sends SIGTERM, waits as
+//! long again and sends SIGKILL, without reaping or forwarding output while it waits. The
+//! ranks then have about a second for the agreement and the checkpoint: enough for a small
+//! run, not for a large one, and a longer timeout makes mpirun sleep through it even when the
+//! ranks are done (a 60 s timeout held interrupted and failed jobs for one to two minutes).
+//! SIGUSR1 avoids that path: mpirun forwards it and waits for the ranks to end on their own.
 
-use signal_hook::consts::{SIGINT, SIGTERM};
+use signal_hook::consts::{SIGINT, SIGTERM, SIGUSR1};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
@@ -30,24 +35,33 @@ use std::time::{Duration, Instant};
 /// milliseconds, a person pressing Ctrl-C twice takes longer.
 pub const DUPLICATE_WINDOW: Duration = Duration::from_millis(500);
 
+/// How many signals a run stops on.
+const KINDS: usize = 3;
+
 /// When the first signal of each kind arrived in this run: nanoseconds since the handlers were
 /// installed, plus one (0: not yet).
-static FIRST_ARRIVAL: [AtomicU64; 2] = [AtomicU64::new(0), AtomicU64::new(0)];
+static FIRST_ARRIVAL: [AtomicU64; KINDS] =
+    [AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)];
 
 /// The signals a run stops on, in the order of [`StopSignals::received`]'s counts.
-pub const STOP_SIGNALS: [(i32, &str); 2] = [(SIGINT, "SIGINT"), (SIGTERM, "SIGTERM")];
+pub const STOP_SIGNALS: [(i32, &str); KINDS] = [
+    (SIGINT, "SIGINT"),
+    (SIGTERM, "SIGTERM"),
+    (SIGUSR1, "SIGUSR1"),
+];
 
-/// The flags SIGINT and SIGTERM raise. The handlers are installed once per process and stay
-/// (removing one would leave its signal ignored); each run resets the flags when it starts.
+/// The flags SIGINT, SIGTERM and SIGUSR1 raise. The handlers are installed once per process
+/// and stay (removing one would leave its signal ignored); each run resets the flags when it
+/// starts.
 pub struct StopSignals {
-    flags: [Arc<AtomicBool>; 2],
+    flags: [Arc<AtomicBool>; KINDS],
 }
 
 /// The process's flags, with the handlers installed (or why they could not be).
-static INSTALLED: OnceLock<Result<[Arc<AtomicBool>; 2], String>> = OnceLock::new();
+static INSTALLED: OnceLock<Result<[Arc<AtomicBool>; KINDS], String>> = OnceLock::new();
 
-fn install_handlers() -> Result<[Arc<AtomicBool>; 2], String> {
-    let flags = [0, 1].map(|_| Arc::new(AtomicBool::new(false)));
+fn install_handlers() -> Result<[Arc<AtomicBool>; KINDS], String> {
+    let flags = [0; KINDS].map(|_| Arc::new(AtomicBool::new(false)));
     let installed = Instant::now();
     let window = DUPLICATE_WINDOW.as_nanos() as u64;
     for (k, (signal, name)) in STOP_SIGNALS.into_iter().enumerate() {
@@ -83,27 +97,32 @@ impl StopSignals {
 
     /// Whether each of [`STOP_SIGNALS`] has arrived, as counts (0 or 1) in that order, ready to
     /// be summed over the ranks.
-    pub fn received(&self) -> [u64; 2] {
-        [0, 1].map(|k| u64::from(self.flags[k].load(Ordering::SeqCst)))
+    pub fn received(&self) -> [u64; KINDS] {
+        let mut counts = [0; KINDS];
+        for (c, f) in counts.iter_mut().zip(&self.flags) {
+            *c = u64::from(f.load(Ordering::SeqCst));
+        }
+        counts
     }
 }
 
 /// The signal a run stops for, from the counts of [`StopSignals::received`] summed over the
 /// ranks (every rank computes the same): SIGTERM when any rank got it (under `mpirun` every
-/// rank does, and SIGKILL follows), else SIGINT; `None` when no rank got either.
-pub fn stop_signal(counts: [u64; 2]) -> Option<(i32, &'static str)> {
-    if counts[1] > 0 {
-        Some(STOP_SIGNALS[1])
-    } else if counts[0] > 0 {
-        Some(STOP_SIGNALS[0])
-    } else {
-        None
-    }
+/// rank does, and SIGKILL follows), else SIGINT, else SIGUSR1; `None` when no rank got any.
+pub fn stop_signal(counts: &[u64]) -> Option<(i32, &'static str)> {
+    [1, 0, 2]
+        .into_iter()
+        .find(|&k| counts.get(k).is_some_and(|&c| c > 0))
+        .map(|k| STOP_SIGNALS[k])
 }
 
-/// The exit status of a run stopped by `signal` (the shell's convention, `128 + signal`).
+/// The exit status of a run stopped by `signal`: the shell's `128 + signal` for SIGINT and
+/// SIGTERM (130, 143), so that scripts can tell an interrupted run from a finished one, and 0
+/// for SIGUSR1, a stop that was asked for: the run did what it was told, and `mpirun`, which
+/// takes any rank's non-zero exit for a failed job and kills the rest through the path above,
+/// ends at once instead (`launch/mpirun.sh` exits 130 or 143 for what it was sent).
 pub fn exit_status(signal: i32) -> i32 {
-    128 + signal
+    if signal == SIGUSR1 { 0 } else { 128 + signal }
 }
 
 #[cfg(test)]
@@ -115,11 +134,14 @@ mod tests {
 
     #[test]
     fn sigterm_wins_over_sigint_and_statuses_follow_the_shell() {
-        assert_eq!(stop_signal([0, 0]), None);
-        assert_eq!(stop_signal([3, 0]).map(|s| s.1), Some("SIGINT"));
-        assert_eq!(stop_signal([1, 2]).map(|s| s.1), Some("SIGTERM"));
+        assert_eq!(stop_signal(&[0, 0, 0]), None);
+        assert_eq!(stop_signal(&[3, 0, 0]).map(|s| s.1), Some("SIGINT"));
+        assert_eq!(stop_signal(&[1, 2, 0]).map(|s| s.1), Some("SIGTERM"));
+        assert_eq!(stop_signal(&[0, 0, 2]).map(|s| s.1), Some("SIGUSR1"));
+        assert_eq!(stop_signal(&[1, 0, 2]).map(|s| s.1), Some("SIGINT"));
         assert_eq!(exit_status(SIGINT), 130);
         assert_eq!(exit_status(SIGTERM), 143);
+        assert_eq!(exit_status(SIGUSR1), 0);
     }
 
     /// A signal raised in the process sets exactly its flag, and the next run starts clean.
@@ -127,11 +149,11 @@ mod tests {
     fn raised_signals_set_their_flags() {
         let _turn = RAISING.lock().unwrap_or_else(|e| e.into_inner());
         let s = StopSignals::install().unwrap();
-        assert_eq!(s.received(), [0, 0]);
+        assert_eq!(s.received(), [0, 0, 0]);
         signal_hook::low_level::raise(SIGTERM).unwrap();
-        assert_eq!(s.received(), [0, 1]);
+        assert_eq!(s.received(), [0, 1, 0]);
         let s = StopSignals::install().unwrap();
-        assert_eq!(s.received(), [0, 0]);
+        assert_eq!(s.received(), [0, 0, 0]);
     }
 
     /// The same request delivered twice at once (`timeout` signals the command, then its
@@ -143,8 +165,8 @@ mod tests {
         let s = StopSignals::install().unwrap();
         signal_hook::low_level::raise(SIGINT).unwrap();
         signal_hook::low_level::raise(SIGINT).unwrap();
-        assert_eq!(s.received(), [1, 0]);
+        assert_eq!(s.received(), [1, 0, 0]);
         let s = StopSignals::install().unwrap();
-        assert_eq!(s.received(), [0, 0]);
+        assert_eq!(s.received(), [0, 0, 0]);
     }
 }

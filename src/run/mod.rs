@@ -121,8 +121,8 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Valu
 
 /// A failure every rank of a decomposed run knows of at the same point: MPI can be ended in
 /// order on all of them (`polydem`'s main then finalizes and exits 1) instead of aborted,
-/// which Open MPI follows by killing every rank and waiting its `odls_base_sigkill_timeout`
-/// (60 s under `launch/mpirun.sh`) before the job ends. `error` is the message to print, held
+/// which Open MPI follows by killing every rank through its `odls_base_sigkill_timeout` path
+/// (docs/parallel.md, "Interrupting a run"). `error` is the message to print, held
 /// by the lowest rank that failed only, so that it is printed once.
 #[derive(Debug, thiserror::Error)]
 #[error("{}", error.as_deref().unwrap_or("another rank could not start the run"))]
@@ -312,12 +312,11 @@ fn step_loop(
         // the second mpirun leaves between its SIGTERM and SIGKILL (crate::interrupt).
         let received = signals.received();
         let counts = if ranks > 1 {
-            let c = comm.sum_u64(&received);
-            [c[0], c[1]]
+            comm.sum_u64(&received)
         } else {
-            received
+            received.to_vec()
         };
-        if let Some(signal) = crate::interrupt::stop_signal(counts) {
+        if let Some(signal) = crate::interrupt::stop_signal(&counts) {
             let path = save_checkpoint(&*comm, engine.synced()?, &dir, id)?;
             if rank == 0 {
                 tracing::warn!(
