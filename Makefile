@@ -8,6 +8,8 @@
 #                  PyPI's NVRTC on LD_LIBRARY_PATH (kernel compile check)
 #   make validate  the full-size validation cases that `make test` runs as smaller twins
 #                  (tests marked `#[ignore = "full validation: make validate"]`)
+#   make faults    the bad-input, fault and interrupt tests of docs/validation.md §11 alone
+#                  (they run in `make test` too): real mpirun on 2-3 ranks, signals, kills
 #   make lint      cargo fmt --check, clippy -D warnings on every target, rustdoc -D warnings,
 #                  and no import cycle between top-level modules (scripts/module_graph.py)
 #   make graph     print the module import graph and the largest source files, and write them
@@ -24,6 +26,7 @@
 #   make lint      cold about 6 min (clippy checks every target, rustdoc builds the
 #                  dependencies in the dev profile), warm under 1 min
 #   make probe     cold 8-10 min (the build), warm seconds
+#   make faults    warm about 1 min
 #
 # `make lint` is not part of `make test`: formatting or lint findings are review findings, not
 # failed tests, so they should not stop a user's `make test` from reporting what the tests
@@ -44,7 +47,7 @@ POLYDEM := $(TARGET_DIR)/release/polydem
 VENV_PYTHON := $(ROOT)/.venv/bin/python
 PROBE_OUT := $(ROOT)/out/probe
 
-.PHONY: help setup build run probe test validate lint graph clean-venv
+.PHONY: help setup build run probe test validate faults lint graph clean-venv
 
 help:
 	@sed -n '1,/^$$/p' $(ROOT)/Makefile | sed 's/^# \{0,1\}//'
@@ -94,6 +97,18 @@ validate: setup
 	cd $(ROOT) && for t in $(VALIDATE_TESTS); do \
 	    POLYDEM_PYTHON=$(VENV_PYTHON) $(CARGO) test --release --test $${t%%:*} -- \
 	        --ignored --exact $${t#*:}; \
+	done
+
+# The tests of docs/validation.md §11 (bad input, faults and interrupts): `BINARY` runs every
+# test of that file, `BINARY:a,b` those whose names contain a or b.
+FAULT_TESTS := scene_limits shape_templates probe_cli io_output restart_integrity run_restart \
+    mpi_signals scene_files:no_shipped_scene_warns,missing_files \
+    mpi_decomposition:interrupting,stops_every_rank,refused stability
+
+faults: setup
+	cd $(ROOT) && for t in $(FAULT_TESTS); do \
+	    filters=$$([[ $$t == *:* ]] && echo "$${t#*:}" | tr ',' ' ' || true); \
+	    POLYDEM_PYTHON=$(VENV_PYTHON) $(CARGO) test --release --test $${t%%:*} -- $$filters; \
 	done
 
 lint: setup

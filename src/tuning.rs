@@ -49,6 +49,9 @@ pub struct Tuning {
     pub mixed_lp_f32: bool,
     /// `POLYDEM_ROOT`: the repository root (its `meshes/`) for `polydem bench accuracy`.
     pub root: Option<PathBuf>,
+    /// `POLYDEM_PANIC_AT=RANK:STEP`: that rank of `polydem run` panics after that step, so that
+    /// tests can check that a panic on one rank ends the whole job (`tests/mpi_signals.rs`).
+    pub panic_at: Option<(usize, u64)>,
     /// What was set but not allowed, one line each (the default is kept).
     pub rejected: Vec<String>,
 }
@@ -127,6 +130,17 @@ impl Tuning {
             }
         };
         t.root = var("POLYDEM_ROOT").map(PathBuf::from);
+        t.panic_at = text("POLYDEM_PANIC_AT").and_then(|v| {
+            let parsed = v
+                .split_once(':')
+                .and_then(|(r, s)| Some((r.trim().parse().ok()?, s.trim().parse().ok()?)));
+            if parsed.is_none() {
+                t.rejected.push(format!(
+                    "POLYDEM_PANIC_AT={v:?} is not RANK:STEP (two whole numbers); no panic is made"
+                ));
+            }
+            parsed
+        });
         t
     }
 
@@ -170,6 +184,10 @@ impl Tuning {
         put(
             "POLYDEM_ROOT",
             self.root.as_ref().map(|p| p.display().to_string()),
+        );
+        put(
+            "POLYDEM_PANIC_AT",
+            self.panic_at.map(|(r, s)| format!("{r}:{s}")),
         );
         v
     }
@@ -216,7 +234,10 @@ mod tests {
             ("POLYDEM_GPU_EXCHANGE", "host"),
             ("POLYDEM_PAIR_BATCH", "64"),
             ("POLYDEM_MIXED_LP", "f32"),
+            ("POLYDEM_PANIC_AT", "1:300"),
         ]);
+        assert_eq!(t.panic_at, Some((1, 300)));
+        assert!(t.set().contains(&"POLYDEM_PANIC_AT=1:300".to_string()));
         assert_eq!(t.cuda_block, Some(96));
         assert!(t.mixed_lp_f32);
         assert!(t.set().contains(&"POLYDEM_MIXED_LP=f32".to_string()));
@@ -234,12 +255,14 @@ mod tests {
             ("POLYDEM_MPI", "yes"),
             ("POLYDEM_GPU_EXCHANGE", "gpu"),
             ("POLYDEM_MIXED_LP", "half"),
+            ("POLYDEM_PANIC_AT", "1"),
         ]);
+        assert_eq!(bad.panic_at, None);
         assert_eq!(bad.cuda_block, None);
         assert_eq!(bad.mpi, None);
         assert_eq!(bad.gpu_exchange_on_device, None);
         assert!(!bad.mixed_lp_f32);
-        assert_eq!(bad.rejected.len(), 4);
+        assert_eq!(bad.rejected.len(), 5);
         assert!(t.set().contains(&"POLYDEM_CUDA_BLOCK=96".to_string()));
     }
 }

@@ -2,7 +2,7 @@
 //! "Interrupting a run"): `launch/mpirun.sh` on 2 and 3 ranks sent a terminal's Ctrl-C (SIGINT
 //! to its process group), `kill` (SIGTERM) and SIGHUP; SIGTERM delivered to every rank at once,
 //! as Slurm's `scancel` and time limit deliver it to a job's tasks; a rank killed with SIGKILL;
-//! a decomposition the ranks cannot run.
+//! a panic on one rank; a decomposition the ranks cannot run.
 //!
 //! Each interrupted run must stop every rank after the same step with that step's checkpoint
 //! and the summary written, exit with the shell's status for the signal, and leave no rank
@@ -309,6 +309,37 @@ fn a_rank_killed_mid_run_ends_the_whole_job() {
     let what = "SIGKILL to rank 1 of 2";
     let exit = job.finish(sent, what);
     assert!(!exit.success(), "{what}:\n{}", job.log);
+    no_rank_left(&out, what);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A panic on one rank mid-run (`POLYDEM_PANIC_AT`, a test knob of `tuning`): the panic hook
+/// prints it once and aborts MPI, and mpirun ends the other rank, which waits in the step's
+/// collectives.
+#[test]
+fn a_panic_on_one_rank_ends_the_whole_job() {
+    let dir = temp_dir("mpi-signals-panic");
+    let scene = long_pour(&dir);
+    let out = dir.join("out");
+    let mut cmd = Command::new(repo_root().join("launch/mpirun.sh"));
+    cmd.arg("2")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .env("POLYDEM_BIN", polydem_bin())
+        .env("POLYDEM_BACKEND", "cpu")
+        .env("POLYDEM_PANIC_AT", "1:300");
+    let mut job = Job::start(cmd);
+    let start = Instant::now();
+    let what = "a panic on rank 1 of 2 after step 300";
+    let exit = job.finish(start, what);
+    assert!(!exit.success(), "{what}:\n{}", job.log);
+    assert_eq!(
+        job.log.matches("panics after step 300 as asked").count(),
+        1,
+        "{what}: the panic printed once:\n{}",
+        job.log
+    );
     no_rank_left(&out, what);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -259,6 +259,12 @@ fn step_loop(
             return Err(stopped_unstable(e, &*comm, engine, &dir, id));
         }
         particle_steps += engine.particle_count() as u64;
+        if crate::tuning::Tuning::get().panic_at == Some((rank, engine.host().step)) {
+            panic!(
+                "POLYDEM_PANIC_AT: rank {rank} panics after step {} as asked",
+                engine.host().step
+            );
+        }
         let (t, dt) = (engine.host().time, engine.host().dt);
         if frame_at.due(t, dt) {
             out.frame(engine.synced()?)?;
