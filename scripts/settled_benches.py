@@ -46,7 +46,7 @@ def bench_scene(box, type_name, type_lines, count, how, out):
     return f"""gravity = [0.0, 0.0, 0.0]
 
 [simulation]
-dt_fraction = 0.05
+dt_fraction = 0.025
 end_time = 1.0
 seed = 9
 
