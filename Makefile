@@ -11,7 +11,8 @@
 #   make faults    the bad-input, fault and interrupt tests of docs/validation.md §11 alone
 #                  (they run in `make test` too): real mpirun on 2-3 ranks, signals, kills
 #   make lint      cargo fmt --check, clippy -D warnings on every target, rustdoc -D warnings,
-#                  and no import cycle between top-level modules (scripts/module_graph.py)
+#                  no import cycle between top-level modules, and docs/design.md's module
+#                  graph block current (scripts/module_graph.py; `make graph` rewrites it)
 #   make graph     print the module import graph and the largest source files, and write them
 #                  into docs/design.md (Architecture at a glance)
 #   make setup     only the installation step
@@ -116,6 +117,7 @@ lint: setup
 	cd $(ROOT) && $(CARGO) clippy --release --all-targets -- -D warnings
 	cd $(ROOT) && RUSTDOCFLAGS=-Dwarnings $(CARGO) doc --no-deps
 	cd $(ROOT) && python3 scripts/module_graph.py --check
+	cd $(ROOT) && python3 scripts/module_graph.py --check-doc docs/design.md
 
 graph:
 	@cd $(ROOT) && python3 scripts/module_graph.py && python3 scripts/module_graph.py --update docs/design.md

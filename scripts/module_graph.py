@@ -21,6 +21,7 @@ Python 3 standard library only.
 from __future__ import annotations
 
 import argparse
+import difflib
 import re
 import sys
 from collections import defaultdict
@@ -350,6 +351,13 @@ def main() -> int:
         metavar="FILE",
         help="write the block between FILE's module-graph markers (docs/design.md)",
     )
+    mode.add_argument(
+        "--check-doc",
+        type=Path,
+        metavar="FILE",
+        help="fail, with a diff, when the block between FILE's markers is not current "
+        "(`make lint`; `make graph` rewrites it)",
+    )
     ap.add_argument("--files", type=int, default=12, help="how many of the largest files to list")
     ap.add_argument("--root", type=Path, default=ROOT, help="the repository (default: this one)")
     args = ap.parse_args()
@@ -377,8 +385,30 @@ def main() -> int:
             print("\n".join(report), file=sys.stderr)
         return 1 if report else 0
 
-    if args.markdown or args.update:
+    if args.markdown or args.update or args.check_doc:
         text = markdown(args.root, args.files, modules, edges, cyclic, report)
+        if args.check_doc:
+            doc = args.check_doc.read_text()
+            begin, end = "<!-- module-graph:begin -->", "<!-- module-graph:end -->"
+            if begin not in doc or end not in doc:
+                print(f"{args.check_doc}: no {begin} … {end} markers", file=sys.stderr)
+                return 2
+            current = doc.split(begin, 1)[1].split(end, 1)[0].strip("\n")
+            if current != text.strip("\n"):
+                diff = difflib.unified_diff(
+                    current.splitlines(),
+                    text.strip("\n").splitlines(),
+                    f"{args.check_doc} (as written)",
+                    "scripts/module_graph.py (now)",
+                    lineterm="",
+                )
+                print("\n".join(diff), file=sys.stderr)
+                print(
+                    f"{args.check_doc}: the module graph block is stale; `make graph` rewrites it",
+                    file=sys.stderr,
+                )
+                return 1
+            return 1 if report else 0
         if args.markdown:
             print("### Architecture at a glance")
             print()
