@@ -64,6 +64,7 @@ tests=(
   "vs_double|$T/validation_spheres --ignored --exact sphere_cases_on_gpu_double --nocapture"
   "vs_mixed|$T/validation_spheres --ignored --exact sphere_cases_on_gpu_mixed --nocapture"
   "vw_resting|$T/validation_moving_walls --ignored --exact resting_faces_at_the_default_step_on_gpu --nocapture"
+  "vw_resting_mixed|$T/validation_moving_walls --ignored --exact resting_faces_at_the_default_step_on_gpu_mixed --nocapture"
   "vw_lattice|$T/validation_moving_walls --ignored --exact a_compressed_lattice_of_low_restitution_cubes_on_gpu_is_the_cpus --nocapture"
   "validation_impact|$T/validation_impact --ignored"
   "stability_guard|$T/stability --ignored --exact the_guard_stops_gpu_runs_at_the_same_steps"
