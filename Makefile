@@ -23,7 +23,7 @@
 #
 #   make run       cold 8-10 min (the build) + the scene; warm the scene alone
 #   make test      cold about 20 min, warm about 11 (NVRTC 3, the small pour 3, the rest 5)
-#   make validate  cold about 20 min, warm about 12 (the full pour)
+#   make validate  cold about 20 min, warm about 16 (the full pour; the ensemble of cube boxes)
 #   make lint      cold about 6 min (clippy checks every target, rustdoc builds the
 #                  dependencies in the dev profile), warm under 1 min
 #   make probe     cold 8-10 min (the build), warm seconds
@@ -92,7 +92,8 @@ test: setup
 # The full-size validation cases: each `BINARY:TEST` is a test marked
 # `#[ignore = "full validation: make validate"]` whose smaller twin runs in `make test`. Named
 # one by one, so that `--ignored` does not also pick the GPU tests.
-VALIDATE_TESTS := validation_pour:poured_dodecahedra_settle_to_the_experimental_packing_fraction
+VALIDATE_TESTS := validation_pour:poured_dodecahedra_settle_to_the_experimental_packing_fraction \
+    validation_contact:aligned_cubes_converge_over_an_ensemble_of_boxes
 
 validate: setup
 	cd $(ROOT) && for t in $(VALIDATE_TESTS); do \

@@ -12,7 +12,7 @@
 //! | # | stage | CPU | GPU |
 //! |---|---|---|---|
 //! | 9a | half kick, drift, rotation | `pipeline/integration.rs`, [`integrate`] | `integrate.cu` |
-//! | 1 | exchange: insertion, removal, wrap; migration and halo | `pipeline/exchange.rs`, [`domain`] | host round trip, `halo.cu` |
+//! | 1 | exchange: insertion, removal, wrap; migration and halo | `pipeline/exchange.rs`, [`domain`] | wrap in `integrate.cu`; ghost motion and migration by `halo.cu` on the device; insertion and removal through the host |
 //! | 2 | neighbour list (bins, 1D pair list, Verlet skin) | `pipeline/neighbors.rs`, [`neighbor`] | `neighbor.cu`, `scan.cu` |
 //! | 3–5 | broad phase, narrow phase, overlap volume | `pipeline/pairs.rs`, [`geometry`] | `contact.cu` |
 //! | 6 | walls: facet clipping | `pipeline/walls.rs`, [`contact::WallMesh`] | `contact.cu` |
