@@ -327,7 +327,7 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                 use std::io::Write;
                 writeln!(out, "{}", serde_json::to_string_pretty(&summary)?)?;
             }
-            Ok(summary["exit_status"].as_i64().unwrap_or(0) as i32)
+            Ok(summary.exit_status)
         }
         Command::Bench {
             scene,

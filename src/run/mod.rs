@@ -28,11 +28,11 @@ use crate::scene::{Inserter, InserterState, load_scene};
 use anyhow::{Context, Result};
 use checkpoints::{KeptCheckpoints, SceneId, read_restart, save_checkpoint, stopped_unstable};
 use output::{Outputs, Schedule};
-use serde_json::json;
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
+pub use summary::{RunSummary, SummaryEnergies};
 use summary::{parallel_report, whole_run, whole_run_counts};
 
 /// Options of `polydem run`.
@@ -54,13 +54,13 @@ pub struct RunOptions {
 }
 
 /// `polydem run` on one rank: returns the summary it also writes to `summary.json`.
-pub fn run(opts: &RunOptions) -> Result<serde_json::Value> {
+pub fn run(opts: &RunOptions) -> Result<RunSummary> {
     run_on(opts, Arc::new(SerialComm))
 }
 
 /// `polydem run` on the ranks of `comm` (one rank: [`run`]). Rank 0 returns the summary and
 /// writes `summary.json`; the other ranks return the same summary without writing it.
-pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<serde_json::Value> {
+pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<RunSummary> {
     // The start-up checks every rank makes alike (the scene, its decomposition over the ranks)
     // and rank 0's output folder end in an agreement, so that a failure ends MPI in order on
     // every rank instead of aborting it (docs/parallel.md, "Failures at start-up").
@@ -360,7 +360,7 @@ fn finish(
     id: &SceneId,
     ended: LoopEnd,
     warnings: Vec<String>,
-) -> Result<serde_json::Value> {
+) -> Result<RunSummary> {
     let comm = out.comm.clone();
     let (rank, ranks) = (comm.rank(), comm.size());
     let dir = out.dir.clone();
@@ -397,35 +397,39 @@ fn finish(
     let threads = rayon::current_num_threads();
     let parallel = parallel_report(&*comm, sim);
     let stopped_by = ended.stopped_by;
-    let summary = json!({
-        "scene": opts.scene.display().to_string(),
-        "backend": backend_name,
-        "precision": device.precision_name(),
-        "ranks": ranks,
-        "parallel": parallel,
-        "threads": threads,
-        "steps": sim.step - ended.first_step,
-        "final_step": sim.step,
-        "simulated_time": sim.time,
-        "dt": sim.dt,
-        "wall_seconds": wall,
-        "particle_steps_per_second": particle_steps as f64 / wall.max(1e-12),
-        "particle_steps_per_second_per_thread": particle_steps as f64 / wall.max(1e-12) / threads as f64,
-        "particles": g.particles,
-        "particles_removed": g.stats.removed,
-        "contacts": g.stats.contacts,
-        "wall_contacts": g.stats.wall_contacts,
-        "energy": {"kinetic_translational": kt, "kinetic_rotational": kr, "potential_gravity": pg, "elastic": g.stats.elastic_energy},
-        "stage_seconds": sim.timers,
-        "neighbor": neighbor,
-        // The simulation's device buffers at the end (null on the CPU); the CUDA context and
-        // the kernels come on top.
-        "device_bytes": device_bytes,
-        "interrupted": stopped_by.is_some(),
-        "signal": stopped_by.map(|s| s.1),
-        "exit_status": stopped_by.map_or(0, |s| crate::interrupt::exit_status(s.0)),
-        "warnings": warnings,
-    });
+    let rate = particle_steps as f64 / wall.max(1e-12);
+    let summary = RunSummary {
+        scene: opts.scene.display().to_string(),
+        backend: backend_name,
+        precision: device.precision_name(),
+        ranks,
+        parallel,
+        threads,
+        steps: sim.step - ended.first_step,
+        final_step: sim.step,
+        simulated_time: sim.time,
+        dt: sim.dt,
+        wall_seconds: wall,
+        particle_steps_per_second: rate,
+        particle_steps_per_second_per_thread: rate / threads as f64,
+        particles: g.particles,
+        particles_removed: g.stats.removed,
+        contacts: g.stats.contacts,
+        wall_contacts: g.stats.wall_contacts,
+        energy: SummaryEnergies {
+            kinetic_translational: kt,
+            kinetic_rotational: kr,
+            potential_gravity: pg,
+            elastic: g.stats.elastic_energy,
+        },
+        stage_seconds: serde_json::to_value(sim.timers)?,
+        neighbor: serde_json::to_value(&neighbor)?,
+        device_bytes,
+        interrupted: stopped_by.is_some(),
+        signal: stopped_by.map(|s| s.1),
+        exit_status: stopped_by.map_or(0, |s| crate::interrupt::exit_status(s.0)),
+        warnings,
+    };
     if rank == 0 {
         write_atomic(
             &dir.join("summary.json"),
