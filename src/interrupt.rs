@@ -8,7 +8,8 @@
 //! A handler only raises a flag; the run loop polls it between steps, every rank of a
 //! decomposed run agrees on it (so all stop after the same step), writes the interrupt
 //! checkpoint and the summary, and the process exits with `128 + signal` (130 for SIGINT, 143
-//! for SIGTERM), so that scripts can tell an interrupted run from a finished one. A second
+//! for SIGTERM; 0 for SIGUSR1, [`exit_status`]), so that scripts can tell an interrupted run
+//! from a finished one. A second
 //! SIGINT while the first is being handled ends the process at once with that status, as a
 //! user pressing Ctrl-C twice expects, unless it comes within [`DUPLICATE_WINDOW`] of the
 //! first: then it is the same request delivered twice, and is ignored. GNU `timeout` sends its

@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::{polydem_bin, repo_root, temp_dir};
+use common::{long_pour, polydem_bin, repo_root, temp_dir};
 use polydem::io::read_checkpoint;
 use serde_json::Value;
 use std::collections::HashMap;
@@ -735,19 +735,7 @@ fn interrupting_mpirun_stops_every_rank_at_the_same_step() {
     use std::io::{BufRead, BufReader};
     use std::process::Stdio;
     let dir = temp_dir("mpi-interrupt");
-    let root = repo_root();
-    // The pour made long (it would end at step 2000), logging every 100 steps.
-    let text = std::fs::read_to_string(root.join("launch/mpi/pour.toml"))
-        .unwrap()
-        .replace("end_time = 0.04", "end_time = 4.0")
-        .replace("\"../../meshes/", &format!("\"{}/meshes/", root.display()))
-        .replace("log_interval_steps = 500", "log_interval_steps = 100");
-    assert!(
-        text.contains("end_time = 4.0") && text.contains("log_interval_steps = 100"),
-        "the pour's end_time and log lines"
-    );
-    let scene = dir.join("long_pour.toml");
-    std::fs::write(&scene, &text).unwrap();
+    let scene = long_pour(&dir);
     let scene = scene.to_str().unwrap().to_string();
     let mut first = None;
     for target in ["process group", "mpirun"] {

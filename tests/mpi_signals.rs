@@ -16,34 +16,17 @@
 
 mod common;
 
-use common::{polydem_bin, repo_root, temp_dir};
+use common::{long_pour, polydem_bin, repo_root, temp_dir};
 use polydem::io::read_checkpoint;
 use serde_json::Value;
 use std::io::{BufRead, BufReader, Lines};
 use std::os::unix::process::CommandExt;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, ChildStderr, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 /// How long a job may take to end after its signal or failure before it counts as hung.
 const ENDS_WITHIN: Duration = Duration::from_secs(15);
-
-/// `launch/mpi/pour.toml` made long (it would end at step 2000), logging every 100 steps.
-fn long_pour(dir: &Path) -> PathBuf {
-    let root = repo_root();
-    let text = std::fs::read_to_string(root.join("launch/mpi/pour.toml"))
-        .unwrap()
-        .replace("end_time = 0.04", "end_time = 4.0")
-        .replace("\"../../meshes/", &format!("\"{}/meshes/", root.display()))
-        .replace("log_interval_steps = 500", "log_interval_steps = 100");
-    assert!(
-        text.contains("end_time = 4.0") && text.contains("log_interval_steps = 100"),
-        "the pour's end_time and log lines"
-    );
-    let scene = dir.join("long_pour.toml");
-    std::fs::write(&scene, text).unwrap();
-    scene
-}
 
 /// A job started in a process group of its own (as a shell starts a foreground job), its log
 /// read as it comes.
@@ -74,14 +57,7 @@ impl Job {
 
     /// `launch/mpirun.sh ranks scene --out out` on the CPU.
     fn script(ranks: usize, scene: &Path, out: &Path) -> Job {
-        let mut cmd = Command::new(repo_root().join("launch/mpirun.sh"));
-        cmd.arg(ranks.to_string())
-            .arg(scene)
-            .arg("--out")
-            .arg(out)
-            .env("POLYDEM_BIN", polydem_bin())
-            .env("POLYDEM_BACKEND", "cpu");
-        Job::start(cmd)
+        Job::start(script_command(ranks, scene, out))
     }
 
     /// Reads the log up to the line that reports `step`.
@@ -118,6 +94,18 @@ impl Job {
         );
         status
     }
+}
+
+/// The command of [`Job::script`], for callers that add arguments or settings.
+fn script_command(ranks: usize, scene: &Path, out: &Path) -> Command {
+    let mut cmd = Command::new(repo_root().join("launch/mpirun.sh"));
+    cmd.arg(ranks.to_string())
+        .arg(scene)
+        .arg("--out")
+        .arg(out)
+        .env("POLYDEM_BIN", polydem_bin())
+        .env("POLYDEM_BACKEND", "cpu");
+    cmd
 }
 
 /// `kill -SIGNAL -- TARGET`.
@@ -218,16 +206,8 @@ fn the_launch_script_stops_every_rank_on_ctrl_c_kill_and_hangup() {
     let ck = stopped.join(format!("checkpoints/step_{k:010}.ckpt"));
     let name = format!("checkpoints/step_{:010}.ckpt", k + 100);
     let resumed = dir.join("resumed");
-    let mut cmd = Command::new(repo_root().join("launch/mpirun.sh"));
-    cmd.arg("2")
-        .arg(&scene)
-        .arg("--out")
-        .arg(&resumed)
-        .arg("--restart")
-        .arg(&ck)
-        .args(["--max-steps", "100"])
-        .env("POLYDEM_BIN", polydem_bin())
-        .env("POLYDEM_BACKEND", "cpu");
+    let mut cmd = script_command(2, &scene, &resumed);
+    cmd.arg("--restart").arg(&ck).args(["--max-steps", "100"]);
     let mut job = Job::start(cmd);
     let exit = job.finish(Instant::now(), "restart on 2 ranks");
     assert!(exit.success(), "restart:\n{}", job.log);
@@ -321,14 +301,8 @@ fn a_panic_on_one_rank_ends_the_whole_job() {
     let dir = temp_dir("mpi-signals-panic");
     let scene = long_pour(&dir);
     let out = dir.join("out");
-    let mut cmd = Command::new(repo_root().join("launch/mpirun.sh"));
-    cmd.arg("2")
-        .arg(&scene)
-        .arg("--out")
-        .arg(&out)
-        .env("POLYDEM_BIN", polydem_bin())
-        .env("POLYDEM_BACKEND", "cpu")
-        .env("POLYDEM_PANIC_AT", "1:300");
+    let mut cmd = script_command(2, &scene, &out);
+    cmd.env("POLYDEM_PANIC_AT", "1:300");
     let mut job = Job::start(cmd);
     let start = Instant::now();
     let what = "a panic on rank 1 of 2 after step 300";

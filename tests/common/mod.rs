@@ -518,3 +518,21 @@ pub fn pile_touching_pair() -> (ConvexTemplate, [(f64, Isometry3<f64>); 2]) {
     );
     (cube, [(0.9195573907383391, a), (1.0211201337892601, b)])
 }
+
+/// `launch/mpi/pour.toml` made long (it would end at step 2000, here at 4 s), logging every 100
+/// steps, written into `dir` with its meshes referred to the repository: a run to interrupt.
+pub fn long_pour(dir: &std::path::Path) -> PathBuf {
+    let root = repo_root();
+    let text = std::fs::read_to_string(root.join("launch/mpi/pour.toml"))
+        .unwrap()
+        .replace("end_time = 0.04", "end_time = 4.0")
+        .replace("\"../../meshes/", &format!("\"{}/meshes/", root.display()))
+        .replace("log_interval_steps = 500", "log_interval_steps = 100");
+    assert!(
+        text.contains("end_time = 4.0") && text.contains("log_interval_steps = 100"),
+        "the pour's end_time and log lines"
+    );
+    let scene = dir.join("long_pour.toml");
+    std::fs::write(&scene, text).unwrap();
+    scene
+}
