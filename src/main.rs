@@ -215,6 +215,19 @@ fn communicator() -> Arc<dyn Comm> {
     Arc::new(SerialComm)
 }
 
+/// Prints one rank's error line to stderr in a single write: `eprintln!` writes the pieces of
+/// its format one by one, and the ranks' pieces then interleave in mpirun's forwarded stream
+/// (a pipe keeps writes of up to `PIPE_BUF` bytes whole).
+fn rank_error(comm: &dyn Comm, message: &str) {
+    use std::io::Write;
+    let line = format!(
+        "error (rank {} of {}): {message}\n",
+        comm.rank(),
+        comm.size()
+    );
+    let _ = std::io::stderr().lock().write_all(line.as_bytes());
+}
+
 fn main() {
     let cli = Cli::parse();
     let comm = match cli.command {
@@ -240,11 +253,7 @@ fn main() {
         std::panic::set_hook(Box::new(move |info| {
             default_hook(info);
             if let Some(c) = hook_comm.upgrade() {
-                eprintln!(
-                    "error (rank {} of {}): panic; ending every rank",
-                    c.rank(),
-                    c.size()
-                );
+                rank_error(c.as_ref(), "panic; ending every rank");
                 c.abort(101);
             }
         }));
@@ -256,12 +265,12 @@ fn main() {
                 // rank, and MPI ended in order.
                 if let Some(stop) = e.downcast_ref::<polydem::run::EveryRankStops>() {
                     if let Some(error) = &stop.error {
-                        eprintln!("error (rank {} of {}): {error}", comm.rank(), comm.size());
+                        rank_error(comm.as_ref(), error);
                     }
                     drop(comm);
                     std::process::exit(1);
                 }
-                eprintln!("error (rank {} of {}): {e:#}", comm.rank(), comm.size());
+                rank_error(comm.as_ref(), &format!("{e:#}"));
                 // A stop every rank agreed on (the stability guard's, a particle leaving the
                 // domain) ends MPI in order, each rank having said its part; any other error
                 // is this rank's alone, and ends the others where they wait.
