@@ -360,13 +360,13 @@ fn assert_bitwise_equal(c: StateView, g: StateView, what: &str) {
 /// ends in checkpoints with bitwise equal particle states (matched by id) and contact
 /// histories. A second GPU run that merges no grid cells when it builds the wall list
 /// (`POLYDEM_WALL_MERGE_CELLS=0`) sends every particle down the fallback walk of the facet
-/// grid, and must end bitwise the same too (to step 6000, where the cone fills).
+/// grid, and must end bitwise the same too (to step 12000, where the cone fills).
 ///
 /// Before the free rotation's sin and cos were evaluated by `portable_sin_cos` on both
 /// backends, the GPU's libdevice and the CPU's libm differed in the last bit for some angle,
 /// and the GPU left the CPU from step 6600 on. A third GPU run takes the lean pair passes in
 /// batches of 97 pairs (`POLYDEM_PAIR_BATCH`, as a list of millions of pairs takes them) and
-/// must end bitwise the same at step 6000.
+/// must end bitwise the same at step 12000.
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu() {
@@ -384,21 +384,21 @@ fn the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu() {
     assert_bitwise_equal(checkpoint_view(c), checkpoint_view(&last[1]), "GPU");
     let walk = run_on_both(
         &scene,
-        Some(6000),
+        Some(12000),
         &[("POLYDEM_WALL_MERGE_CELLS", "0")],
         "quickstart-walk",
     );
-    assert_eq!(walk[0].step, 6000);
+    assert_eq!(walk[0].step, 12000);
     assert_bitwise_equal(
         checkpoint_view(&walk[0]),
         checkpoint_view(&walk[1]),
         "GPU, walking the facet grid",
     );
     // The lean pair passes in batches of 97 pairs (a large list's batches, on a small one):
-    // the same run, to step 6000 (the first pair contacts form after step 3000).
+    // the same run, to step 12000 (the first pair contacts form after step 7000).
     let batched = run_on_both(
         &scene,
-        Some(6000),
+        Some(12000),
         &[("POLYDEM_PAIR_BATCH", "97")],
         "quickstart-batches",
     );
@@ -413,15 +413,15 @@ fn the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu() {
 /// `geometry::pair::overlap_pair_mixed`): the same f32 geometry (the CUDA headers are bitwise
 /// the Rust code in f32, tests/cuda_geometry_host.rs), the same routing of thin, unproven and
 /// bent pairs to f64, f64 for the walls and the rest of the step. The quickstart in mixed
-/// precision to step 6000 (pair contacts from step 3000 on, wall contacts before) on both
+/// precision to step 12000 (pair contacts from step 7000 on, wall contacts before) on both
 /// backends ends bitwise the same: a mixed-precision GPU run can be reproduced, and its
 /// failures chased, on a CPU.
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn the_quickstart_in_mixed_precision_is_its_cpu_twin_bit_for_bit() {
     let scene = repo_root().join("launch/quickstart/quickstart.toml");
-    let last = run_on_both_in("mixed", &scene, Some(6000), &[], "quickstart-mixed");
-    assert_eq!(last[0].step, 6000);
+    let last = run_on_both_in("mixed", &scene, Some(12000), &[], "quickstart-mixed");
+    assert_eq!(last[0].step, 12000);
     assert!(
         last[0].history.len() > 100,
         "{} contacts",
@@ -434,11 +434,11 @@ fn the_quickstart_in_mixed_precision_is_its_cpu_twin_bit_for_bit() {
     );
 }
 
-/// Every scene of `launch/examples/` for 5000 steps on both backends, in double precision,
+/// Every scene of `launch/examples/` for 12000 steps on both backends, in double precision,
 /// from the same initial state: bitwise equal states. The shaker's lowest cubes have landed in
-/// the moving box by then (about 30 particle and wall contacts); the hopper's grains (dt = 8e-7 s) are still falling towards its mesh, and the box
-/// pour (dt = 1.8e-7 s) has inserted its first grains: the quickstart (the hopper's STL) and
-/// the dense pour above cover their contacts.
+/// the moving box by then; the hopper's grains (dt = 4e-7 s) are still falling towards its
+/// mesh, and the box pour (dt = 9e-8 s, the default step) has inserted its first two grains:
+/// the quickstart (the hopper's STL) and the dense pour above cover their contacts.
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn the_examples_on_the_gpu_stay_bitwise_equal_to_the_cpu() {
@@ -455,7 +455,7 @@ fn the_examples_on_the_gpu_stay_bitwise_equal_to_the_cpu() {
         let mut text = std::fs::read_to_string(path).unwrap();
         if name == "shaker.toml" {
             // A coarse fixed step (the scene's own is 30 times finer), so that cubes land
-            // within the 5000 steps: the backends are compared, not the physics.
+            // within the 12000 steps: the backends are compared, not the physics.
             text = text.replace("[simulation]\n", "[simulation]\ndt = 2.0e-5\n");
         }
         let scene = || parse_scene(&text, &dir, &name).unwrap();
@@ -465,13 +465,13 @@ fn the_examples_on_the_gpu_stay_bitwise_equal_to_the_cpu() {
             Precision::Double,
         );
         let gpu = engine.cuda_mut().unwrap();
-        for _ in 0..5000 {
+        for _ in 0..12000 {
             cpu.step().unwrap();
             gpu.step().unwrap();
         }
         let g = gpu.sync_host().unwrap();
         println!(
-            "{name}: {} particles, {} contacts at step 5000",
+            "{name}: {} particles, {} contacts at step 12000",
             cpu.particles.len(),
             cpu.history.len()
         );
