@@ -1327,6 +1327,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             friction: mu,
             damping,
             rocking: !sphere,
+            face_window: Default::default(),
         };
         let log_e = e.ln();
         let log_norm = (log_e.powi(2) + std::f64::consts::PI.powi(2)).sqrt();

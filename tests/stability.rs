@@ -405,6 +405,7 @@ fn a_body_wholly_inside_another_is_pushed_out_along_the_line_of_centres() {
             friction: 0.0,
             damping: 0.0,
             rocking: true,
+            face_window: Default::default(),
         };
         let kin = ContactKinematics {
             x_a: xa,

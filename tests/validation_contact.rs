@@ -8,6 +8,7 @@ mod common;
 use common::*;
 use nalgebra::{UnitQuaternion, Vector3};
 use polydem::backend::{Device, Engine};
+use polydem::contact::FaceWindow;
 use polydem::geometry::pair::Precision;
 use polydem::pipeline::Simulation;
 use polydem::scene::parse_scene;
@@ -229,6 +230,22 @@ fn restitution_in_the_cpu_twin_of_mixed_precision() {
     restitution(CPU_MIXED, &[0.1, 0.5, 0.95, 1.0], &DIVISIONS, 16);
 }
 
+/// `simulation.face_window = "trajectory"` (docs/contact.md §1): face-first impacts of the
+/// sweep above, at `dt_fraction` 0.05 (t_c/20) as well as at the default and finer, hold the
+/// same bounds: e within 2 % at every phase, and no elastic impact gains more than 1e-3 (the
+/// secant window gains 2.8e-3 at t_c/20).
+#[test]
+fn face_impacts_sampled_along_their_trajectory_hold_at_twice_the_default_step() {
+    restitution_of(
+        CPU,
+        FaceWindow::Trajectory,
+        &["face"],
+        &[0.1, 0.5, 0.9, 1.0],
+        &[20.0, 40.0, 80.0, 160.0],
+        16,
+    );
+}
+
 /// The e of the restitution sweeps: 0.1 … 0.95, and 1.
 const RESTITUTIONS: [f64; 7] = [0.1, 0.3, 0.5, 0.7, 0.9, 0.95, 1.0];
 
@@ -237,6 +254,26 @@ const RESTITUTIONS: [f64; 7] = [0.1, 0.3, 0.5, 0.7, 0.9, 0.95, 1.0];
 const DIVISIONS: [f64; 5] = [40.0, 80.0, 160.0, 400.0, 800.0];
 
 fn restitution(device: Device, restitutions: &[f64], divisions_swept: &[f64], phases: usize) {
+    restitution_of(
+        device,
+        FaceWindow::Secant,
+        &["vertex", "edge", "face"],
+        restitutions,
+        divisions_swept,
+        phases,
+    );
+}
+
+/// The sweep of [`restitution`] for the first-touching features `kinds` (of "vertex", "edge",
+/// "face") with the face contacts' force sampled by `window`.
+fn restitution_of(
+    device: Device,
+    window: FaceWindow,
+    kinds: &[&str],
+    restitutions: &[f64],
+    divisions_swept: &[f64],
+    phases: usize,
+) {
     let cube = "{ kind = \"cuboid\", a = 0.01, b = 0.01, c = 0.01 }";
     // Orientations that put a vertex, an edge or a face straight below the centre.
     let vertex =
@@ -255,7 +292,7 @@ fn restitution(device: Device, restitutions: &[f64], divisions_swept: &[f64], ph
             ("face", face, 0.005),
         ] {
             let case = format!("{} {name}", if wall { "wall" } else { "pair" });
-            if !case.contains(only.as_str()) {
+            if !case.contains(only.as_str()) || !kinds.contains(&name) {
                 continue;
             }
             for &e in restitutions {
@@ -263,6 +300,7 @@ fn restitution(device: Device, restitutions: &[f64], divisions_swept: &[f64], ph
                 // centred at z = −0.005, so that its top face is the floor's plane.
                 let build_at = |dt: f64, gap: f64| {
                     let mut s = simulation(e, 0.0, 0.0, dt, wall, cube);
+                    s.scene.simulation.face_window = window;
                     add(
                         &mut s,
                         1,
@@ -320,9 +358,11 @@ fn restitution(device: Device, restitutions: &[f64], divisions_swept: &[f64], ph
                     let error = ((lo - e) / e).abs().max(((hi - e) / e).abs());
                     worst = worst.max(error);
                     println!(
-                        "{device:?} {} {name}, e_in {e}, dt = t_c/{divisions}: e_out {lo:.4} … {hi:.4} (worst {:.2e}; t_c {tc:.3e} s)",
+                        "{device:?} {window:?} {} {name}, e_in {e}, dt = t_c/{divisions}: e_out {lo:.4} … {hi:.4} (worst {:.2e}; energy {:+.2e} … {:+.2e} of e²; t_c {tc:.3e} s)",
                         if wall { "wall" } else { "pair" },
-                        error
+                        error,
+                        lo * lo / (e * e) - 1.0,
+                        hi * hi / (e * e) - 1.0,
                     );
                     // Elastic impacts: no single one may gain more than 1e-3 of its energy, in
                     // either precision (mixed precision evaluates the thin slab of a face

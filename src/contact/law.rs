@@ -47,6 +47,7 @@ pub use super::potential::{
     RESOLVED_STEP, SINGULAR_EXPONENT, WINDOW_FRACTION, mean_pressure, resolved_mean_pressure,
     resolved_potential, resolved_volume,
 };
+use super::trajectory::{FaceWindow, NormalMotion};
 use crate::geometry::Overlap;
 use crate::geometry::portable_cbrt;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -67,6 +68,8 @@ pub struct ContactParameters {
     /// Whether the contact area resists rocking (polyhedra). A sphere's contact has no face
     /// to rock on, and the couple would brake its rolling (viscous rolling resistance).
     pub rocking: bool,
+    /// How a face contact's force is sampled over a step ([`FaceWindow`]).
+    pub face_window: FaceWindow,
 }
 
 /// The kinematics of a contact.
@@ -346,16 +349,22 @@ pub fn contact_forces(
     let resolved = resolved_volume(stiffness, area, dt, kin.effective_mass);
     // Where the window is narrow against the volume the slope at V is as good (and keeps the
     // step symplectic: a contact at rest or in slow motion is Eq. 12 exactly).
-    let mut pressure = if windowed && sweep > WINDOW_FRACTION * volume {
+    let secant = windowed && params.face_window == FaceWindow::Secant;
+    let mut pressure = if secant && sweep > WINDOW_FRACTION * volume {
         resolved_mean_pressure(stiffness, volume - sweep, volume + sweep, resolved)
     } else {
         resolved_pressure(stiffness, volume, resolved)
     };
+    // Or the impulse of the contact's own normal motion over the kick window, its entry and
+    // its exit included (trajectory.rs), from the slope at V as the first guess.
+    if windowed && !secant && dt > 0.0 {
+        let motion = NormalMotion::new(local, stiffness, resolved, kin.effective_mass);
+        pressure = motion.window_force(vn, dt, first_touch, pressure * area) / area;
+    }
     // A contact that began during the last drift (the last position, V − 2 A s, was apart)
     // missed the part of the last kick's window that lay in contact, [0, V − A s]: it is
     // carried now.
-    if windowed && first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0
-    {
+    if secant && first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0 {
         pressure += resolved_potential(stiffness, volume - sweep, resolved) / (2.0 * sweep);
     }
     // Hunt–Crossley damping, on the elastic force's line of action, referred to this loading
@@ -403,7 +412,7 @@ pub fn contact_forces(
     // step's kick) lies in contact over part of the next kick's window, which the next step,
     // finding it apart, cannot see: that part, U(V(h − s'))/(2 s'), is carried now. Its
     // volume comes from the local power law, which is apart exactly at the depth h.
-    if windowed && vn > 0.0 && dt > 0.0 {
+    if secant && vn > 0.0 && dt > 0.0 {
         let exit = 0.5 * (vn + f_normal * dt / kin.effective_mass) * dt;
         if local.depth - 2.0 * exit <= 0.0 && local.depth - exit > 0.0 {
             pressure += resolved_potential(stiffness, local.volume_at(-exit), resolved)

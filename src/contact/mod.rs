@@ -7,9 +7,11 @@ pub mod history;
 pub mod law;
 pub mod potential;
 pub mod restitution;
+pub mod trajectory;
 pub mod wall;
 
 pub use history::{ContactHistory, ContactKey, ContactState, WALL_BIT};
 pub use law::{ContactForces, ContactKinematics, ContactParameters, contact_forces, mass_share};
 pub use restitution::hunt_crossley_alpha;
+pub use trajectory::FaceWindow;
 pub use wall::WallMesh;

@@ -75,6 +75,7 @@ impl Simulation {
             friction: pair.friction,
             damping: self.damping[ma * s.materials.len() + mb],
             rocking: !s.templates[s.particle_types[p.kind[i] as usize].template].sphere,
+            face_window: s.simulation.face_window,
         }
     }
 

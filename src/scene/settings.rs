@@ -56,6 +56,8 @@ pub struct SimulationSettings {
     pub neighbor: NeighborSettings,
     /// Stability guard settings.
     pub guard: GuardSettings,
+    /// How a face contact's elastic force is sampled over a step (`face_window`).
+    pub face_window: crate::contact::FaceWindow,
 }
 
 /// `[simulation.guard]`, resolved (`crate::stability`).

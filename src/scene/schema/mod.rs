@@ -21,8 +21,8 @@ pub use particles::{
     InsertionSection, MaterialSection, PairSection, ParticleTypeSection, RegionKind, RegionSection,
 };
 pub use simulation::{
-    BalanceWeightName, DecompositionName, DomainSection, LeavingName, NeighborModeName,
-    OutputSection, ParallelSection, SimulationSection,
+    BalanceWeightName, DecompositionName, DomainSection, FaceWindowName, LeavingName,
+    NeighborModeName, OutputSection, ParallelSection, SimulationSection,
 };
 pub use spans::{SpanIndex, explain_serde_message};
 pub use walls::{AxisAngleSection, MotionKind, MotionSection, WallSection};

@@ -52,6 +52,15 @@ pub struct SimulationSection {
     /// `[simulation.guard]`.
     #[serde(default)]
     pub guard: Option<GuardSection>,
+    /// How a face contact's force is sampled over a step: `"secant"` or `"trajectory"`.
+    pub face_window: Option<FaceWindowName>,
+}
+/// Values of `simulation.face_window`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum FaceWindowName {
+    Secant,
+    Trajectory,
 }
 /// `[simulation.guard]`: the stability guard's bounds (`crate::stability`).
 #[derive(Debug, Deserialize)]

@@ -2,6 +2,7 @@
 //! `[parallel]` and `[output]`.
 
 use super::*;
+use crate::contact::FaceWindow;
 
 impl Validator<'_> {
     pub(super) fn simulation(&mut self, s: &schema::SimulationSection) -> SimulationSettings {
@@ -64,6 +65,10 @@ impl Validator<'_> {
                 hybrid_skin: n.and_then(|n| n.hybrid_skin).unwrap_or(f64::NAN),
             },
             guard,
+            face_window: match s.face_window {
+                Some(schema::FaceWindowName::Trajectory) => FaceWindow::Trajectory,
+                Some(schema::FaceWindowName::Secant) | None => FaceWindow::Secant,
+            },
         }
     }
 
