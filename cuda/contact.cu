@@ -159,6 +159,7 @@ PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const
     params.friction = pm.friction;
     params.damping = pm.damping;
     params.rocking = !PD_SPHERES;
+    params.trajectory = PD_FACE_TRAJECTORY;
     ContactKinematics kin;
     kin.x_a = xa;
     kin.x_b = xb;

@@ -17,6 +17,7 @@ struct ContactParameters {
     double friction;
     double damping; // ᾱ(e)
     bool rocking;   // the contact area resists rocking (polyhedra, not spheres)
+    bool trajectory; // face_window = "trajectory" (law.rs `FaceWindow`; PD_FACE_TRAJECTORY)
 };
 
 // Kinematics of a contact (law.rs `ContactKinematics`).
@@ -264,6 +265,91 @@ PD_HD double local_volume_at(const LocalPowerLaw& l, double d) {
     return ratio > 0.0 ? l.volume * portable_pow(ratio, l.exponent) : 0.0;
 }
 
+// A face contact's one-dimensional normal motion about its current state (trajectory.rs
+// `NormalMotion`): the approach d beyond the depth h and its rate, under the regularized
+// potential W of the local power law.
+struct NormalMotion {
+    LocalPowerLaw law;
+    double stiffness, resolved, inverse_mass;
+};
+
+// NormalMotion::acceleration: -W'(V) V'(δ)/m*, V'(δ) = k V/δ; zero once apart.
+PD_HD double motion_acceleration(const NormalMotion& m, double d) {
+    double depth = m.law.depth + d;
+    if (depth <= 0.0) {
+        return 0.0;
+    }
+    double v = local_volume_at(m.law, d);
+    double area = m.law.exponent * v / depth;
+    return -resolved_pressure(m.stiffness, v, m.resolved) * area * m.inverse_mass;
+}
+
+// NormalMotion::flow: the state (d, rate) after `span` (backward when negative), RK4 in 4
+// sub-steps (trajectory.rs WINDOW_SUBSTEPS), a sub-step that would cross touch at its starting
+// speed cut there, free flight once apart.
+PD_HD void motion_flow(const NormalMotion& m, double* d_io, double* rate_io, double span) {
+    double d = *d_io, rate = *rate_io;
+    double sign = span < 0.0 ? -1.0 : 1.0;
+    double left = abs_(span);
+    double full = left / 4.0;
+    for (int i = 0; i < 16; ++i) {
+        if (left <= 0.0) {
+            break;
+        }
+        double depth = m.law.depth + d;
+        if (depth <= 0.0) {
+            d += sign * rate * left;
+            break;
+        }
+        double h = min_(full, left);
+        double out = -sign * rate;
+        if (out > 0.0 && depth - out * h < 0.0) {
+            double touch = depth / out;
+            if (touch >= 1e-14 * full) {
+                h = min_(h, touch);
+            }
+        }
+        double s = sign * h;
+        double k1d = rate, k1r = motion_acceleration(m, d);
+        double k2d = rate + 0.5 * s * k1r, k2r = motion_acceleration(m, d + 0.5 * s * k1d);
+        double k3d = rate + 0.5 * s * k2r, k3r = motion_acceleration(m, d + 0.5 * s * k2d);
+        double k4d = rate + s * k3r, k4r = motion_acceleration(m, d + s * k3d);
+        d += s / 6.0 * (k1d + 2.0 * k2d + 2.0 * k3d + k4d);
+        rate += s / 6.0 * (k1r + 2.0 * k2r + 2.0 * k3r + k4r);
+        left -= h;
+    }
+    *d_io = d;
+    *rate_io = rate;
+}
+
+// NormalMotion::window_force: the mean elastic force over the kick window from the mid-point
+// speed (3 fixed-point passes, trajectory.rs MIDPOINT_PASSES), the window before a new contact
+// and the window after a leaving one included.
+PD_HD double motion_window_force(const NormalMotion& m, double vn, double dt, bool first, double guess) {
+    double half = -vn;
+    double force = guess;
+    for (int pass = 0; pass < 3; ++pass) {
+        double mid = half - 0.5 * force * m.inverse_mass * dt;
+        double d_back = 0.0, r_back = mid;
+        motion_flow(m, &d_back, &r_back, -0.5 * dt);
+        double d_ahead = 0.0, r_ahead = mid;
+        motion_flow(m, &d_ahead, &r_ahead, 0.5 * dt);
+        double taken = r_back - r_ahead;
+        if (first) {
+            double d = d_back, r = r_back;
+            motion_flow(m, &d, &r, -dt);
+            taken += r - r_back;
+        }
+        if (m.law.depth + (half - taken) * dt <= 0.0) {
+            double d = d_ahead, r = r_ahead;
+            motion_flow(m, &d, &r, dt);
+            taken += r_ahead - r;
+        }
+        force = taken / (m.inverse_mass * dt);
+    }
+    return force;
+}
+
 // The normal force of a contact for a pressure (law.rs `contact_forces`' `normal` closure):
 // elastic, the Hunt–Crossley coefficient, and the capped total that never pulls.
 struct NormalForce {
@@ -356,10 +442,20 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     bool windowed = local.exponent < 1.5; // law.rs SINGULAR_EXPONENT
     // The regularized potential W of every contact (law.rs `resolved_volume`).
     double resolved = resolved_volume(stiffness, area, dt, kin.effective_mass);
-    double pressure = windowed && sweep > 0.5 * volume
+    bool secant = windowed && !params.trajectory;
+    double pressure = secant && sweep > 0.5 * volume
                           ? resolved_mean_pressure(stiffness, volume - sweep, volume + sweep, resolved)
                           : resolved_pressure(stiffness, volume, resolved); // law.rs WINDOW_FRACTION
-    if (windowed && first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0) {
+    // Or the impulse of the contact's own normal motion over the kick window (trajectory.rs).
+    if (windowed && !secant && dt > 0.0) {
+        NormalMotion motion;
+        motion.law = local;
+        motion.stiffness = stiffness;
+        motion.resolved = resolved;
+        motion.inverse_mass = 1.0 / kin.effective_mass;
+        pressure = motion_window_force(motion, vn, dt, first_touch, pressure * area) / area;
+    }
+    if (secant && first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0) {
         pressure += resolved_potential(stiffness, volume - sweep, resolved) / (2.0 * sweep);
     }
     state->approach_speed = loading_cycle_speed(state->approach_speed, vn);
@@ -374,7 +470,7 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     double cap_a = at_floor ? kin.split_a : 1.0, cap_b = at_floor ? kin.split_b : 1.0;
     NormalForce nf = normal_force(params, cap_mass, pressure, area, v_ref, share, vn, dt);
     // The exit (law.rs): a separating contact that the coming drift carries apart.
-    if (windowed && vn > 0.0 && dt > 0.0) {
+    if (secant && vn > 0.0 && dt > 0.0) {
         double exit = 0.5 * (vn + nf.f_normal * dt / kin.effective_mass) * dt;
         if (local.depth - 2.0 * exit <= 0.0 && local.depth - exit > 0.0) {
             pressure += resolved_potential(stiffness, local_volume_at(local, -exit), resolved) / (2.0 * exit * area);

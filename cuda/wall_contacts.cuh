@@ -356,6 +356,7 @@ extern "C" __global__ void wall_contacts(WallContactsParams args) {
         params.friction = pm.friction;
         params.damping = pm.damping;
         params.rocking = !PD_SPHERES;
+        params.trajectory = PD_FACE_TRAJECTORY;
         V3<double> c = world.centroid;
         ContactKinematics kin;
         kin.x_a = xp;

@@ -34,13 +34,16 @@ fn configs() -> Vec<KernelConfig> {
         max_faces: 12,
         materials: 2,
         ghosts: false,
+        face_trajectory: false,
     };
     vec![
         base.clone(),
-        // A rank of a decomposed run (ghost flags in the pair search), mixed precision.
+        // A rank of a decomposed run (ghost flags in the pair search), mixed precision, face
+        // contacts along their trajectory.
         KernelConfig {
             precision: Precision::Mixed,
             ghosts: true,
+            face_trajectory: true,
             ..base.clone()
         },
         // Periodic, no walls, several large templates: 128 faces need the 16-bit hull index.

@@ -1248,8 +1248,9 @@ fn rand3(rng: &mut Rng, lo: f64, hi: f64) -> Vector3<f64> {
 /// `geometry::real`, bit for bit. The law's cases cover every branch: first touch with the
 /// kick window open and carrying the missed share, the slope at V, a body wholly inside the
 /// other (|S| ≈ 0), spheres on walls and on spheres, sticking and sliding springs, twisting
-/// friction within and at its Coulomb cap, rocking damping at its one-step bound, μ = 0, e = 1
-/// and dt = 0 (the first force evaluation).
+/// friction within and at its Coulomb cap, rocking damping at its one-step bound, μ = 0, e = 1,
+/// dt = 0 (the first force evaluation), and face contacts sampled along their trajectory
+/// (`face_window = "trajectory"`), first touches among them.
 #[test]
 fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
     use polydem::contact::{ContactKinematics, ContactParameters, ContactState, contact_forces};
@@ -1305,8 +1306,9 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         want.push(l);
     }
     writeln!(text, "law {n}").unwrap();
-    // window, first-touch share, inside, sliding, twist cap, sphere, exit, split caps
-    let mut branches = [0usize; 8];
+    // window, first-touch share, inside, sliding, twist cap, sphere, exit, split caps,
+    // trajectory, trajectory at first touch
+    let mut branches = [0usize; 10];
     for i in 0..n {
         let sphere = i % 4 == 3;
         let e = if i % 5 == 0 {
@@ -1327,7 +1329,13 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             friction: mu,
             damping,
             rocking: !sphere,
-            face_window: Default::default(),
+            // A quarter of the cases along the trajectory (docs/contact.md §1): the face
+            // contacts among them take its branch.
+            face_window: if i % 4 == 2 {
+                polydem::contact::FaceWindow::Trajectory
+            } else {
+                polydem::contact::FaceWindow::Secant
+            },
         };
         let log_e = e.ln();
         let log_norm = (log_e.powi(2) + std::f64::consts::PI.powi(2)).sqrt();
@@ -1445,6 +1453,11 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             log_e,
             log_norm,
             if params.rocking { 1.0 } else { 0.0 },
+            if params.face_window == polydem::contact::FaceWindow::Trajectory {
+                1.0
+            } else {
+                0.0
+            },
             volume,
         ] {
             hex(&mut text, x);
@@ -1488,7 +1501,11 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         } else {
             volume / area
         };
-        let windowed = !inside && area * depth / volume < 1.5;
+        let face = !inside && area * depth / volume < 1.5;
+        let trajectory = params.face_window == polydem::contact::FaceWindow::Trajectory;
+        let windowed = face && !trajectory;
+        branches[8] += usize::from(face && trajectory && dt > 0.0);
+        branches[9] += usize::from(face && trajectory && dt > 0.0 && first);
         branches[0] += usize::from(windowed && sweep > 0.5 * volume);
         branches[1] +=
             usize::from(windowed && first && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0);
@@ -1543,7 +1560,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
     println!(
         "{} cases ({n} sin/cos, {n} cbrt, {n} ln/exp/pow, {n} law; law branches: window {}, \
          first-touch share {}, inside {}, sliding {}, twist capped {}, spheres {}, exit {}, \
-         split caps {}), {} differ",
+         split caps {}, trajectory {}, trajectory at first touch {}), {} differ",
         want.len(),
         branches[0],
         branches[1],
@@ -1553,6 +1570,8 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         branches[5],
         branches[6],
         branches[7],
+        branches[8],
+        branches[9],
         mismatches.len()
     );
     for (k, what) in [
@@ -1564,6 +1583,8 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         "spheres",
         "exit",
         "split caps",
+        "trajectory",
+        "trajectory at first touch",
     ]
     .iter()
     .enumerate()

@@ -250,6 +250,36 @@ fn unknown_keys_are_errors_naming_the_full_key() {
         "simulation.end_time",
     );
     error_naming(&replace("end_time = 0.5\n", ""), "simulation.end_time");
+    // A value outside a key's names lists the names.
+    let msg = error_naming(
+        &replace("seed = 11", "seed = 11\nface_window = \"exact\""),
+        "simulation.face_window",
+    );
+    assert!(msg.contains("allowed: `secant`, `trajectory`"), "{msg}");
+}
+
+/// `simulation.face_window` (docs/contact.md §1): the secant by default, the trajectory when
+/// named, and part of what a restart must match.
+#[test]
+fn the_face_window_is_read_and_fingerprinted() {
+    use polydem::contact::FaceWindow;
+    let secant = parse(BASE).unwrap();
+    assert_eq!(secant.simulation.face_window, FaceWindow::Secant);
+    let trajectory = parse(&replace(
+        "seed = 11",
+        "seed = 11\nface_window = \"trajectory\"",
+    ))
+    .unwrap();
+    assert_eq!(trajectory.simulation.face_window, FaceWindow::Trajectory);
+    let (a, b) = (
+        polydem::scene::restart::SceneFingerprint::of(&secant),
+        polydem::scene::restart::SceneFingerprint::of(&trajectory),
+    );
+    assert_ne!(
+        a.hash(),
+        b.hash(),
+        "a restart must not change the face window"
+    );
 }
 
 #[test]

@@ -27,7 +27,7 @@
 // Sphere input: "lenses N" N × { ra rb d(3) }, then "caps N" N × { c(3) r tri(9) n(3) }; output
 //   L i {volume centroid(3) S(3) M(3) depth thickness} and C i {the same}.
 // Law input: "sincos N" N × { x }, "cbrt N" N × { x }, "pow N" N × { x y }, "law N" N × { c_n c_t e mu damping ln_e
-//   log_norm rocking(1.0/0.0)  volume centroid(3) S(3) M(3) depth thickness  x_a x_b v_a v_b w_a
+//   log_norm rocking(1.0/0.0) trajectory(1.0/0.0) volume centroid(3) S(3) M(3) depth thickness  x_a x_b v_a v_b w_a
 //   w_b (3 each) m_eff inv_m_a inv_m_b q_a(w x y z) q_b inv_inertia_a(3) inv_inertia_b(3) r_sphere_a r_sphere_b
 //   spring(3) approach twist dt }; output S i {sin cos}, R i {cbrt}, P i {ln x, exp y, x^y}, W i {force_b(3) torque_a(3)
 //   torque_b(3) energy spring(3) approach twist}.
@@ -250,6 +250,7 @@ int run_law(const char* path) {
         pm.log_restitution = read_f64();
         pm.log_norm = read_f64();
         params.rocking = read_f64() != 0.0;
+        params.trajectory = read_f64() != 0.0;
         pd::Overlap<double> o;
         o.volume = read_f64();
         o.centroid = read_v3();

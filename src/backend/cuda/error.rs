@@ -6,10 +6,6 @@ use crate::pipeline::SimulationError;
 /// Errors of the CUDA backend.
 #[derive(Debug, thiserror::Error)]
 pub enum CudaError {
-    /// The scene asks for something the CUDA backend does not have; the message names the key
-    /// and what to do.
-    #[error("{0}")]
-    Unsupported(String),
     /// The driver reported an error. Its message is part of this one, so it is not also
     /// chained as a source (an error report would print it twice).
     #[error("CUDA driver: {0}")]

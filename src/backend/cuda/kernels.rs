@@ -73,6 +73,9 @@ pub struct KernelConfig {
     /// A rank of a decomposed run: some particles are ghosts, and pairs of two ghosts are left
     /// out of the pair list.
     pub ghosts: bool,
+    /// `simulation.face_window = "trajectory"`: face contacts take the impulse of their own
+    /// normal motion (`contact::trajectory`); the secant's kernels carry none of its code.
+    pub face_trajectory: bool,
 }
 
 impl KernelConfig {
@@ -99,6 +102,7 @@ impl KernelConfig {
                 .unwrap_or(1),
             materials: scene.materials.len().max(1),
             ghosts: false,
+            face_trajectory: scene.simulation.face_window == crate::contact::FaceWindow::Trajectory,
         }
     }
 
@@ -119,6 +123,7 @@ impl KernelConfig {
             format!("-DPD_MAX_TEMPLATE_FACES={}", self.max_faces),
             format!("-DPD_MATERIALS={}", self.materials),
             format!("-DPD_GHOSTS={}", flag(self.ghosts)),
+            format!("-DPD_FACE_TRAJECTORY={}", flag(self.face_trajectory)),
         ];
         // Most grid cells merged per particle and wall when the wall list is built (default
         // 27; a box spanning more walks the facet grid in id order instead):

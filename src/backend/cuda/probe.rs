@@ -159,6 +159,7 @@ impl GeometryProbe {
             max_faces,
             materials: 1,
             ghosts: false,
+            face_trajectory: false,
         };
         let ptx = compile(PROBE_FILE, &config, (major * 10 + minor) as u32)?;
         let module = ctx.load_module(ptx)?;

@@ -101,14 +101,6 @@ impl CudaSimulation {
         ordinal: usize,
         precision: Precision,
     ) -> Result<Self, CudaError> {
-        let window = host.scene.simulation.face_window;
-        if window != crate::contact::FaceWindow::Secant {
-            return Err(CudaError::Unsupported(format!(
-                "simulation.face_window = \"{}\" runs on the CPU backend only (its CUDA twin is \
-                 not written yet): use --backend cpu, or leave the key out for \"secant\"",
-                window.name()
-            )));
-        }
         let ctx = CudaContext::new(ordinal)?;
         // SAFETY: nothing has been allocated yet. Every buffer is used on the main stream but
         // the wall list's, which the wall stream also uses between the two events of
