@@ -330,7 +330,30 @@ PD_HD int overlap_about_t(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, co
                 hi = max_(hi, h);
             }
         }
-        thickness = max_(hi - lo, T(0));
+        T extent = max_(hi - lo, T(0));
+        // The distance to separation along -n the vertices give (OverlapWorkspace::separation_along):
+        // over the vertices, the largest of the least (delta_i - n_i.v)/(n_i.toward) over A's planes
+        // that bound the overlap and face along it; kept where at least half of V/|S|.
+        V3<T> toward = -n;
+        T deepest = T(0);
+        auto visit = [&](V3<T> v) {
+            T depth = Limits<T>::max();
+            for (int i = 0; i < na; ++i) {
+                if (ws.area[i] > T(0)) {
+                    T w = dot(ws.normal[i], toward);
+                    if (w > T(0)) depth = min_(depth, (ws.delta[i] - dot(ws.normal[i], v)) / w);
+                }
+            }
+            deepest = max_(deepest, depth);
+        };
+        if (enumerated) {
+            for (int v = 0; v < ws.faces.n_vertices; ++v) visit(ws.faces.vertex[v]);
+        } else if constexpr (kHull) {
+            for (int s = 0; s < ws.hull.n_tri; ++s) {
+                if (ws.hull.tri[s].alive) visit(ws.vertex[s]);
+            }
+        }
+        thickness = deepest * area >= T(0.5) * volume ? min_(deepest, extent) : extent;
     }
     PD_CLK(14)
     out->volume = volume;

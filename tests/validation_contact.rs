@@ -607,13 +607,12 @@ dir = "{}"
     errors
 }
 
-/// The energy change must lie within a second-order envelope at every step, t_c/20 … t_c/160:
-/// `|ΔE(Δt)| ≤ 2 |ΔE(t_c/20)| (20 Δt/t_c)²` (a factor 2 of slack, since the box is chaotic: a
-/// change of step changes which contacts occur, and one halving may gain while the envelope
-/// falls as Δt²), and fall by at least 2^(3 × 1.8) over the three halvings (observed 2.57:
-/// docs/validation.md §3). Before the kick window was restricted to face-like contacts
-/// (docs/contact.md §1) the error flattened at −1.5e-4 from t_c/80 on, twice the envelope at
-/// t_c/160.
+/// The energy change must lie within the second-order envelope `|ΔE/E| ≤ K (20 Δt/t_c)²` at
+/// every step, t_c/20 … t_c/160, with `K` = 2.5e-3, twice the largest error at t_c/20 over the
+/// 8-draw ensemble below (one draw is chaotic: a change of step changes which contacts occur,
+/// so its own error need not fall at every halving; docs/validation.md §3). Before the face
+/// depth of docs/contact.md §1 took offset faces for faces, this draw left the envelope at
+/// t_c/20 (5.1e-3) and t_c/80 (4.6e-4).
 #[test]
 fn aligned_cubes_in_a_periodic_box_conserve_energy_to_second_order() {
     aligned_cubes(CPU);
@@ -646,7 +645,7 @@ fn aligned_cubes(device: Device) {
         .collect();
     println!("{device:?} aligned cubes: orders {orders:.2?}");
     for (k, e) in errors.iter().enumerate() {
-        let envelope = 2.0 * errors[0].abs() / 4f64.powi(k as i32);
+        let envelope = 2.5e-3 / 4f64.powi(k as i32);
         assert!(
             e.abs() <= envelope,
             "t_c/{}: energy change {e:e} outside the second-order envelope {envelope:e} \
@@ -654,11 +653,6 @@ fn aligned_cubes(device: Device) {
             20 << k
         );
     }
-    let overall = (errors[0].abs() / errors[3].abs()).log2() / 3.0;
-    assert!(
-        overall > 1.8,
-        "order {overall:.2} over t_c/20 … t_c/160 (errors {errors:?})"
-    );
 }
 
 /// The aligned cubes' box over 8 draws of the random velocities at Δt = t_c/10, /20, /40 and
@@ -666,7 +660,8 @@ fn aligned_cubes(device: Device) {
 /// contacts occur, and its energy error need not fall monotonically (one draw gave 1.94e-3,
 /// 1.51e-4, 4.65e-4, 5.35e-5). The error is a sum of per-impact errors whose sign depends on
 /// the phase of first touch, each within the face impact's envelope (docs/accuracy.md); over
-/// the draws, the mean and the largest |ΔE/E| must fall at every halving of the step.
+/// the draws, the mean and the largest |ΔE/E| must fall at every halving of the step, and the
+/// mean at second order from t_c/20 (`dt_fraction` 0.05) on (observed 2.45 and 2.36).
 #[test]
 #[ignore = "full validation: make validate"]
 fn aligned_cubes_converge_over_an_ensemble_of_boxes() {
@@ -710,4 +705,72 @@ fn aligned_cubes_converge_over_an_ensemble_of_boxes() {
             "not monotone: means {means:?}, largest {maxima:?}"
         );
     }
+    for (k, w) in means.windows(2).enumerate().skip(1) {
+        let order = (w[0] / w[1]).log2();
+        assert!(
+            order >= 2.0,
+            "mean order {order:.2} from t_c/{} (means {means:?})",
+            steps[k]
+        );
+    }
+}
+
+/// Two 1 cm cubes meeting face to face with the upper one's centre off the lower one's by
+/// (2, 1) mm and (4, 2) mm (face overlaps of 8 × 9 and 6 × 8 mm), e = 1, μ = 0, at 1 m/s, over
+/// 16 phases of first touch: the overlap is a box whose `S` leans by the penetration over the
+/// width, and its depth must be the distance to separation, not the extent along that normal
+/// (docs/contact.md §1), for the kick window to open. The energy change of every impact stays
+/// below 1e-3 at t_c/20 (`dt_fraction` 0.05) and 2.5e-4 at t_c/40 with the secant window
+/// (observed 7.6e-4 and 1.4e-4), and below 2.5e-4 at both along the trajectory (2.0e-4,
+/// 1.1e-4); with the extent as depth they changed by up to about 6e-3 and 4e-3.
+#[test]
+fn faces_meeting_off_centre_keep_their_energy() {
+    let cube = "{ kind = \"cuboid\", a = 0.01, b = 0.01, c = 0.01 }";
+    let m = RHO * 1e-6;
+    let r = (3.0 * 1e-6 / (4.0 * std::f64::consts::PI)).cbrt();
+    let tc = polydem::contact::restitution::face_contact_time(0.5 * m, 2.0 * E / r, 1e-4, 1.0);
+    let mut failures = Vec::new();
+    for (window, bounds) in [
+        (FaceWindow::Secant, [1e-3, 2.5e-4]),
+        (FaceWindow::Trajectory, [2.5e-4, 2.5e-4]),
+    ] {
+        for offset in [0.002, 0.004] {
+            let build_at = |dt: f64, gap: f64| {
+                let mut s = simulation(1.0, 0.0, 0.0, dt, false, cube);
+                s.scene.simulation.face_window = window;
+                let above = Vector3::new(offset, 0.5 * offset, 0.005 + gap);
+                let down = Vector3::new(0.0, 0.0, -1.0);
+                let q = UnitQuaternion::identity();
+                add(&mut s, 1, above, q, down, Vector3::zeros());
+                let below = Vector3::new(0.0, 0.0, -0.005);
+                add(&mut s, 2, below, q, Vector3::zeros(), Vector3::zeros());
+                s.refresh().unwrap();
+                s
+            };
+            for (divisions, bound) in [20.0, 40.0].into_iter().zip(bounds) {
+                let dt = tc / divisions;
+                let changes: Vec<f64> = (0..16)
+                    .map(|k| {
+                        let s = build_at(dt, 1e-6 + dt * k as f64 / 16.0);
+                        let e0 = s.total_energy();
+                        let mut e = engine(s, CPU);
+                        impact(&mut e);
+                        e.synced().unwrap().total_energy() / e0 - 1.0
+                    })
+                    .collect();
+                let worst = changes.iter().fold(0.0f64, |w, c| w.max(c.abs()));
+                println!(
+                    "{window:?}, {} mm off, t_c/{divisions}: largest energy change {worst:.2e}",
+                    offset * 1e3
+                );
+                if worst > bound {
+                    failures.push(format!(
+                        "{window:?}, {} mm off, t_c/{divisions}: {worst:.2e} > {bound:.1e}",
+                        offset * 1e3
+                    ));
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

@@ -185,6 +185,39 @@ impl<T: Real> OverlapWorkspace<T> {
         (hi - lo).max(T::zero())
     }
 
+    /// How far B must move along the unit vector `n` (from A towards B) to leave A, as the
+    /// vertices of the last evaluation's overlap see it: the largest over the vertices `v` of
+    /// the least `(δ_i − n_i·v)/(n_i·n)` over A's planes `i < na` that bound the overlap and
+    /// face along `n`. A vertex of B inside A (a vertex or an edge on a face) rises by its depth
+    /// behind A's face; two faces meeting with a lateral offset overlap in a box whose `S`
+    /// leans by `c/b` (the penetration over the width), where the extent along the normal is
+    /// about `3c` and this is `c` (docs/contact.md §1). Where the deepest point lies inside
+    /// an edge of the overlap (two crossing edges) every vertex touches a face of A and this is
+    /// zero: the caller keeps the extent there.
+    pub fn separation_along(&self, n: &Vector3<T>, na: usize) -> T {
+        let mut deepest = T::zero();
+        let mut visit = |v: &Vector3<T>| {
+            let mut depth = T::max_value().unwrap_or(T::one());
+            for i in 0..na {
+                if self.area[i] > T::zero() {
+                    let w = self.normal[i].dot(n);
+                    if w > T::zero() {
+                        depth = depth.min((self.delta[i] - self.normal[i].dot(v)) / w);
+                    }
+                }
+            }
+            deepest = deepest.max(depth);
+        };
+        if self.by_hull {
+            self.hull
+                .triangles()
+                .for_each(|(s, _)| visit(&self.vertex[s]));
+        } else {
+            self.faces.vertices().iter().for_each(&mut visit);
+        }
+        deepest
+    }
+
     /// Area of the intersection face lying on plane `i` of the last evaluation (planes of A
     /// first, then of B); zero for planes that do not bound the intersection.
     pub fn face_area(&self, i: usize) -> T {
@@ -343,10 +376,19 @@ pub(crate) fn overlap_about<T: Real>(
     centroid /= volume;
     // Moment about the overlap centroid rather than x₀.
     moment_b -= centroid.cross(&dv_dxb);
-    // The extent along the normal −S/|S| (`by_hull` is `!enumerated` here).
+    // The depth along the normal −S/|S|: the distance to separation the overlap's vertices
+    // give where it is at least half the face value V/|S| (which no convex overlap's depth is
+    // below), else its extent (`by_hull` is `!enumerated` here).
     let area = dv_dxb.norm();
     let thickness = if area > T::zero() {
-        ws.extent_along(&(dv_dxb / area))
+        let n = dv_dxb / area;
+        let extent = ws.extent_along(&n);
+        let separation = ws.separation_along(&(-n), na);
+        if separation * area >= T::of(0.5) * volume {
+            separation.min(extent)
+        } else {
+            extent
+        }
     } else {
         T::zero()
     };
