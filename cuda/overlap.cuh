@@ -335,6 +335,10 @@ PD_HD int overlap_about_t(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, co
         // over the vertices, the largest of the least (delta_i - n_i.v)/(n_i.toward) over A's planes
         // that bound the overlap and face along it; kept where at least half of V/|S|.
         V3<T> toward = -n;
+        bool carried = false;
+        for (int i = 0; i < na; ++i) {
+            if (ws.area[i] > T(0) && ws.area[i] * dot(ws.normal[i], toward) >= T(0.9) * area) carried = true;
+        }
         T deepest = T(0);
         auto visit = [&](V3<T> v) {
             T depth = Limits<T>::max();
@@ -346,11 +350,14 @@ PD_HD int overlap_about_t(OverlapWorkspace<T>& ws, const Plane<T>* a, int na, co
             }
             deepest = max_(deepest, depth);
         };
-        if (enumerated) {
+        // Only where one face of A carries the overlap's side towards A (geometry::overlap FACE_SHARE).
+        if (carried && enumerated) {
             for (int v = 0; v < ws.faces.n_vertices; ++v) visit(ws.faces.vertex[v]);
-        } else if constexpr (kHull) {
-            for (int s = 0; s < ws.hull.n_tri; ++s) {
-                if (ws.hull.tri[s].alive) visit(ws.vertex[s]);
+        } else if (carried) {
+            if constexpr (kHull) {
+                for (int s = 0; s < ws.hull.n_tri; ++s) {
+                    if (ws.hull.tri[s].alive) visit(ws.vertex[s]);
+                }
             }
         }
         thickness = deepest * area >= T(0.5) * volume ? min_(deepest, extent) : extent;

@@ -57,6 +57,7 @@ tests=(
   "vc_rest_double|$T/validation_contact --ignored --exact rest_on_gpu_double --nocapture"
   "vc_rest_mixed|$T/validation_contact --ignored --exact rest_on_gpu_mixed --nocapture"
   "vc_aligned_cubes|$T/validation_contact --ignored --exact aligned_cubes_on_gpu_double --nocapture"
+  "vc_face_trajectory|$T/validation_contact --ignored --exact face_impacts_along_their_trajectory_on_gpu_double --nocapture"
   "vf_spheres_double|$T/validation_friction --ignored --exact friction_spheres_on_gpu_double --nocapture"
   "vf_spheres_mixed|$T/validation_friction --ignored --exact friction_spheres_on_gpu_mixed --nocapture"
   "vf_polyhedra_double|$T/validation_friction --ignored --exact friction_polyhedra_on_gpu_double --nocapture"

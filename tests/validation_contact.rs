@@ -246,6 +246,21 @@ fn face_impacts_sampled_along_their_trajectory_hold_at_twice_the_default_step() 
     );
 }
 
+/// The face impacts along their trajectory on the GPU (`PD_FACE_TRAJECTORY`): e = 0.5 and 1
+/// at t_c/20 and t_c/40, 4 phases, each impact bitwise the CPU's in double precision.
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn face_impacts_along_their_trajectory_on_gpu_double() {
+    restitution_of(
+        GPU_DOUBLE,
+        FaceWindow::Trajectory,
+        &["face"],
+        &[0.5, 1.0],
+        &[20.0, 40.0],
+        4,
+    );
+}
+
 /// The e of the restitution sweeps: 0.1 … 0.95, and 1.
 const RESTITUTIONS: [f64; 7] = [0.1, 0.3, 0.5, 0.7, 0.9, 0.95, 1.0];
 

@@ -191,10 +191,19 @@ impl<T: Real> OverlapWorkspace<T> {
     /// face along `n`. A vertex of B inside A (a vertex or an edge on a face) rises by its depth
     /// behind A's face; two faces meeting with a lateral offset overlap in a box whose `S`
     /// leans by `c/b` (the penetration over the width), where the extent along the normal is
-    /// about `3c` and this is `c` (docs/contact.md §1). Where the deepest point lies inside
-    /// an edge of the overlap (two crossing edges) every vertex touches a face of A and this is
-    /// zero: the caller keeps the extent there.
-    pub fn separation_along(&self, n: &Vector3<T>, na: usize) -> T {
+    /// about `3c` and this is `c` (docs/contact.md §1). The largest exit time over the overlap
+    /// lies at one of its vertices where one face of A carries the overlap's side towards A
+    /// (its area projected on `n` at least [`FACE_SHARE`] of `|S|` = `s_norm`); elsewhere it
+    /// may lie inside an edge of the overlap (two crossing edges, a vertex of B near an edge of
+    /// A), the vertices underestimate it, and this is zero: the caller keeps the extent there.
+    pub fn separation_along(&self, n: &Vector3<T>, na: usize, s_norm: T) -> T {
+        let carried = (0..na).any(|i| {
+            self.area[i] > T::zero()
+                && self.area[i] * self.normal[i].dot(n) >= T::of(FACE_SHARE) * s_norm
+        });
+        if !carried {
+            return T::zero();
+        }
         let mut deepest = T::zero();
         let mut visit = |v: &Vector3<T>| {
             let mut depth = T::max_value().unwrap_or(T::one());
@@ -383,7 +392,7 @@ pub(crate) fn overlap_about<T: Real>(
     let thickness = if area > T::zero() {
         let n = dv_dxb / area;
         let extent = ws.extent_along(&n);
-        let separation = ws.separation_along(&(-n), na);
+        let separation = ws.separation_along(&(-n), na, area);
         if separation * area >= T::of(0.5) * volume {
             separation.min(extent)
         } else {
@@ -401,6 +410,11 @@ pub(crate) fn overlap_about<T: Real>(
         thickness,
     })
 }
+
+/// The share of `|S|` that one face of A, projected on the normal, must carry for the depth to
+/// be taken from the overlap's vertices ([`OverlapWorkspace::separation_along`]): a face of A
+/// against a face, an edge or a vertex of B well inside it.
+pub const FACE_SHARE: f64 = 0.9;
 
 /// Share of each plane's face in S: 1 for B's planes, 0 for A's, except that a plane of A and a
 /// plane of B that coincide (dual points within `tol`: aligned faces, a cube on a cube) bound
