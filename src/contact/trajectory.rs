@@ -28,8 +28,8 @@ pub enum FaceWindow {
     /// entry and exit terms (docs/contact.md §1); both backends.
     #[default]
     Secant,
-    /// The impulse of the contact's one-dimensional motion over the kick window
-    /// ([`NormalMotion::window_force`]); the CPU backend.
+    /// The impulse of the contact's one-dimensional motion over the kick window (the module
+    /// docs); both backends (`PD_FACE_TRAJECTORY` in the kernels).
     Trajectory,
 }
 
