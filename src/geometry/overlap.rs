@@ -52,8 +52,11 @@ pub struct Overlap<T: Real> {
     /// Radius of the largest ball inside the overlap (half-thickness of a thin lens); negative
     /// when the bodies are apart.
     pub depth: T,
-    /// Extent of the overlap region along the normal `−S/|S|`: the penetration δ of a vertex,
-    /// edge or face into the other body, measured from the geometry rather than from history.
+    /// The penetration δ of a vertex, edge or face into the other body along the normal
+    /// `−S/|S|`, measured from the geometry rather than from history: the distance to
+    /// separation the overlap's vertices give where one face of A carries it
+    /// ([`OverlapWorkspace::separation_along`]), else the overlap's extent along the normal; for
+    /// a wall facet, the penetration behind the facet.
     pub thickness: T,
 }
 
