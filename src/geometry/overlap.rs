@@ -173,19 +173,24 @@ impl<T: Real> OverlapWorkspace<T> {
             T::max_value().unwrap_or(T::one()),
             -T::max_value().unwrap_or(T::one()),
         );
-        let mut extend = |v: &Vector3<T>| {
+        self.for_each_vertex(|v| {
             let h = n.dot(v);
             lo = lo.min(h);
             hi = hi.max(h);
-        };
+        });
+        (hi - lo).max(T::zero())
+    }
+
+    /// Calls `visit` on each vertex of the last evaluation's overlap, in the frame of the
+    /// planes: the dual hull's triangles or the enumeration's vertices, whichever built it.
+    fn for_each_vertex(&self, mut visit: impl FnMut(&Vector3<T>)) {
         if self.by_hull {
             self.hull
                 .triangles()
-                .for_each(|(s, _)| extend(&self.vertex[s]));
+                .for_each(|(s, _)| visit(&self.vertex[s]));
         } else {
-            self.faces.vertices().iter().for_each(&mut extend);
+            self.faces.vertices().iter().for_each(visit);
         }
-        (hi - lo).max(T::zero())
     }
 
     /// How far B must move along the unit vector `n` (from A towards B) to leave A, as the
@@ -208,7 +213,7 @@ impl<T: Real> OverlapWorkspace<T> {
             return T::zero();
         }
         let mut deepest = T::zero();
-        let mut visit = |v: &Vector3<T>| {
+        self.for_each_vertex(|v| {
             let mut depth = T::max_value().unwrap_or(T::one());
             for i in 0..na {
                 if self.area[i] > T::zero() {
@@ -219,14 +224,7 @@ impl<T: Real> OverlapWorkspace<T> {
                 }
             }
             deepest = deepest.max(depth);
-        };
-        if self.by_hull {
-            self.hull
-                .triangles()
-                .for_each(|(s, _)| visit(&self.vertex[s]));
-        } else {
-            self.faces.vertices().iter().for_each(&mut visit);
-        }
+        });
         deepest
     }
 
