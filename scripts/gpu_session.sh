@@ -8,6 +8,8 @@
 #   bash scripts/gpu_session.sh tests     # the GPU tests, several processes at once (~5-8 min)
 #   bash scripts/gpu_session.sh benches   # the A/B benches, one at a time on an idle GPU
 #   bash scripts/gpu_session.sh all       # both
+#   bash scripts/gpu_session.sh settled   # docs/performance.md's settled packings, and the face
+#                                         # trajectory window's cost on them
 #   ONLY="gpu_pipeline validation_friction" bash scripts/gpu_session.sh tests   # some groups
 # Results go to $OUT (the device call's folder; out/gpu_session here): summary.txt (one line a
 # test or bench), logs.tgz (every log, each line stamped with the seconds since its test began)
@@ -69,6 +71,7 @@ tests=(
   "vw_lattice|$T/validation_moving_walls --ignored --exact a_compressed_lattice_of_low_restitution_cubes_on_gpu_is_the_cpus --nocapture"
   "validation_impact|$T/validation_impact --ignored"
   "stability_guard|$T/stability --ignored --exact the_guard_stops_gpu_runs_at_the_same_steps"
+  "scene_limits|$T/scene_limits --ignored"
 )
 # ONLY="name name ..." runs just those groups (the names before the '|').
 if [ -n "${ONLY:-}" ]; then
@@ -140,6 +143,25 @@ if [ "$what" = benches ] || [ "$what" = all ]; then
     bench "settled_one_batch_$round" POLYDEM_PAIR_BATCH=2147483647 polydem bench $settled
     bench "settled_lp_f32_$round" POLYDEM_MIXED_LP=f32 polydem bench $settled
   done
+fi
+if [ "$what" = settled ]; then
+  # The settled packings of docs/performance.md at 1e6 particles, one at a time on an idle GPU,
+  # and the dodecahedra again with simulation.face_window = "trajectory" (a copy of the scene
+  # beside it, so that its packing path still resolves).
+  s=launch/bench/settled
+  for name in dodecahedra mineral_grains cylinders; do
+    sed 's/^\[simulation\]$/[simulation]\nface_window = "trajectory"/' "$s/${name}_1e6.toml" \
+      > "$s/${name}_1e6_trajectory.toml"
+  done
+  steps="--warmup 10 --steps ${STEPS:-100}"
+  bench dodecahedra_mixed X=1 polydem bench $s/dodecahedra_1e6.toml --backend cuda --gpu-precision mixed $steps
+  bench dodecahedra_mixed_traj X=1 polydem bench $s/dodecahedra_1e6_trajectory.toml --backend cuda --gpu-precision mixed $steps
+  bench dodecahedra_double X=1 polydem bench $s/dodecahedra_1e6.toml --backend cuda --gpu-precision double $steps
+  bench dodecahedra_double_traj X=1 polydem bench $s/dodecahedra_1e6_trajectory.toml --backend cuda --gpu-precision double $steps
+  bench mineral_grains_mixed X=1 polydem bench $s/mineral_grains_1e6.toml --backend cuda --gpu-precision mixed --warmup 5 --steps 40
+  bench mineral_grains_mixed_traj X=1 polydem bench $s/mineral_grains_1e6_trajectory.toml --backend cuda --gpu-precision mixed --warmup 5 --steps 40
+  bench cylinders_mixed X=1 polydem bench $s/cylinders_1e6.toml --backend cuda --gpu-precision mixed --warmup 5 --steps 40
+  bench spheres_mixed X=1 polydem bench $s/spheres_1e6.toml --backend cuda --gpu-precision mixed $steps
 fi
 tar -czf "$OUT/logs.tgz" -C "$logs" .
 cat "$summary"
