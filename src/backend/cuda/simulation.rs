@@ -118,7 +118,11 @@ impl CudaSimulation {
         let arch = (major * 10 + minor) as u32;
         let mut config = KernelConfig::for_scene(&host.scene, precision);
         config.ghosts = host.parallel.is_some();
-        let k = Kernels::load(&ctx, &config, arch)?;
+        // A GPU that other processes fill can run out before the particles arrive: named too.
+        let set_up = |e: CudaError| {
+            e.out_of_memory(|| "the kernels and the step's fixed buffers".to_string(), None)
+        };
+        let k = Kernels::load(&ctx, &config, arch).map_err(set_up)?;
         let device = ctx.name().unwrap_or_else(|_| format!("GPU {ordinal}"));
         let s = &host.scene;
         // Materials: restitution, friction and damping coefficient per pair (as `SimulationBuilder::build` does).
@@ -135,11 +139,13 @@ impl CudaSimulation {
                 ));
             }
         }
-        let materials = stream.clone_htod(&materials)?;
+        let materials = stream
+            .clone_htod(&materials)
+            .map_err(|e| set_up(e.into()))?;
         let skin = s.simulation.neighbor.skin;
         let (grid, list_builder) = domain_grid(&host);
-        let error = stream.alloc_zeros::<u32>(3)?;
-        let clock = StageClock::new(&ctx)?;
+        let error = stream.alloc_zeros::<u32>(3).map_err(|e| set_up(e.into()))?;
+        let clock = StageClock::new(&ctx).map_err(set_up)?;
         let gpu = Gpu {
             _ctx: ctx,
             clock,
@@ -155,18 +161,20 @@ impl CudaSimulation {
         let mut sim = CudaSimulation {
             device,
             precision,
-            particles: DeviceParticles::empty(&gpu.stream)?,
-            pairs: PairStage::new(&gpu)?,
+            particles: DeviceParticles::empty(&gpu.stream).map_err(|e| set_up(e.into()))?,
+            pairs: PairStage::new(&gpu).map_err(set_up)?,
             list_builder,
             walls: None,
             halo: HaloStage::default(),
-            integrator: Integrator::new(&gpu)?,
+            integrator: Integrator::new(&gpu).map_err(set_up)?,
             host_current: true,
             gpu,
             host,
         };
-        sim.upload_templates()?;
-        sim.upload_walls()?;
+        sim.upload_templates().map_err(set_up)?;
+        sim.upload_walls().map_err(|e| {
+            e.out_of_memory(|| "the walls' facets and facet grid".to_string(), None)
+        })?;
         sim.upload_from_host()?;
         Ok(sim)
     }
@@ -192,7 +200,10 @@ impl CudaSimulation {
     /// The first force evaluation of a new simulation (see [`CudaSimulation::from_scene`]).
     fn evaluate_first_forces(&mut self) -> Result<(), CudaError> {
         let dt = self.host.dt;
-        self.forces(dt, false)
+        let n = self.host.particles.len();
+        self.forces(dt, false).map_err(|e| {
+            e.out_of_memory(|| format!("the first force evaluation of {n} particles"), None)
+        })
     }
 
     /// Bytes of device memory held by this simulation's buffers (particles, pair list and
