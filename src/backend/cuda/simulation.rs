@@ -120,7 +120,10 @@ impl CudaSimulation {
         config.ghosts = host.parallel.is_some();
         // A GPU that other processes fill can run out before the particles arrive: named too.
         let set_up = |e: CudaError| {
-            e.out_of_memory(|| "the kernels and the step's fixed buffers".to_string(), None)
+            e.out_of_memory(
+                || "the kernels and the step's fixed buffers".to_string(),
+                None,
+            )
         };
         let k = Kernels::load(&ctx, &config, arch).map_err(set_up)?;
         let device = ctx.name().unwrap_or_else(|_| format!("GPU {ordinal}"));
@@ -161,7 +164,7 @@ impl CudaSimulation {
         let mut sim = CudaSimulation {
             device,
             precision,
-            particles: DeviceParticles::empty(&gpu.stream).map_err(|e| set_up(e.into()))?,
+            particles: DeviceParticles::empty(&gpu.stream).map_err(set_up)?,
             pairs: PairStage::new(&gpu).map_err(set_up)?,
             list_builder,
             walls: None,
@@ -202,7 +205,10 @@ impl CudaSimulation {
         let dt = self.host.dt;
         let n = self.host.particles.len();
         self.forces(dt, false).map_err(|e| {
-            e.out_of_memory(|| format!("the first force evaluation of {n} particles"), None)
+            e.out_of_memory(
+                || format!("the first force evaluation of {n} particles"),
+                None,
+            )
         })
     }
 
