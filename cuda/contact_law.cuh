@@ -447,7 +447,9 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
                           ? resolved_mean_pressure(stiffness, volume - sweep, volume + sweep, resolved)
                           : resolved_pressure(stiffness, volume, resolved); // law.rs WINDOW_FRACTION
     // Or the impulse of the contact's own normal motion over the kick window (trajectory.rs).
-    if (windowed && !secant && dt > 0.0) {
+    // A contact deep against its step's travel keeps the slope at V (trajectory.rs
+    // TRAJECTORY_FRACTION).
+    if (windowed && !secant && dt > 0.0 && sweep > 0.1 * volume) {
         NormalMotion motion;
         motion.law = local;
         motion.stiffness = stiffness;

@@ -1308,7 +1308,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
     writeln!(text, "law {n}").unwrap();
     // window, first-touch share, inside, sliding, twist cap, sphere, exit, split caps,
     // trajectory, trajectory at first touch
-    let mut branches = [0usize; 10];
+    let mut branches = [0usize; 11];
     for i in 0..n {
         let sphere = i % 4 == 3;
         let e = if i % 5 == 0 {
@@ -1504,8 +1504,12 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         let face = !inside && area * depth / volume < 1.5;
         let trajectory = params.face_window == polydem::contact::FaceWindow::Trajectory;
         let windowed = face && !trajectory;
-        branches[8] += usize::from(face && trajectory && dt > 0.0);
-        branches[9] += usize::from(face && trajectory && dt > 0.0 && first);
+        // Along the trajectory within a few steps of entry or exit (trajectory.rs
+        // TRAJECTORY_FRACTION), the slope at V deeper.
+        let along = face && trajectory && dt > 0.0 && sweep > 0.1 * volume;
+        branches[8] += usize::from(along);
+        branches[9] += usize::from(along && first);
+        branches[10] += usize::from(face && trajectory && dt > 0.0 && !along);
         branches[0] += usize::from(windowed && sweep > 0.5 * volume);
         branches[1] +=
             usize::from(windowed && first && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0);
@@ -1560,7 +1564,8 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
     println!(
         "{} cases ({n} sin/cos, {n} cbrt, {n} ln/exp/pow, {n} law; law branches: window {}, \
          first-touch share {}, inside {}, sliding {}, twist capped {}, spheres {}, exit {}, \
-         split caps {}, trajectory {}, trajectory at first touch {}), {} differ",
+         split caps {}, trajectory {}, trajectory at first touch {}, deep face off the \
+         trajectory {}), {} differ",
         want.len(),
         branches[0],
         branches[1],
@@ -1572,6 +1577,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         branches[7],
         branches[8],
         branches[9],
+        branches[10],
         mismatches.len()
     );
     for (k, what) in [
@@ -1585,6 +1591,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         "split caps",
         "trajectory",
         "trajectory at first touch",
+        "deep face off the trajectory",
     ]
     .iter()
     .enumerate()

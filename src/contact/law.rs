@@ -47,7 +47,7 @@ pub use super::potential::{
     RESOLVED_STEP, SINGULAR_EXPONENT, WINDOW_FRACTION, mean_pressure, resolved_mean_pressure,
     resolved_potential, resolved_volume,
 };
-use super::trajectory::{FaceWindow, NormalMotion};
+use super::trajectory::{FaceWindow, NormalMotion, TRAJECTORY_FRACTION};
 use crate::geometry::Overlap;
 use crate::geometry::portable_cbrt;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -357,7 +357,8 @@ pub fn contact_forces(
     };
     // Or the impulse of the contact's own normal motion over the kick window, its entry and
     // its exit included (trajectory.rs), from the slope at V as the first guess.
-    if windowed && !secant && dt > 0.0 {
+    // A contact deep against its step's travel keeps the slope at V (see TRAJECTORY_FRACTION).
+    if windowed && !secant && dt > 0.0 && sweep > TRAJECTORY_FRACTION * volume {
         let motion = NormalMotion::new(local, stiffness, resolved, kin.effective_mass);
         pressure = motion.window_force(vn, dt, first_touch, pressure * area) / area;
     }

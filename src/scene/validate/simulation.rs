@@ -67,7 +67,8 @@ impl Validator<'_> {
             guard,
             face_window: match s.face_window {
                 Some(schema::FaceWindowName::Trajectory) => FaceWindow::Trajectory,
-                Some(schema::FaceWindowName::Secant) | None => FaceWindow::Secant,
+                Some(schema::FaceWindowName::Secant) => FaceWindow::Secant,
+                None => FaceWindow::default(),
             },
         }
     }
