@@ -10,6 +10,9 @@
 #   bash scripts/gpu_session.sh all       # both
 #   bash scripts/gpu_session.sh settled   # docs/performance.md's settled packings, and the face
 #                                         # trajectory window's cost on them
+#   bash scripts/gpu_session.sh regress   # the settled many-faced packings with this CLI and each
+#                                         # .device/bin/polydem_<name> (scripts/pack-commit.sh),
+#                                         # alternating, then this CLI's phase clocks
 #   ONLY="gpu_pipeline validation_friction" bash scripts/gpu_session.sh tests   # some groups
 # Results go to $OUT (the device call's folder; out/gpu_session here): summary.txt (one line a
 # test or bench), logs.tgz (every log, each line stamped with the seconds since its test began)
@@ -162,6 +165,25 @@ if [ "$what" = settled ]; then
   bench mineral_grains_mixed_traj X=1 polydem bench $s/mineral_grains_1e6_trajectory.toml --backend cuda --gpu-precision mixed --warmup 5 --steps 40
   bench cylinders_mixed X=1 polydem bench $s/cylinders_1e6.toml --backend cuda --gpu-precision mixed --warmup 5 --steps 40
   bench spheres_mixed X=1 polydem bench $s/spheres_1e6.toml --backend cuda --gpu-precision mixed $steps
+fi
+if [ "$what" = regress ]; then
+  # Where the many-faced shapes' pair stage went: this commit against older ones, one at a
+  # time on an idle GPU, alternating, then POLYDEM_PHASE_CLOCKS=1 (per-phase thread-cycles of
+  # the pair kernels in the .err logs) with each.
+  s=launch/bench/settled
+  short="--backend cuda --gpu-precision mixed --warmup 5 --steps 20"
+  for round in 1 2; do
+    for cli in .device/bin/polydem*; do
+      tag=$(basename "$cli")
+      for name in mineral_grains cylinders dodecahedra; do
+        bench "${name}_${tag}_$round" X=1 "$cli" bench $s/${name}_1e6.toml $short
+      done
+    done
+  done
+  for cli in .device/bin/polydem*; do
+    bench "mineral_grains_$(basename "$cli")_clocks" POLYDEM_PHASE_CLOCKS=1 "$cli" bench \
+      $s/mineral_grains_1e6.toml $short
+  done
 fi
 tar -czf "$OUT/logs.tgz" -C "$logs" .
 cat "$summary"
