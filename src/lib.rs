@@ -77,3 +77,6 @@ pub mod shape;
 pub mod stability;
 pub mod state;
 pub mod tuning;
+
+/// The arithmetic of the pair geometry a run takes (`--gpu-precision`), one type for the crate.
+pub use geometry::pair::Precision;

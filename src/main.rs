@@ -4,7 +4,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use polydem::backend::BackendChoice;
 use polydem::domain::{Comm, SerialComm};
-use polydem::probe::{Precision, probe_overlap, probe_wall};
+use polydem::probe::{Arithmetic, probe_overlap, probe_wall};
 use polydem::run::RunOptions;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -46,7 +46,7 @@ enum Command {
         /// frame with f64 state. With `--backend cpu`, `mixed` evaluates the polyhedral pairs
         /// as the GPU's mixed precision does (to reproduce a GPU run without a GPU).
         #[arg(long, value_enum, default_value = "double")]
-        gpu_precision: polydem::backend::cuda::Precision,
+        gpu_precision: polydem::Precision,
         /// Remove a previous run's output from the output folder first (a new run into a
         /// folder holding one is refused otherwise; `--restart` continues in it).
         #[arg(long)]
@@ -71,7 +71,7 @@ enum Command {
         /// both precisions unless one is given. With `--backend cpu`: f64 unless `mixed` is
         /// given (the GPU's mixed precision on the CPU).
         #[arg(long, value_enum)]
-        gpu_precision: Option<polydem::backend::cuda::Precision>,
+        gpu_precision: Option<polydem::Precision>,
         /// Who builds the pair lists on the GPU, overriding the scene's
         /// simulation.neighbor.mode.
         #[arg(long, value_enum)]
@@ -116,7 +116,7 @@ enum Command {
         backend: BackendChoice,
         /// Pair-geometry arithmetic on the GPU.
         #[arg(long, value_enum, default_value = "double")]
-        gpu_precision: polydem::backend::cuda::Precision,
+        gpu_precision: polydem::Precision,
     },
     /// Observables of a checkpoint of a scene (docs/production.md), as JSON.
     Analyze {
@@ -138,13 +138,13 @@ enum ProbeQuery {
     Overlap {
         file: PathBuf,
         #[arg(long, value_enum, default_value = "f64")]
-        precision: Precision,
+        precision: Arithmetic,
     },
     /// A polyhedron against triangle facets: clipped section area, centroid, penetrating volume.
     Wall {
         file: PathBuf,
         #[arg(long, value_enum, default_value = "f64")]
-        precision: Precision,
+        precision: Arithmetic,
     },
 }
 
@@ -390,10 +390,8 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                     backend,
                     // Mixed on a GPU unless given; the CPU only when asked.
                     precision: gpu_precision.unwrap_or(match backend {
-                        polydem::backend::BackendChoice::Cpu => {
-                            polydem::backend::cuda::Precision::Double
-                        }
-                        _ => polydem::backend::cuda::Precision::Mixed,
+                        polydem::backend::BackendChoice::Cpu => polydem::Precision::Double,
+                        _ => polydem::Precision::Mixed,
                     }),
                     warmup,
                     steps,

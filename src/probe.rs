@@ -31,9 +31,10 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::Path;
 
-/// Arithmetic of the pair geometry.
+/// The arithmetic a probe evaluates one pair in: a run's [`crate::Precision`] (f64 is
+/// `Double`'s, mixed is `Mixed`'s) or, to see what f32 alone gives, f32 throughout.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Precision {
+pub enum Arithmetic {
     /// All f64 (the reference).
     F64,
     /// f32 pair geometry in a frame centred on the first body (positions stay f64).
@@ -256,7 +257,7 @@ fn read_input(path: &Path) -> Result<(String, &Path)> {
 }
 
 /// `polydem probe overlap FILE`: writes one JSON object per pair, in input order.
-pub fn probe_overlap(path: &Path, precision: Precision, out: &mut dyn Write) -> Result<()> {
+pub fn probe_overlap(path: &Path, precision: Arithmetic, out: &mut dyn Write) -> Result<()> {
     let (text, base) = read_input(path)?;
     let input: OverlapInput =
         serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
@@ -272,9 +273,9 @@ pub fn probe_overlap(path: &Path, precision: Precision, out: &mut dyn Write) -> 
         let body_a = (&a.template, 1.0, &pose_a);
         let body_b = (&b.template, 1.0, &pose_b);
         let result = match precision {
-            Precision::F64 => overlap_pair(&mut ws64, body_a, body_b),
-            Precision::F32 => overlap_pair(&mut ws32, body_a, body_b),
-            Precision::Mixed => overlap_pair_mixed_with(
+            Arithmetic::F64 => overlap_pair(&mut ws64, body_a, body_b),
+            Arithmetic::F32 => overlap_pair(&mut ws32, body_a, body_b),
+            Arithmetic::Mixed => overlap_pair_mixed_with(
                 &mut ws32,
                 &mut ws64,
                 body_a,
@@ -314,7 +315,7 @@ fn wall_case<T: Real>(
 
 /// `polydem probe wall FILE`: writes one JSON object per case: per-facet clipped section area and
 /// centroid, penetrating volume and its gradient, and their totals.
-pub fn probe_wall(path: &Path, precision: Precision, out: &mut dyn Write) -> Result<()> {
+pub fn probe_wall(path: &Path, precision: Arithmetic, out: &mut dyn Write) -> Result<()> {
     let (text, base) = read_input(path)?;
     let input: WallInput =
         serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
@@ -336,14 +337,14 @@ pub fn probe_wall(path: &Path, precision: Precision, out: &mut dyn Write) -> Res
         }
         let value = match precision {
             // Mixed precision evaluates walls in f64.
-            Precision::F64 | Precision::Mixed => wall_case(
+            Arithmetic::F64 | Arithmetic::Mixed => wall_case(
                 &mut ws64.overlap,
                 &mut ws64.a,
                 shape,
                 &pose,
                 &case.triangles,
             ),
-            Precision::F32 => wall_case(
+            Arithmetic::F32 => wall_case(
                 &mut ws32.overlap,
                 &mut ws32.a,
                 shape,

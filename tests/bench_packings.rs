@@ -81,7 +81,7 @@ fn packed() -> &'static (PathBuf, serde_json::Value) {
             contacts: 6.0,
             out: out.clone(),
             backend: polydem::backend::BackendChoice::Cpu,
-            precision: polydem::backend::cuda::Precision::Double,
+            precision: polydem::Precision::Double,
         })
         .expect("pack");
         (out, report)

@@ -3,9 +3,10 @@
 //! PyPI's `nvidia-cuda-nvrtc` on the library path). The kernels also `static_assert` the sizes
 //! of the structs they share with Rust, so a layout drift fails here.
 
+use polydem::Precision;
+use polydem::backend::cuda::KernelConfig;
 use polydem::backend::cuda::kernels::{KERNEL_FILES, compile_in};
 use polydem::backend::cuda::probe::PROBE_FILE;
-use polydem::backend::cuda::{KernelConfig, Precision};
 
 /// The scene configurations whose kernels are checked. Only `cuda/contact.cu` (tens of seconds
 /// to minutes under NVRTC) and `cuda/probe.cu` are costly; the others take about a second.

@@ -7,7 +7,7 @@
 mod common;
 
 use common::*;
-use polydem::backend::cuda::Precision;
+use polydem::Precision;
 use polydem::pipeline::{RestoredState, Simulation};
 use polydem::scene::parse_scene;
 use std::collections::HashMap;

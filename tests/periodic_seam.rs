@@ -110,6 +110,6 @@ fn a_contact_across_the_periodic_face_survives_a_wrap() {
 fn a_contact_across_the_periodic_face_survives_a_wrap_on_gpu() {
     seam_case(Device::Cuda {
         ordinal: 0,
-        precision: polydem::backend::cuda::Precision::Double,
+        precision: polydem::Precision::Double,
     });
 }

@@ -628,7 +628,8 @@ fn schema_and_value_errors_are_listed_together() {
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn a_pair_list_beyond_gpu_memory_is_named_with_its_bytes() {
-    use polydem::backend::cuda::{CudaError, Precision};
+    use polydem::Precision;
+    use polydem::backend::cuda::CudaError;
     use polydem::backend::{Device, Engine, Start};
     let text = replace(
         "region = { kind = \"box\", min = [-0.1, -0.1, 0.1], max = [0.1, 0.1, 0.3] }\ncount = 20",

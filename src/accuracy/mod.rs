@@ -29,8 +29,8 @@ mod plot;
 mod runner;
 mod sustained;
 
+use crate::Precision;
 use crate::backend::Device;
-use crate::backend::cuda::Precision;
 use anyhow::{Context, Result, anyhow};
 use plot::plot;
 use runner::CaseRunner;

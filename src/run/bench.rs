@@ -1,6 +1,6 @@
 //! `polydem bench`: a scene stepped without output, timed.
 use super::summary::{parallel_report, whole_run};
-use crate::backend::cuda::Precision;
+use crate::Precision;
 use crate::backend::{BackendChoice, Engine, Start, select_device};
 use crate::domain::{Comm, SerialComm};
 use crate::scene::load_scene;

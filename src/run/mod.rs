@@ -19,7 +19,7 @@ pub use check::{ENERGY_FACE_FRACTION, SAFE_FACE_FRACTION, check, time_step_warni
 pub use output::{OUTPUT_ENTRIES, prepare_output_dir};
 pub use pack::{PackOptions, pack};
 
-use crate::backend::cuda::Precision;
+use crate::Precision;
 use crate::backend::{BackendChoice, Device, Engine, Start, select_device};
 use crate::domain::{Comm, SerialComm};
 use crate::io::{remove_temporary_files, write_atomic};

@@ -18,7 +18,7 @@
 //! them, and compressed further otherwise. Friction during the compression is the scene's:
 //! the lower it is, the denser the packing at a given Z.
 
-use crate::backend::cuda::Precision;
+use crate::Precision;
 use crate::backend::{BackendChoice, Engine, Start, select_device};
 use crate::domain::SerialComm;
 use crate::io::{PackedParticle, Packing};

@@ -301,12 +301,12 @@ pub const CPU_MIXED: polydem::backend::Device = polydem::backend::Device::CpuMix
 #[allow(dead_code)]
 pub const GPU_DOUBLE: polydem::backend::Device = polydem::backend::Device::Cuda {
     ordinal: 0,
-    precision: polydem::backend::cuda::Precision::Double,
+    precision: polydem::Precision::Double,
 };
 #[allow(dead_code)]
 pub const GPU_MIXED: polydem::backend::Device = polydem::backend::Device::Cuda {
     ordinal: 0,
-    precision: polydem::backend::cuda::Precision::Mixed,
+    precision: polydem::Precision::Mixed,
 };
 
 /// `start` on GPU 0 in `precision`, made as every backend is, by [`polydem::backend::Engine::new`];
@@ -314,7 +314,7 @@ pub const GPU_MIXED: polydem::backend::Device = polydem::backend::Device::Cuda {
 #[allow(dead_code)]
 pub fn gpu_engine(
     start: impl Into<polydem::backend::Start>,
-    precision: polydem::backend::cuda::Precision,
+    precision: polydem::Precision,
 ) -> polydem::backend::Engine {
     let device = polydem::backend::Device::Cuda {
         ordinal: 0,
