@@ -254,8 +254,11 @@ struct LocalPowerLaw {
 PD_HD LocalPowerLaw local_power_law(double volume, double area, double thickness) {
     LocalPowerLaw out;
     out.volume = volume;
-    out.depth = thickness > 0.0 && thickness - thickness == 0.0 ? thickness : volume / area;
-    out.exponent = min_(max_(area * out.depth / volume, 1.0), 3.0);
+    double h = thickness > 0.0 && thickness - thickness == 0.0 ? thickness : volume / area;
+    double ratio = area * h / volume;
+    out.exponent = min_(max_(ratio, 1.0), 3.0);
+    // A clamped exponent takes the depth that keeps V'(h) = k V/h the contact's area.
+    out.depth = ratio - ratio == 0.0 && ratio != out.exponent ? out.exponent * volume / area : h;
     return out;
 }
 

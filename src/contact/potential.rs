@@ -33,18 +33,30 @@ pub(super) struct LocalPowerLaw {
 
 impl LocalPowerLaw {
     pub(super) fn new(volume: f64, area: f64, thickness: f64) -> Self {
-        let depth = if thickness > 0.0 && thickness.is_finite() {
+        let thickness = if thickness > 0.0 && thickness.is_finite() {
             thickness
         } else {
             volume / area
         };
+        let ratio = area * thickness / volume;
+        // max then min, not clamp: a NaN ratio becomes 1 as in the CUDA twin's
+        // `min_(max_(…))`, where clamp would keep the NaN.
+        #[allow(clippy::manual_clamp)]
+        let exponent = ratio.max(1.0).min(3.0);
+        // A clamped exponent takes the depth that keeps the law's slope at V the contact's
+        // area, `V'(h) = k V/h = A_n`: a depth past `V/A_n` (the vertices' exit depth of an
+        // overlap that wraps round an edge of A can give up to twice that) with k held at 1
+        // gave the face's motion of `contact::trajectory` `V/h`, up to twice the area, and an
+        // elastic force as much too large.
+        let depth = if ratio.is_finite() && ratio != exponent {
+            exponent * volume / area
+        } else {
+            thickness
+        };
         Self {
             volume,
             depth,
-            // max then min, not clamp: a NaN ratio becomes 1 as in the CUDA twin's
-            // `min_(max_(…))`, where clamp would keep the NaN.
-            #[allow(clippy::manual_clamp)]
-            exponent: (area * depth / volume).max(1.0).min(3.0),
+            exponent,
         }
     }
 
