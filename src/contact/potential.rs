@@ -44,10 +44,10 @@ impl LocalPowerLaw {
         #[allow(clippy::manual_clamp)]
         let exponent = ratio.max(1.0).min(3.0);
         // A clamped exponent takes the depth that keeps the law's slope at V the contact's
-        // area, `V'(h) = k V/h = A_n`: a depth past `V/A_n` (the vertices' exit depth of an
-        // overlap that wraps round an edge of A can give up to twice that) with k held at 1
-        // gave the face's motion of `contact::trajectory` `V/h`, up to twice the area, and an
-        // elastic force as much too large.
+        // area, `V'(h) = k V/h = A_n`: the vertices' exit depth is taken down to half of
+        // `V/A_n` (geometry::overlap), and such a depth short of `V/A_n` with k held at 1 gave
+        // the face's motion of `contact::trajectory` the area `V/h`, up to twice `A_n`, and an
+        // elastic force as much too large. (Past `3 V/A_n`, k held at 3 gave too small a one.)
         let depth = if ratio.is_finite() && ratio != exponent {
             exponent * volume / area
         } else {
