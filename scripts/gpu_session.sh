@@ -171,8 +171,10 @@ if [ "$what" = regress ]; then
   # time on an idle GPU, alternating, then POLYDEM_PHASE_CLOCKS=1 (per-phase thread-cycles of
   # the pair kernels in the .err logs) with each.
   s=launch/bench/settled
+  # ROUNDS (default 1) alternations: about 1.5 min per CLI and round, so keep the CLIs times
+  # ROUNDS within a call's 10 minutes.
   short="--backend cuda --gpu-precision mixed --warmup 5 --steps 20"
-  for round in 1 2; do
+  for round in $(seq "${ROUNDS:-1}"); do
     for cli in .device/bin/polydem*; do
       tag=$(basename "$cli")
       for name in mineral_grains cylinders dodecahedra; do
