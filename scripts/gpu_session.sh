@@ -172,17 +172,18 @@ if [ "$what" = regress ]; then
   # the pair kernels in the .err logs) with each.
   s=launch/bench/settled
   # ROUNDS (default 1) alternations: about 1.5 min per CLI and round, so keep the CLIs times
-  # ROUNDS within a call's 10 minutes.
+  # ROUNDS within a call's 10 minutes. SCENES="mineral_grains" runs only some packings.
   short="--backend cuda --gpu-precision mixed --warmup 5 --steps 20"
   for round in $(seq "${ROUNDS:-1}"); do
     for cli in .device/bin/polydem*; do
       tag=$(basename "$cli")
-      for name in mineral_grains cylinders dodecahedra; do
+      for name in ${SCENES:-mineral_grains cylinders dodecahedra}; do
         bench "${name}_${tag}_$round" X=1 "$cli" bench $s/${name}_1e6.toml $short
       done
     done
   done
-  for cli in .device/bin/polydem*; do
+  # CLOCKS=0 leaves the phase clocks out (a bisection needs only the speeds).
+  [ "${CLOCKS:-1}" = 0 ] || for cli in .device/bin/polydem*; do
     bench "mineral_grains_$(basename "$cli")_clocks" POLYDEM_PHASE_CLOCKS=1 "$cli" bench \
       $s/mineral_grains_1e6.toml $short
   done

@@ -255,9 +255,14 @@ fn run_reports_particles_leaving_the_domain() {
 
 /// The same on the GPU (double precision): the same rule, and the same particles at the same
 /// step as on the CPU.
+/// The GPU tests of this file, one at a time: the memory test fills the GPU to 256 MiB, so
+/// a run that starts beside it cannot open the GPU (its context alone needs more).
+static ONE_GPU_TEST: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn particles_leaving_the_domain_on_the_gpu_follow_the_same_rule() {
+    let _gpu = ONE_GPU_TEST.lock().unwrap_or_else(|e| e.into_inner());
     let (cpu, gpu) = (leaving_run("cpu"), leaving_run("cuda"));
     println!("CPU: {cpu}\nGPU: {gpu}");
     assert_eq!(cpu, gpu);
@@ -628,6 +633,7 @@ fn schema_and_value_errors_are_listed_together() {
 #[test]
 #[ignore = "needs a CUDA GPU"]
 fn a_pair_list_beyond_gpu_memory_is_named_with_its_bytes() {
+    let _gpu = ONE_GPU_TEST.lock().unwrap_or_else(|e| e.into_inner());
     use polydem::Precision;
     use polydem::backend::cuda::CudaError;
     use polydem::backend::{Device, Engine, Start};
