@@ -268,6 +268,38 @@ PD_HD double local_volume_at(const LocalPowerLaw& l, double d) {
     return ratio > 0.0 ? l.volume * portable_pow(ratio, l.exponent) : 0.0;
 }
 
+// The normal force of a contact for a pressure (law.rs `contact_forces`' `normal` closure):
+// elastic, the Hunt–Crossley coefficient, and the capped total that never pulls.
+struct NormalForce {
+    double f_elastic, c_n, f_normal;
+};
+
+PD_HD NormalForce normal_force(const ContactParameters& params, double cap_mass, double pressure, double area,
+                               double v_ref, double share, double vn, double dt) {
+    NormalForce out;
+    out.f_elastic = pressure * area;
+    out.c_n = params.damping * out.f_elastic / v_ref;
+    double f_damp = -out.c_n * vn;
+    if (dt > 0.0) {
+        double limit = share * cap_mass * abs_(vn) / dt;
+        f_damp = min_(max_(f_damp, -limit), limit);
+    }
+    out.f_normal = max_(out.f_elastic + f_damp, 0.0);
+    return out;
+}
+
+// The normal force a kick applies for an elastic force (law.rs: `normal(force / area)`), with
+// which the window judges whether the coming drift ends apart (trajectory.rs `window_force`'s
+// `kick`).
+struct Kick {
+    const ContactParameters* params;
+    double cap_mass, area, v_ref, share, vn;
+};
+
+PD_HD double kick_force(const Kick& k, double force, double dt) {
+    return normal_force(*k.params, k.cap_mass, force / k.area, k.area, k.v_ref, k.share, k.vn, dt).f_normal;
+}
+
 // A face contact's one-dimensional normal motion about its current state (trajectory.rs
 // `NormalMotion`): the approach d beyond the depth h and its rate, under the regularized
 // potential W of the local power law.
@@ -327,8 +359,9 @@ PD_HD void motion_flow(const NormalMotion& m, double* d_io, double* rate_io, dou
 
 // NormalMotion::window_force: the mean elastic force over the kick window from the mid-point
 // speed (3 fixed-point passes, trajectory.rs MIDPOINT_PASSES), the window before a new contact
-// and the window after a leaving one included.
-PD_HD double motion_window_force(const NormalMotion& m, double vn, double dt, bool first, double guess) {
+// and the window after a leaving one included, judged with the force the kick applies.
+PD_HD double motion_window_force(const NormalMotion& m, double vn, double dt, bool first, double guess,
+                                 const Kick& kick) {
     double half = -vn;
     double force = guess;
     for (int pass = 0; pass < 3; ++pass) {
@@ -343,7 +376,8 @@ PD_HD double motion_window_force(const NormalMotion& m, double vn, double dt, bo
             motion_flow(m, &d, &r, -dt);
             taken += r - r_back;
         }
-        if (m.law.depth + (half - taken) * dt <= 0.0) {
+        double left = kick_force(kick, taken / (m.inverse_mass * dt), dt) * m.inverse_mass * dt;
+        if (m.law.depth + (half - left) * dt <= 0.0) {
             double d = d_ahead, r = r_ahead;
             motion_flow(m, &d, &r, dt);
             taken += r_ahead - r;
@@ -351,26 +385,6 @@ PD_HD double motion_window_force(const NormalMotion& m, double vn, double dt, bo
         force = taken / (m.inverse_mass * dt);
     }
     return force;
-}
-
-// The normal force of a contact for a pressure (law.rs `contact_forces`' `normal` closure):
-// elastic, the Hunt–Crossley coefficient, and the capped total that never pulls.
-struct NormalForce {
-    double f_elastic, c_n, f_normal;
-};
-
-PD_HD NormalForce normal_force(const ContactParameters& params, double cap_mass, double pressure, double area,
-                               double v_ref, double share, double vn, double dt) {
-    NormalForce out;
-    out.f_elastic = pressure * area;
-    out.c_n = params.damping * out.f_elastic / v_ref;
-    double f_damp = -out.c_n * vn;
-    if (dt > 0.0) {
-        double limit = share * cap_mass * abs_(vn) / dt;
-        f_damp = min_(max_(f_damp, -limit), limit);
-    }
-    out.f_normal = max_(out.f_elastic + f_damp, 0.0);
-    return out;
 }
 
 // V^{2/3}, the area scale of an overlap of volume V (law.rs `volume_area_scale`).
@@ -449,17 +463,6 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     double pressure = secant && sweep > 0.5 * volume
                           ? resolved_mean_pressure(stiffness, volume - sweep, volume + sweep, resolved)
                           : resolved_pressure(stiffness, volume, resolved); // law.rs WINDOW_FRACTION
-    // Or the impulse of the contact's own normal motion over the kick window (trajectory.rs).
-    // A contact deep against its step's travel keeps the slope at V (trajectory.rs
-    // TRAJECTORY_FRACTION).
-    if (windowed && !secant && dt > 0.0 && sweep > 0.1 * volume) {
-        NormalMotion motion;
-        motion.law = local;
-        motion.stiffness = stiffness;
-        motion.resolved = resolved;
-        motion.inverse_mass = 1.0 / kin.effective_mass;
-        pressure = motion_window_force(motion, vn, dt, first_touch, pressure * area) / area;
-    }
     if (secant && first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0) {
         pressure += resolved_potential(stiffness, volume - sweep, resolved) / (2.0 * sweep);
     }
@@ -473,6 +476,24 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
     double share = at_floor ? 0.5 : 1.0;
     double cap_mass = at_floor ? kin.dashpot_mass : kin.effective_mass;
     double cap_a = at_floor ? kin.split_a : 1.0, cap_b = at_floor ? kin.split_b : 1.0;
+    // Or the impulse of the contact's own normal motion over the kick window (trajectory.rs).
+    // A contact deep against its step's travel keeps the slope at V (trajectory.rs
+    // TRAJECTORY_FRACTION).
+    if (windowed && !secant && dt > 0.0 && sweep > 0.1 * volume) {
+        NormalMotion motion;
+        motion.law = local;
+        motion.stiffness = stiffness;
+        motion.resolved = resolved;
+        motion.inverse_mass = 1.0 / kin.effective_mass;
+        Kick kick;
+        kick.params = &params;
+        kick.cap_mass = cap_mass;
+        kick.area = area;
+        kick.v_ref = v_ref;
+        kick.share = share;
+        kick.vn = vn;
+        pressure = motion_window_force(motion, vn, dt, first_touch, pressure * area, kick) / area;
+    }
     NormalForce nf = normal_force(params, cap_mass, pressure, area, v_ref, share, vn, dt);
     // The exit (law.rs): a separating contact that the coming drift carries apart.
     if (secant && vn > 0.0 && dt > 0.0) {

@@ -8,8 +8,8 @@
 #   bash scripts/gpu_session.sh tests     # the GPU tests, several processes at once (~5-8 min)
 #   bash scripts/gpu_session.sh benches   # the A/B benches, one at a time on an idle GPU
 #   bash scripts/gpu_session.sh all       # both
-#   bash scripts/gpu_session.sh settled   # docs/performance.md's settled packings, and the face
-#                                         # trajectory window's cost on them
+#   bash scripts/gpu_session.sh settled   # docs/performance.md's settled packings, and what the
+#                                         # face trajectory (the default) costs them
 #   bash scripts/gpu_session.sh regress   # the settled many-faced packings with this CLI and each
 #                                         # .device/bin/polydem_<name> (scripts/pack-commit.sh),
 #                                         # alternating, then this CLI's phase clocks
@@ -149,20 +149,21 @@ if [ "$what" = benches ] || [ "$what" = all ]; then
 fi
 if [ "$what" = settled ]; then
   # The settled packings of docs/performance.md at 1e6 particles, one at a time on an idle GPU,
-  # and the dodecahedra again with simulation.face_window = "trajectory" (a copy of the scene
-  # beside it, so that its packing path still resolves).
+  # and the dodecahedra and mineral grains again with simulation.face_window = "secant" (the
+  # default before the trajectory; a copy of the scene beside it, so that its packing path
+  # still resolves): what the trajectory costs them.
   s=launch/bench/settled
   for name in dodecahedra mineral_grains cylinders; do
-    sed 's/^\[simulation\]$/[simulation]\nface_window = "trajectory"/' "$s/${name}_1e6.toml" \
-      > "$s/${name}_1e6_trajectory.toml"
+    sed 's/^\[simulation\]$/[simulation]\nface_window = "secant"/' "$s/${name}_1e6.toml" \
+      > "$s/${name}_1e6_secant.toml"
   done
   steps="--warmup 10 --steps ${STEPS:-100}"
   bench dodecahedra_mixed X=1 polydem bench $s/dodecahedra_1e6.toml --backend cuda --gpu-precision mixed $steps
-  bench dodecahedra_mixed_traj X=1 polydem bench $s/dodecahedra_1e6_trajectory.toml --backend cuda --gpu-precision mixed $steps
+  bench dodecahedra_mixed_secant X=1 polydem bench $s/dodecahedra_1e6_secant.toml --backend cuda --gpu-precision mixed $steps
   bench dodecahedra_double X=1 polydem bench $s/dodecahedra_1e6.toml --backend cuda --gpu-precision double $steps
-  bench dodecahedra_double_traj X=1 polydem bench $s/dodecahedra_1e6_trajectory.toml --backend cuda --gpu-precision double $steps
+  bench dodecahedra_double_secant X=1 polydem bench $s/dodecahedra_1e6_secant.toml --backend cuda --gpu-precision double $steps
   bench mineral_grains_mixed X=1 polydem bench $s/mineral_grains_1e6.toml --backend cuda --gpu-precision mixed --warmup 5 --steps 40
-  bench mineral_grains_mixed_traj X=1 polydem bench $s/mineral_grains_1e6_trajectory.toml --backend cuda --gpu-precision mixed --warmup 5 --steps 40
+  bench mineral_grains_mixed_secant X=1 polydem bench $s/mineral_grains_1e6_secant.toml --backend cuda --gpu-precision mixed --warmup 5 --steps 40
   bench cylinders_mixed X=1 polydem bench $s/cylinders_1e6.toml --backend cuda --gpu-precision mixed --warmup 5 --steps 40
   bench spheres_mixed X=1 polydem bench $s/spheres_1e6.toml --backend cuda --gpu-precision mixed $steps
 fi

@@ -50,15 +50,22 @@ fn every_reference_case_is_within_one_percent_at_the_default_step() {
         at("restitution", DEFAULT_DT_FRACTION),
     );
     assert!(coarse > 1.5 * fine, "restitution {coarse:e} → {fine:e}");
-    // No elastic impact gains more than 1e-3 of its energy at the default; at twice the step
-    // one does, which is why the default is not twice as large.
+    // No elastic impact gains more than 1e-3 of its energy at the default, nor at twice the
+    // step along the face's trajectory (the default face window; 2.8e-3 with the secant).
     let (coarse, fine) = (
         at("elastic_impact", 2.0 * DEFAULT_DT_FRACTION),
         at("elastic_impact", DEFAULT_DT_FRACTION),
     );
     assert!(
-        fine <= 1e-3 && coarse > 1e-3,
+        fine <= 1e-3 && coarse <= 1e-3,
         "elastic impacts' energy gain {coarse:e} → {fine:e}"
+    );
+    // At twice the step a sphere that sticks late leaves with part of its slip (1.7 % at 55°,
+    // docs/accuracy.md): why the default is not twice as large.
+    let sticking = at("sphere_sticking", 2.0 * DEFAULT_DT_FRACTION);
+    assert!(
+        sticking > 0.01,
+        "sphere_sticking {sticking:e} at twice the default"
     );
     let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1 + rows.len());

@@ -258,19 +258,21 @@ fn unknown_keys_are_errors_naming_the_full_key() {
     assert!(msg.contains("allowed: `secant`, `trajectory`"), "{msg}");
 }
 
-/// `simulation.face_window` (docs/contact.md §1): the secant by default, the trajectory when
+/// `simulation.face_window` (docs/contact.md §1): the trajectory by default, the secant when
 /// named, and part of what a restart must match.
 #[test]
 fn the_face_window_is_read_and_fingerprinted() {
     use polydem::contact::FaceWindow;
-    let secant = parse(BASE).unwrap();
-    assert_eq!(secant.simulation.face_window, FaceWindow::Secant);
-    let trajectory = parse(&replace(
+    let trajectory = parse(BASE).unwrap();
+    assert_eq!(trajectory.simulation.face_window, FaceWindow::Trajectory);
+    let named = parse(&replace(
         "seed = 11",
         "seed = 11\nface_window = \"trajectory\"",
     ))
     .unwrap();
-    assert_eq!(trajectory.simulation.face_window, FaceWindow::Trajectory);
+    assert_eq!(named.simulation, trajectory.simulation);
+    let secant = parse(&replace("seed = 11", "seed = 11\nface_window = \"secant\"")).unwrap();
+    assert_eq!(secant.simulation.face_window, FaceWindow::Secant);
     let (a, b) = (
         polydem::scene::restart::SceneFingerprint::of(&secant),
         polydem::scene::restart::SceneFingerprint::of(&trajectory),
@@ -1180,8 +1182,9 @@ fn the_hybrid_skin_is_at_least_the_skin() {
 /// `launch/mpi/`, the decomposition tests' fixtures, which compare rank counts bit for bit at
 /// a coarse fixed step (0.12–1.0 of their contact times) and warn when run. The examples, the
 /// quickstart and the benchmarks also take at most the default `dt_fraction` (0.025): at 0.05 an
-/// elastic face impact gains up to 2.8e-3 of its energy (docs/accuracy.md). The production
-/// cases still run at 0.05 until their observables are rerun at the default (docs/production.md),
+/// elastic face impact gains up to 2.8e-3 of its energy with the secant face window
+/// (docs/accuracy.md). The production cases still run at 0.05 with the secant, as their
+/// results were made, until their observables are rerun at the default (docs/production.md),
 /// and the packing scenes of `launch/bench/packings/` at the step that made the committed packings.
 #[test]
 fn no_shipped_scene_warns_about_its_time_step() {

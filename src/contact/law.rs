@@ -355,13 +355,6 @@ pub fn contact_forces(
     } else {
         resolved_pressure(stiffness, volume, resolved)
     };
-    // Or the impulse of the contact's own normal motion over the kick window, its entry and
-    // its exit included (trajectory.rs), from the slope at V as the first guess.
-    // A contact deep against its step's travel keeps the slope at V (see TRAJECTORY_FRACTION).
-    if windowed && !secant && dt > 0.0 && sweep > TRAJECTORY_FRACTION * volume {
-        let motion = NormalMotion::new(local, stiffness, resolved, kin.effective_mass);
-        pressure = motion.window_force(vn, dt, first_touch, pressure * area) / area;
-    }
     // A contact that began during the last drift (the last position, V − 2 A s, was apart)
     // missed the part of the last kick's window that lay in contact, [0, V − A s]: it is
     // carried now.
@@ -407,6 +400,16 @@ pub fn contact_forces(
         // The contact pushes, never pulls.
         (f_elastic, c_n, (f_elastic + f_damp).max(0.0))
     };
+    // Or the impulse of the contact's own normal motion over the kick window, its entry and
+    // its exit included (trajectory.rs), from the slope at V as the first guess. Whether the
+    // coming drift ends apart (the window after) is judged with the force the kick applies,
+    // damping included, as the next step will find it.
+    // A contact deep against its step's travel keeps the slope at V (see TRAJECTORY_FRACTION).
+    if windowed && !secant && dt > 0.0 && sweep > TRAJECTORY_FRACTION * volume {
+        let motion = NormalMotion::new(local, stiffness, resolved, kin.effective_mass);
+        let kick = |force: f64| normal(force / area).2;
+        pressure = motion.window_force(vn, dt, first_touch, pressure * area, kick) / area;
+    }
     let (mut f_elastic, mut c_n, mut f_normal) = normal(pressure);
     // The exit, the mirror of the entry: a separating contact that the coming drift carries
     // apart (its depth h is at most 2 s', s' = u Δt/2 with u the normal speed after this

@@ -29,6 +29,10 @@ pub const SECTIONS_RECORD: &str = "scene_sections";
 pub struct SceneFingerprint {
     /// `(section, hash)` in file order, e.g. `("walls[0] (box)", …)`.
     pub sections: Vec<(String, u64)>,
+    /// `(section, hash, hint)`: a section as it hashed under an earlier default, and what to
+    /// write to continue a checkpoint of that time (the face window's default was the secant):
+    /// a refused restart whose section matches says so.
+    pub earlier_defaults: Vec<(String, u64, &'static str)>,
 }
 
 impl SceneFingerprint {
@@ -45,14 +49,29 @@ impl SceneFingerprint {
         // continue in another mode. The hybrid skin is left out of the text, so that
         // checkpoints written before it existed keep their fingerprint.
         sim.neighbor.mode = crate::scene::NeighborMode::Auto;
-        // The face window came later: the default (secant) hashes as before it existed, so that
-        // the checkpoints of earlier runs still restart.
-        let text = format!("{sim:?}").replace(", face_window: Secant", "");
-        let text = match (text.find(", hybrid_skin: "), text.find(" }, guard")) {
-            (Some(a), Some(b)) if a < b => format!("{}{}", &text[..a], &text[b..]),
-            _ => text,
+        // The face window came later, with the secant as its default: the secant hashes as
+        // before the key existed, so that the checkpoints of earlier runs still restart where
+        // their scene names it.
+        let hashed = |sim: &crate::scene::SimulationSettings| {
+            let text = format!("{sim:?}").replace(", face_window: Secant", "");
+            match (text.find(", hybrid_skin: "), text.find(" }, guard")) {
+                (Some(a), Some(b)) if a < b => format!("{}{}", &text[..a], &text[b..]),
+                _ => text,
+            }
         };
-        add("simulation".into(), text);
+        let mut earlier_defaults = Vec::new();
+        if sim.face_window == crate::contact::FaceWindow::Trajectory {
+            let mut secant = sim.clone();
+            secant.face_window = crate::contact::FaceWindow::Secant;
+            earlier_defaults.push((
+                "simulation".to_string(),
+                fnv1a64(hashed(&secant).as_bytes()),
+                "the checkpoint was written with the face window then the default, \
+                 `simulation.face_window = \"secant\"`: name it in the scene's [simulation] to \
+                 continue the run",
+            ));
+        }
+        add("simulation".into(), hashed(&sim));
         let mut domain = scene.domain;
         domain.on_leaving = Default::default();
         add("domain".into(), format!("{domain:?}"));
@@ -80,7 +99,10 @@ impl SceneFingerprint {
         for (i, w) in scene.walls.iter().enumerate() {
             add(format!("walls[{i}] ({})", w.name), format!("{w:?}"));
         }
-        SceneFingerprint { sections }
+        SceneFingerprint {
+            sections,
+            earlier_defaults,
+        }
     }
 
     /// The hash of all sections: what a checkpoint stores as `scene_hash`.
@@ -108,7 +130,10 @@ impl SceneFingerprint {
                 Some((name.to_string(), u64::from_str_radix(h, 16).ok()?))
             })
             .collect::<Option<Vec<_>>>()?;
-        Some(SceneFingerprint { sections })
+        Some(SceneFingerprint {
+            sections,
+            earlier_defaults: Vec::new(),
+        })
     }
 
     /// The sections that differ between `self` (this scene) and `then` (the checkpoint's), in
@@ -156,12 +181,18 @@ impl SceneFingerprint {
             return Err(format!("its `{SECTIONS_RECORD}` record is malformed"));
         };
         let diff = self.differences(&then);
-        let list = if diff.is_empty() {
+        let mut list = if diff.is_empty() {
             // Equal sections under another total: a record that does not match the header.
             "its scene hash does not match its own section record".to_string()
         } else {
             diff.join(", ")
         };
+        for (name, hash, hint) in &self.earlier_defaults {
+            let then_hash = then.sections.iter().find(|(n, _)| n == name).map(|s| s.1);
+            if diff == [format!("{name} changed")] && then_hash == Some(*hash) {
+                list = format!("{list} ({hint})");
+            }
+        }
         Err(format!(
             "written for another scene: {list}; a restart may change only \
              `simulation.end_time`, `[simulation.guard]`, `simulation.neighbor.mode` and \
@@ -282,18 +313,61 @@ mod tests {
         let c = scene("skin = 0.0003");
         assert_ne!(SceneFingerprint::of(&a), SceneFingerprint::of(&c));
         // The hashed text of the simulation section, as before `hybrid_skin` and
-        // `face_window`.
+        // `face_window`, for a run with the face window of that time (the secant).
+        let mut a = a;
+        a.simulation.face_window = crate::contact::FaceWindow::Secant;
         let mut sim = a.simulation.clone();
         sim.end_time = 0.0;
         sim.guard = Default::default();
         let old = format!("{sim:?}")
             .replace(", hybrid_skin: 0.0004", "")
             .replace(", face_window: Secant", "");
-        assert!(!old.contains("hybrid_skin"));
+        assert!(!old.contains("hybrid_skin") && !old.contains("face_window"));
         let simulation = SceneFingerprint::of(&a).sections[0].clone();
         assert_eq!(
             simulation,
             ("simulation".to_string(), fnv1a64(old.as_bytes()))
         );
+    }
+
+    /// A checkpoint of a run made when the secant was the face window's default is refused by
+    /// the same scene under today's default (the law differs), with what to write to continue
+    /// it; with that written it restarts. Another change to the section gets no such hint.
+    #[test]
+    fn a_checkpoint_of_the_secant_default_names_the_key_that_continues_it() {
+        let mut then = scene("skin = 0.0002");
+        then.simulation.face_window = crate::contact::FaceWindow::Secant;
+        let now = scene("skin = 0.0002");
+        assert_eq!(
+            now.simulation.face_window,
+            crate::contact::FaceWindow::Trajectory
+        );
+        let old = SceneFingerprint::of(&then);
+        let checkpoint = Checkpoint {
+            step: 0,
+            time: 0.0,
+            particles: Default::default(),
+            history: Default::default(),
+            rng_state: [0; 4],
+            inserter: Vec::new(),
+            next_id: 0,
+            scene_hash: old.hash(),
+            extra: vec![(SECTIONS_RECORD.to_string(), old.record())],
+        };
+        let refused = SceneFingerprint::of(&now)
+            .check(&checkpoint, 0)
+            .unwrap_err();
+        assert!(refused.contains("simulation changed"), "{refused}");
+        assert!(
+            refused.contains("`simulation.face_window = \"secant\"`"),
+            "{refused}"
+        );
+        SceneFingerprint::of(&then).check(&checkpoint, 0).unwrap();
+        let mut other = scene("skin = 0.0003");
+        other.simulation.face_window = crate::contact::FaceWindow::Trajectory;
+        let refused = SceneFingerprint::of(&other)
+            .check(&checkpoint, 0)
+            .unwrap_err();
+        assert!(!refused.contains("face_window"), "{refused}");
     }
 }
