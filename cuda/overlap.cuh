@@ -412,11 +412,21 @@ struct BodyRef {
 // the outer's circumscribed ball), and then its overlap: the inner body's volume from its faces,
 // its centroid, S = 0, no surface moment. In f64 whatever the pair's precision, the same
 // operations in the same order as the CPU's.
+// Rust contained.rs `least_offset`: the radius of the ball about the centre the template holds.
+PD_HD double least_offset(const TemplateView& t) {
+    double least = bits_double(0x7ff0000000000000ULL); // +infinity
+    for (int f = 0; f < t.n_faces; ++f) least = t.offsets[f] < least ? t.offsets[f] : least;
+    return least;
+}
+
 PD_HD bool contained_inside(const BodyRef& in, const BodyRef& outer, Overlap<double>* out) {
     V3<double> d = in.pos - outer.pos;
     double ri = in.tpl.circumscribed_radius * in.scale, ro = outer.tpl.circumscribed_radius * outer.scale;
-    if (dot(d, d) > ro * ro) return false;
     double tol = 64.0 * 2.220446049250313e-16 * (ri + ro);
+    // Rust `could_be_inside`: |d| + ρ_i ≤ R_o (1 + tol/ρ_o) + tol, a necessary condition.
+    double rho_i = least_offset(in.tpl) * in.scale, rho_o = least_offset(outer.tpl) * outer.scale;
+    double reach = ro + ro * (tol / rho_o) + tol - rho_i;
+    if (!(reach >= 0.0) || dot(d, d) > reach * reach) return false;
     Quat<double> inv;
     inv.w = outer.rot.w;
     inv.x = -outer.rot.x;
