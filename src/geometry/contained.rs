@@ -171,7 +171,7 @@ mod tests {
             for inner in &shapes {
                 for scale in [0.2, 0.45, 0.9] {
                     for _ in 0..20 {
-                        let mut angle = || 6.283 * uniform();
+                        let mut angle = || std::f64::consts::TAU * uniform();
                         let qi = UnitQuaternion::from_euler_angles(angle(), angle(), angle());
                         let qo = UnitQuaternion::from_euler_angles(angle(), angle(), angle());
                         let dir = Vector3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5)
