@@ -301,38 +301,39 @@ pub fn loading_cycle_speed(stored: f64, vn: f64) -> f64 {
     }
 }
 
-/// Evaluates the contact law for an overlap, updating the contact's history `state` over `dt`
-/// (the module docs and docs/contact.md give every term).
-pub fn contact_forces(
+/// The normal part of a contact's force over the step, with what its damping set for the
+/// friction and rocking caps (docs/contact.md §1–2).
+struct NormalPart {
+    /// `U'` as the step samples it (the window's mean, or the slope at V).
+    pressure: f64,
+    /// The elastic normal force `U' A_n`.
+    f_elastic: f64,
+    /// The Hunt–Crossley coefficient.
+    c_n: f64,
+    /// The normal force with damping and caps, never pulling.
+    f_normal: f64,
+    /// The regularized potential `W(V)`.
+    energy: f64,
+    /// The share of the relative speed a dashpot may take per step ([`DASHPOT_STEP_FRACTION`]).
+    share: f64,
+    /// The bodies' shares in the caps' mass splitting.
+    cap_a: f64,
+    cap_b: f64,
+}
+
+/// The elastic normal force as the step samples it (the secant window, the trajectory, the
+/// slope at V; the entry and exit), the Hunt–Crossley damping of the loading cycle and its
+/// caps (docs/contact.md §1–2). Updates the cycle's approach speed in `state`.
+fn normal_part(
     params: &ContactParameters,
     overlap: &Overlap<f64>,
     kin: &ContactKinematics,
     state: &mut ContactState,
     dt: f64,
-) -> ContactForces {
-    let volume = overlap.volume;
-    if volume <= 0.0 {
-        return ContactForces::default();
-    }
-    let inside;
-    // |S| > f V^{2/3} as |S|³ > f³ V², without a cube root on every contact's path.
-    let area = overlap.area();
-    let overlap = if area * area * area > INSIDE_AREA_CUBED * volume * volume {
-        overlap
-    } else {
-        inside = wholly_inside(overlap, kin);
-        &inside
-    };
-    let area = overlap.area();
-    let s_vec = overlap.dv_dxb;
-    let n = -s_vec / area; // from A to B
-    let c = overlap.centroid;
-    let r_e = contact_point(overlap, kin, &n);
-    let v_rel =
-        (kin.v_b + kin.w_b.cross(&(r_e - kin.x_b))) - (kin.v_a + kin.w_a.cross(&(r_e - kin.x_a)));
-    let vn = v_rel.dot(&n); // > 0 when separating
-    let first_touch = state.approach_speed == 0.0;
-
+    vn: f64,
+    first_touch: bool,
+) -> NormalPart {
+    let (volume, area) = (overlap.volume, overlap.area());
     // Elastic part. Where the contact's stiffness is unbounded at first touch (a face on a
     // face, local exponent k < 3/2), U' is the mean slope over the volume swept in the kick
     // window ±Δt/2; elsewhere the slope at V, the seed's Eq. 12 (symplectic).
@@ -386,7 +387,6 @@ pub fn contact_forces(
     } else {
         (1.0, 1.0)
     };
-    let cap_inverse_inertia = |u: &Vector3<f64>| kin.weighted_inverse_inertia(u, cap_a, cap_b);
     let normal = |pressure: f64| {
         let f_elastic = pressure * area;
         let c_n = params.damping * f_elastic / v_ref;
@@ -424,6 +424,136 @@ pub fn contact_forces(
             (f_elastic, c_n, f_normal) = normal(pressure);
         }
     }
+    NormalPart {
+        pressure,
+        f_elastic,
+        c_n,
+        f_normal,
+        energy,
+        share,
+        cap_a,
+        cap_b,
+    }
+}
+
+/// Friction at `r_e`: the tangential Kelvin–Voigt element in series with the Coulomb slider
+/// (friction.rs), its dashpot the step's lock against the mass the slip sees, and the same
+/// element about the normal (twisting) on the disk of area A_n. `v_t` and `wn` are the
+/// relative tangential speed at `r_e` and spin about `n`. Returns the tangential force on B
+/// and the twisting moment; updates the springs in `state`.
+#[allow(clippy::too_many_arguments)]
+fn friction_part(
+    params: &ContactParameters,
+    kin: &ContactKinematics,
+    state: &mut ContactState,
+    normal: &NormalPart,
+    (n, r_e): (&Vector3<f64>, &Vector3<f64>),
+    (v_t, wn): (&Vector3<f64>, f64),
+    area: f64,
+    dt: f64,
+) -> (Vector3<f64>, f64) {
+    let NormalPart {
+        f_normal,
+        share,
+        cap_a,
+        cap_b,
+        ..
+    } = *normal;
+    let disk = area / std::f64::consts::PI; // a² of the disk of area A_n
+    // The element's spring: the seed's (Eq. 17) or, where that is softer, the stiffest the
+    // step resolves; its dashpot the step's lock (friction.rs).
+    let seed_t = params.tangential_stiffness * area;
+    let w_t = kin.tangential_inverse_mass_trace(r_e, n, cap_a, cap_b);
+    let k_t = seed_t.max(resolved_stiffness(w_t, dt));
+    let root_t = k_t.sqrt();
+    // The stored state, carried into the current tangent plane at its length.
+    let old = state.spring;
+    let in_plane = old - n * old.dot(n);
+    let len = in_plane.norm();
+    let carried = if len > 0.0 {
+        in_plane * (old.norm() / len)
+    } else {
+        Vector3::zeros()
+    };
+    let c_t = lock_coefficient(share, w_t, dt);
+    let cap = params.friction * f_normal;
+    let (f_t, xi) = slip_step(stretch(carried, root_t), *v_t, k_t, c_t, cap, dt);
+    state.spring = xi * root_t;
+    // Twisting friction: the same element about the normal, on the disk of area A_n.
+    let w_n = kin.weighted_inverse_inertia(n, cap_a, cap_b);
+    let k_tw = (0.5 * seed_t * disk).max(resolved_stiffness(w_n, dt));
+    let root_tw = k_tw.sqrt();
+    let c_tw = lock_coefficient(share, w_n, dt);
+    let cap_tw = cap * (2.0 / 3.0) * disk.sqrt();
+    let (m, phi) = slip_step(stretch(state.twist, root_tw), wn, k_tw, c_tw, cap_tw, dt);
+    state.twist = phi * root_tw;
+    (f_t, m)
+}
+
+/// Rocking damping of the contact area: the normal dashpot (`c_n`) spread over the disk of
+/// area A_n (`disk` = a²), against the relative rotation about tangent axes `w_perp`, capped
+/// like the normal dashpot (docs/contact.md §3). The couple it takes from B, `None` where
+/// there is none.
+fn rocking_couple(
+    params: &ContactParameters,
+    kin: &ContactKinematics,
+    normal: &NormalPart,
+    w_perp: &Vector3<f64>,
+    disk: f64,
+    dt: f64,
+) -> Option<Vector3<f64>> {
+    let rocking = w_perp.norm();
+    if !(params.rocking && normal.c_n > 0.0 && rocking > 0.0) {
+        return None;
+    }
+    let mut c_roll = 0.25 * normal.c_n * disk;
+    let inverse = kin.weighted_inverse_inertia(&(w_perp / rocking), normal.cap_a, normal.cap_b);
+    if dt > 0.0 && inverse > 0.0 {
+        c_roll = c_roll.min(normal.share / (dt * inverse));
+    }
+    Some(w_perp * c_roll)
+}
+
+/// Evaluates the contact law for an overlap, updating the contact's history `state` over `dt`
+/// (the module docs and docs/contact.md give every term).
+pub fn contact_forces(
+    params: &ContactParameters,
+    overlap: &Overlap<f64>,
+    kin: &ContactKinematics,
+    state: &mut ContactState,
+    dt: f64,
+) -> ContactForces {
+    let volume = overlap.volume;
+    if volume <= 0.0 {
+        return ContactForces::default();
+    }
+    let inside;
+    // |S| > f V^{2/3} as |S|³ > f³ V², without a cube root on every contact's path.
+    let area = overlap.area();
+    let overlap = if area * area * area > INSIDE_AREA_CUBED * volume * volume {
+        overlap
+    } else {
+        inside = wholly_inside(overlap, kin);
+        &inside
+    };
+    let area = overlap.area();
+    let s_vec = overlap.dv_dxb;
+    let n = -s_vec / area; // from A to B
+    let c = overlap.centroid;
+    let r_e = contact_point(overlap, kin, &n);
+    let v_rel =
+        (kin.v_b + kin.w_b.cross(&(r_e - kin.x_b))) - (kin.v_a + kin.w_a.cross(&(r_e - kin.x_a)));
+    let vn = v_rel.dot(&n); // > 0 when separating
+    let first_touch = state.approach_speed == 0.0;
+    // The normal force, elastic and damped, and the elastic torque the potential gives.
+    let normal = normal_part(params, overlap, kin, state, dt, vn, first_touch);
+    let NormalPart {
+        pressure,
+        f_elastic,
+        f_normal,
+        energy,
+        ..
+    } = normal;
     let torque_b_el = -(overlap.moment_b + (c - kin.x_b).cross(&s_vec)) * pressure;
     let torque_a_el = -(-overlap.moment_b + (c - kin.x_a).cross(&(-s_vec))) * pressure;
 
@@ -431,58 +561,28 @@ pub fn contact_forces(
     let w_rel = kin.w_b - kin.w_a;
     let wn = w_rel.dot(&n);
     let w_perp = w_rel - n * wn;
-
-    // Friction at r_e: the tangential Kelvin–Voigt element in series with the Coulomb slider
-    // (friction.rs), its dashpot the step's lock against the mass the slip sees.
+    // Friction at r_e, sliding and twisting; the rocking damping of the contact area.
     let v_t = v_rel - n * vn;
     let disk = area / std::f64::consts::PI; // a² of the disk of area A_n
-    let mut tangential = Vector3::zeros();
-    let mut m_tw = 0.0;
-    if params.friction > 0.0 {
-        // The element's spring: the seed's (Eq. 17) or, where that is softer, the stiffest the
-        // step resolves; its dashpot the step's lock (friction.rs).
-        let seed_t = params.tangential_stiffness * area;
-        let w_t = kin.tangential_inverse_mass_trace(&r_e, &n, cap_a, cap_b);
-        let k_t = seed_t.max(resolved_stiffness(w_t, dt));
-        let root_t = k_t.sqrt();
-        // The stored state, carried into the current tangent plane at its length.
-        let old = state.spring;
-        let in_plane = old - n * old.dot(&n);
-        let len = in_plane.norm();
-        let carried = if len > 0.0 {
-            in_plane * (old.norm() / len)
-        } else {
-            Vector3::zeros()
-        };
-        let c_t = lock_coefficient(share, w_t, dt);
-        let cap = params.friction * f_normal;
-        let (f_t, xi) = slip_step(stretch(carried, root_t), v_t, k_t, c_t, cap, dt);
-        state.spring = xi * root_t;
-        tangential = f_t;
-        // Twisting friction: the same element about the normal, on the disk of area A_n.
-        let w_n = cap_inverse_inertia(&n);
-        let k_tw = (0.5 * seed_t * disk).max(resolved_stiffness(w_n, dt));
-        let root_tw = k_tw.sqrt();
-        let c_tw = lock_coefficient(share, w_n, dt);
-        let cap_tw = cap * (2.0 / 3.0) * disk.sqrt();
-        let (m, phi) = slip_step(stretch(state.twist, root_tw), wn, k_tw, c_tw, cap_tw, dt);
-        state.twist = phi * root_tw;
-        m_tw = m;
+    let (tangential, m_tw) = if params.friction > 0.0 {
+        friction_part(
+            params,
+            kin,
+            state,
+            &normal,
+            (&n, &r_e),
+            (&v_t, wn),
+            area,
+            dt,
+        )
     } else {
         state.spring = Vector3::zeros();
         state.twist = 0.0;
-    }
-
-    // Rocking damping of the contact area: the normal dashpot spread over its disk.
+        (Vector3::zeros(), 0.0)
+    };
     let mut couple_b = n * m_tw;
-    let rocking = w_perp.norm();
-    if params.rocking && c_n > 0.0 && rocking > 0.0 {
-        let mut c_roll = 0.25 * c_n * disk;
-        let inverse = cap_inverse_inertia(&(w_perp / rocking));
-        if dt > 0.0 && inverse > 0.0 {
-            c_roll = c_roll.min(share / (dt * inverse));
-        }
-        couple_b -= w_perp * c_roll;
+    if let Some(rocking) = rocking_couple(params, kin, &normal, &w_perp, disk, dt) {
+        couple_b -= rocking;
     }
 
     // The elastic force and torque as the potential gives them; the damping and the friction
