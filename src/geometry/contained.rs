@@ -17,8 +17,8 @@ use nalgebra::{Isometry3, Vector3};
 
 /// The overlap of two bodies one of which lies wholly inside the other (every vertex of it
 /// within `64 ε (r_A + r_B)` of the other's planes, r the circumscribed radii), or `None`.
-/// Only a body that could fit is tested vertex by vertex ([`could_be_inside`]), so that
-/// touching bodies cost one distance.
+/// Only a body that could fit is tested vertex by vertex (`|d| + ρ_i ≤ R_o`, ρ the least face
+/// offset, up to round-off: a necessary condition), so that touching bodies cost one distance.
 pub fn contained_overlap(
     a: (&ConvexTemplate, f64, &Isometry3<f64>),
     b: (&ConvexTemplate, f64, &Isometry3<f64>),
