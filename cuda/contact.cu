@@ -9,7 +9,7 @@
 // (PD_MAX_TEMPLATE_VERTICES/FACES), so a dodecahedron scene pays for 20 vertices and 12 faces.
 #include "common.cuh"
 #include "state.cuh"
-#include "overlap.cuh"
+#include "pair.cuh"
 #include "prism.cuh"
 #include "sphere.cuh"
 #include "contact_law.cuh"
@@ -289,7 +289,7 @@ PD_DEVICE void evaluate_pair(const PairArgs& q, size_t k) {
 #if PD_DOUBLE_GEOMETRY
     int status = overlap_pair_t<GeomReal, true>(ws, A, B, &g);
 #else
-    // Mixed precision (overlap.cuh overlap_pair_mixed, geometry::pair::overlap_pair_mixed).
+    // Mixed precision (pair.cuh overlap_pair_mixed, geometry::pair::overlap_pair_mixed).
     PairWorkspace<double> wide;
     int status = overlap_pair_mixed(ws, wide, A, B, &g);
 #endif

@@ -8,7 +8,7 @@
 // any set of templates up to PD_MAX_TEMPLATE_VERTICES/FACES. Every value crosses as a double:
 // indices and status codes are small integers, exact in a double.
 #include "common.cuh"
-#include "overlap.cuh"
+#include "pair.cuh"
 #include "prism.cuh"
 #include "layout.cuh"
 

@@ -1,5 +1,5 @@
 //! Parity of the CUDA contact-geometry headers (`cuda/gjk.cuh`, `interior.cuh`, `quickhull.cuh`,
-//! `overlap.cuh`, `polytope.cuh`, `prism.cuh`) with the Rust reference, on a machine without a
+//! `overlap.cuh`, `pair.cuh`, `polytope.cuh`, `prism.cuh`) with the Rust reference, on a machine without a
 //! GPU: the headers compile as plain host C++17, `cuda/host/geometry_harness.cpp` runs them on
 //! cases written by this test, and the results are compared with
 //! `geometry::pair::{overlap_pair, axis_separates}` and
@@ -1060,7 +1060,7 @@ fn harness_mismatches_with(
         .collect()
 }
 
-/// Mixed precision's routing (`overlap_pair_mixed` of `cuda/overlap.cuh`, which the GPU's
+/// Mixed precision's routing (`overlap_pair_mixed` of `cuda/pair.cuh`, which the GPU's
 /// full pair evaluation runs) against `geometry::pair::overlap_pair_mixed`, the CPU twin's
 /// pair geometry, bit for bit: on the random cases of the parity test above and on the
 /// contacts of the committed settled packing of dodecahedra, as compressed and dilated by

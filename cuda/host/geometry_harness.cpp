@@ -32,7 +32,7 @@
 //   spring(3) approach twist dt }; output S i {sin cos}, R i {cbrt}, P i {ln x, exp y, x^y}, W i {force_b(3) torque_a(3)
 //   torque_b(3) energy spring(3) approach twist}.
 
-#include "overlap.cuh"
+#include "pair.cuh"
 #include "prism.cuh"
 #include "sphere.cuh"
 #include "contact_law.cuh"

@@ -9,7 +9,7 @@
 //! f64 whatever the pair's precision: the inner body's volume (from its faces, exactly), its
 //! centroid, `S = 0` and no surface moment; the contact law then pushes the bodies apart along
 //! the line of centres ([`crate::contact::law::wholly_inside`]). The CUDA twin is
-//! `contained_overlap` in cuda/overlap.cuh, with the same operations in the same order.
+//! `contained_overlap` in cuda/pair.cuh, with the same operations in the same order.
 
 use super::overlap::Overlap;
 use crate::shape::ConvexTemplate;

@@ -286,7 +286,7 @@ pub fn overlap_pair_mixed(
 }
 
 /// [`overlap_pair_mixed`] with the Chebyshev LP in f64 (`wide_lp`, the default) or in f32
-/// (`POLYDEM_MIXED_LP=f32`, on trial; `PD_MIXED_LP_F32` of cuda/overlap.cuh). In f32 the LP can
+/// (`POLYDEM_MIXED_LP=f32`, on trial; `PD_MIXED_LP_F32` of cuda/pair.cuh). In f32 the LP can
 /// stop early in the thin wedge of a face resting on a face; its centre then lies nanometres
 /// from a face, a radius below [`MIXED_WIDE_ULPS`], and the pair goes to f64 all the same.
 pub fn overlap_pair_mixed_with(

@@ -133,7 +133,7 @@ impl Gpu {
 
     /// Prints the pair kernels' per-phase clock totals so far (a profiling build,
     /// `POLYDEM_PHASE_CLOCKS`): thread-cycles summed over all pairs, from `clock64()` at the
-    /// phase boundaries of `cuda/overlap.cuh` and `cuda/contact.cu`.
+    /// phase boundaries of `cuda/pair.cuh` and `cuda/contact.cu`.
     pub(super) fn report_phase_clocks(&self) -> Result<(), CudaError> {
         const PHASES: [&str; 16] = [
             "broad phase and cached axis",

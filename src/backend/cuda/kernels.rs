@@ -21,6 +21,7 @@ pub const SOURCES: &[(&str, &str)] = &[
         include_str!("../../../cuda/vertex_enumeration.cuh"),
     ),
     ("overlap.cuh", include_str!("../../../cuda/overlap.cuh")),
+    ("pair.cuh", include_str!("../../../cuda/pair.cuh")),
     ("prism.cuh", include_str!("../../../cuda/prism.cuh")),
     ("sphere.cuh", include_str!("../../../cuda/sphere.cuh")),
     (
