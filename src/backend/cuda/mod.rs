@@ -26,6 +26,7 @@ mod pair_contacts;
 mod pairs;
 mod particles;
 pub mod probe;
+mod rebuild_records;
 pub mod simulation;
 mod sync;
 mod upload;
