@@ -30,7 +30,9 @@ PD_HD bool contained_inside(const BodyRef& in, const BodyRef& outer, Overlap<dou
     V3<double> d = in.pos - outer.pos;
     double ri = in.tpl.circumscribed_radius * in.scale, ro = outer.tpl.circumscribed_radius * outer.scale;
     double tol = 64.0 * 2.220446049250313e-16 * (ri + ro);
-    // Rust `could_be_inside`: |d| + ρ_i ≤ R_o (1 + tol/ρ_o) + tol, a necessary condition.
+    // The ball first (one distance), then Rust `could_be_inside`: |d| + ρ_i ≤ R_o (1 + tol/ρ_o)
+    // + tol, a necessary condition.
+    if (dot(d, d) > ro * ro) return false;
     double rho_i = least_offset(in.tpl) * in.scale, rho_o = least_offset(outer.tpl) * outer.scale;
     double reach = ro + ro * (tol / rho_o) + tol - rho_i;
     if (!(reach >= 0.0) || dot(d, d) > reach * reach) return false;

@@ -17,8 +17,9 @@ use nalgebra::{Isometry3, Vector3};
 
 /// The overlap of two bodies one of which lies wholly inside the other (every vertex of it
 /// within `64 ε (r_A + r_B)` of the other's planes, r the circumscribed radii), or `None`.
-/// Only a body that could fit is tested vertex by vertex (`|d| + ρ_i ≤ R_o`, ρ the least face
-/// offset, up to round-off: a necessary condition), so that touching bodies cost one distance.
+/// Only a body whose centre lies within the other's circumscribed ball (one distance, which
+/// most touching bodies fail) and that could fit (`|d| + ρ_i ≤ R_o`, ρ the least face offset, up
+/// to round-off: a necessary condition) is tested vertex by vertex.
 pub fn contained_overlap(
     a: (&ConvexTemplate, f64, &Isometry3<f64>),
     b: (&ConvexTemplate, f64, &Isometry3<f64>),
@@ -34,7 +35,9 @@ fn inside(
     let (ri, ro) = (ti.circumscribed_radius * si, to.circumscribed_radius * so);
     let d = xi - xo;
     let tol = 64.0 * f64::EPSILON * (ri + ro);
-    if !could_be_inside(&d, ti, si, to, so, tol)
+    // The ball first: it costs one distance, the fit two scans of the faces.
+    if d.dot(&d) > ro * ro
+        || !could_be_inside(&d, ti, si, to, so, tol)
         || !vertices_inside((ti, si, pi), (to, so, po), tol)
     {
         return None;
@@ -82,9 +85,9 @@ fn least_offset(t: &ConvexTemplate) -> f64 {
 /// `|d| + ρ_i` from the outer centre; every point within `tol` of the outer body's planes lies
 /// in that body scaled by `1 + tol/ρ_o` about its centre (each offset is at least `ρ_o`), whose
 /// circumscribed radius is `R_o (1 + tol/ρ_o)`. So `|d| + ρ_i ≤ R_o (1 + tol/ρ_o)`, with `tol`
-/// more for the rounding of this test. It was `|d| ≤ R_o`, which elongated grains meet with
-/// most of their neighbours: the mineral grains' settled packing has centres closer than the
-/// circumscribed radius for many touching pairs.
+/// more for the rounding of this test. The ball `|d| ≤ R_o` alone let elongated grains through
+/// with many of their neighbours: the mineral grains' settled packing has centres closer than
+/// the circumscribed radius for many touching pairs.
 fn could_be_inside(
     d: &Vector3<f64>,
     ti: &ConvexTemplate,
