@@ -233,17 +233,20 @@ fn packing_fraction_study() {
         )
         .replace("end_time = 0.42", "end_time = 1.02"),
     ));
-    // PD_STUDY="friction 1.0,fed at 500/s" runs only those cases.
+    // PD_STUDY="friction 1.0;fed at 500/s" runs only those cases (names hold commas).
     let only = std::env::var("PD_STUDY").ok();
     let mut measured = std::collections::HashMap::new();
     for (name, scene) in cases {
         if only
             .as_ref()
-            .is_some_and(|o| !o.split(',').any(|c| c == name))
+            .is_some_and(|o| !o.split(';').any(|c| c == name))
         {
             continue;
         }
-        assert_ne!(scene, text, "{name}: the change did not apply");
+        // Every case but the shipped scene itself changes its text.
+        if name != "as shipped, seed 6" {
+            assert_ne!(scene, text, "{name}: the change did not apply");
+        }
         let phi = run(&name, scene);
         measured.insert(name, phi);
     }
