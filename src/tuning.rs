@@ -47,6 +47,11 @@ pub struct Tuning {
     /// (the thin pairs an f32 LP cannot resolve still go to f64 by their radius); on trial:
     /// docs/performance.md has what it was measured against. `f64` or unset: the default.
     pub mixed_lp_f32: bool,
+    /// `POLYDEM_CUDA_SOURCES`: a folder whose kernel files (named as in `cuda/`) NVRTC compiles
+    /// instead of the copies built into the binary, so that a kernel variant can be measured
+    /// without a rebuild; a file missing there is taken from the binary. Kernel work only: the
+    /// host code and the layout it shares with the kernels are the binary's.
+    pub cuda_sources: Option<PathBuf>,
     /// `POLYDEM_ROOT`: the repository root (its `meshes/`) for `polydem bench accuracy`.
     pub root: Option<PathBuf>,
     /// `POLYDEM_PANIC_AT=RANK:STEP`: that rank of `polydem run` panics after that step, so that
@@ -130,6 +135,9 @@ impl Tuning {
             }
         };
         t.root = var("POLYDEM_ROOT").map(PathBuf::from);
+        t.cuda_sources = var("POLYDEM_CUDA_SOURCES")
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from);
         t.panic_at = text("POLYDEM_PANIC_AT").and_then(|v| {
             let parsed = v
                 .split_once(':')
@@ -186,6 +194,10 @@ impl Tuning {
             self.root.as_ref().map(|p| p.display().to_string()),
         );
         put(
+            "POLYDEM_CUDA_SOURCES",
+            self.cuda_sources.as_ref().map(|p| p.display().to_string()),
+        );
+        put(
             "POLYDEM_PANIC_AT",
             self.panic_at.map(|(r, s)| format!("{r}:{s}")),
         );
@@ -235,7 +247,13 @@ mod tests {
             ("POLYDEM_PAIR_BATCH", "64"),
             ("POLYDEM_MIXED_LP", "f32"),
             ("POLYDEM_PANIC_AT", "1:300"),
+            ("POLYDEM_CUDA_SOURCES", "/tmp/kernels"),
         ]);
+        assert_eq!(t.cuda_sources, Some(PathBuf::from("/tmp/kernels")));
+        assert!(
+            t.set()
+                .contains(&"POLYDEM_CUDA_SOURCES=/tmp/kernels".to_string())
+        );
         assert_eq!(t.panic_at, Some((1, 300)));
         assert!(t.set().contains(&"POLYDEM_PANIC_AT=1:300".to_string()));
         assert_eq!(t.cuda_block, Some(96));

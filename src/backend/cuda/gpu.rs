@@ -145,7 +145,7 @@ impl Gpu {
             "planes moved to the centre",
             "overlap (faces and their sums)",
             "contact law",
-            "",
+            "body inside the other (contained check)",
             "",
             "pairs evaluated (count)",
             "pairs needing GJK (count)",

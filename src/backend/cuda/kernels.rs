@@ -167,6 +167,9 @@ pub enum CompileError {
     /// An `#include` names a file that is not among [`SOURCES`].
     #[error("cuda/{name} is not among the embedded kernel sources")]
     MissingSource { name: String },
+    /// A kernel file of the `POLYDEM_CUDA_SOURCES` folder could not be read.
+    #[error("POLYDEM_CUDA_SOURCES: cannot read {path}: {error}")]
+    Unreadable { path: String, error: String },
     /// NVRTC rejected the source: its log.
     #[error("NVRTC could not compile cuda/{kernel_file} (options {options:?}):\n{log}")]
     Nvrtc {
@@ -202,26 +205,54 @@ pub fn phase_clocks() -> bool {
     crate::tuning::Tuning::get().phase_clocks
 }
 
+/// Kernel file `name`: from `dir` (the folder `POLYDEM_CUDA_SOURCES` names) where it holds
+/// the file, a kernel variant measured without a rebuild; else the copy built in from `cuda/`.
+fn source(
+    name: &str,
+    dir: Option<&std::path::Path>,
+) -> Result<std::borrow::Cow<'static, str>, CompileError> {
+    if let Some(path) = dir.map(|d| d.join(name)).filter(|p| p.is_file()) {
+        return std::fs::read_to_string(&path)
+            .map(std::borrow::Cow::Owned)
+            .map_err(|e| CompileError::Unreadable {
+                path: path.display().to_string(),
+                error: e.to_string(),
+            });
+    }
+    SOURCES
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, t)| std::borrow::Cow::Borrowed(*t))
+        .ok_or_else(|| CompileError::MissingSource {
+            name: name.to_string(),
+        })
+}
+
 /// `file` with its `#include "…"` lines replaced by the named sources (each once, as
-/// `#pragma once` would), so NVRTC needs no file system.
+/// `#pragma once` would), so NVRTC needs no file system; the sources are those built in, or
+/// those of the `POLYDEM_CUDA_SOURCES` folder where it has them.
 pub fn expand(file: &str) -> Result<String, CompileError> {
-    fn visit(name: &str, seen: &mut Vec<String>, out: &mut String) -> Result<(), CompileError> {
+    expand_from(file, crate::tuning::Tuning::get().cuda_sources.as_deref())
+}
+
+/// [`expand`] with the files of `dir` (where it holds them) in place of the built-in ones.
+pub fn expand_from(file: &str, dir: Option<&std::path::Path>) -> Result<String, CompileError> {
+    fn visit(
+        name: &str,
+        dir: Option<&std::path::Path>,
+        seen: &mut Vec<String>,
+        out: &mut String,
+    ) -> Result<(), CompileError> {
         if seen.iter().any(|s| s == name) {
             return Ok(());
         }
         seen.push(name.to_string());
-        let text = SOURCES
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, t)| *t)
-            .ok_or_else(|| CompileError::MissingSource {
-                name: name.to_string(),
-            })?;
+        let text = source(name, dir)?;
         for line in text.lines() {
             let t = line.trim_start();
             if let Some(rest) = t.strip_prefix("#include \"") {
                 let inc = rest.split('"').next().unwrap_or_default();
-                visit(inc, seen, out)?;
+                visit(inc, dir, seen, out)?;
             } else if t.starts_with("#pragma once") {
                 continue;
             } else {
@@ -232,7 +263,7 @@ pub fn expand(file: &str) -> Result<String, CompileError> {
         Ok(())
     }
     let mut out = String::new();
-    visit(file, &mut Vec::new(), &mut out)?;
+    visit(file, dir, &mut Vec::new(), &mut out)?;
     Ok(out)
 }
 
@@ -335,4 +366,40 @@ fn nvrtc_compile(file: &str, source: String, options: Vec<String>) -> Result<Ptx
             error,
         },
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file of the override folder replaces the built-in one wherever it is included, the
+    /// others stay the built-in ones, and an unreadable override is an error that names it.
+    #[test]
+    fn the_sources_folder_replaces_only_the_files_it_holds() {
+        let dir = std::env::temp_dir().join(format!("polydem-kernels-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("pair.cuh"), "// a variant of pair.cuh\n").unwrap();
+        let built_in = expand_from("contact.cu", None).unwrap();
+        let variant = expand_from("contact.cu", Some(&dir)).unwrap();
+        assert!(built_in.contains("contained_overlap(const BodyRef& A"));
+        assert!(!variant.contains("contained_overlap(const BodyRef& A"));
+        assert_eq!(variant.matches("// a variant of pair.cuh").count(), 1);
+        assert!(variant.contains("__global__"));
+        assert_eq!(
+            expand_from("scan.cu", Some(&dir)).unwrap(),
+            expand_from("scan.cu", None).unwrap()
+        );
+        std::fs::create_dir_all(dir.join("gjk.cuh")).unwrap();
+        assert!(
+            expand_from("contact.cu", Some(&dir)).is_ok(),
+            "a folder is not a file"
+        );
+        std::fs::write(dir.join("scan.cu"), [0xff, 0xfe, 0x00]).unwrap();
+        let error = expand_from("scan.cu", Some(&dir)).unwrap_err().to_string();
+        assert!(
+            error.contains("POLYDEM_CUDA_SOURCES") && error.contains("scan.cu"),
+            "{error}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
