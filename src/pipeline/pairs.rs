@@ -161,16 +161,9 @@ impl Simulation {
         dt: f64,
         outcomes: &mut Vec<PairOutcome>,
     ) -> Result<(), SimulationError> {
-        let p = &self.particles;
-        let s = &self.scene;
-        let step = self.step;
-        let spheres = s.spheres_only();
-        let mixed = self.pair_precision == Precision::Mixed;
+        let failure = FirstFailure::default();
         // Mixed precision's LP in f64 unless POLYDEM_MIXED_LP=f32 (on trial; the GPU's too).
         let wide_lp = !crate::tuning::Tuning::get().mixed_lp_f32;
-        let periodic = self.bounds.periodic.iter().any(|&k| k);
-        let bounds = self.bounds;
-        let failure = FirstFailure::default();
         self.pairs
             .pairs
             .par_iter()
@@ -178,126 +171,156 @@ impl Simulation {
             .with_min_len(crate::par::CONTACT)
             .map(|(pair, axis)| {
                 let (a, b) = (pair[0] as usize, pair[1] as usize);
-                // B's periodic image from the current centroids by the list build's minimum-image
-                // arithmetic (not the build's shift: a particle wrapped across a periodic face
-                // since the build keeps its contacts); no shift without periodic axes.
-                let xb = if periodic {
-                    let (xa, xb) = (p.position[a], p.position[b]);
-                    xb + (bounds.displacement(&xa, &xb) - (xb - xa))
-                } else {
-                    p.position[b]
-                };
-                let d = xb - p.position[a];
-                let reach = self.radius[a] + self.radius[b];
-                // Stage 3: bounding spheres.
-                if d.norm_squared() >= reach * reach {
-                    return PairOutcome::default();
-                }
-                let overlap = if spheres {
-                    // Stages 4–5 for spheres: the lens in closed form.
-                    let o =
-                        sphere_lens(self.radius[a], self.radius[b], &d).to_world(&p.position[a]);
-                    if o.volume <= 0.0 {
-                        return PairOutcome::default();
-                    }
-                    o
-                } else {
-                    let ta = &s.templates[s.particle_types[p.kind[a] as usize].template];
-                    let tb = &s.templates[s.particle_types[p.kind[b] as usize].template];
-                    let pose_a = Isometry3::from_parts(p.position[a].into(), p.orientation[a]);
-                    let pose_b = Isometry3::from_parts(xb.into(), p.orientation[b]);
-                    let (body_a, body_b) = ((ta, p.scale[a], &pose_a), (tb, p.scale[b], &pose_b));
-                    // Stage 4 shortcut: last step's separating axis, with a margin far above
-                    // GJK's touching tolerance (1e-12 of the size in f64), so the verdict is
-                    // GJK's.
-                    if *axis != Vector3::zeros()
-                        && axis_separates(body_a, body_b, axis, 1e-9 * reach)
-                    {
-                        return PairOutcome {
-                            separating_axis: *axis,
-                            ..PairOutcome::default()
-                        };
-                    }
-                    // Stages 4–5: the narrow phase (GJK where the Chebyshev centre proves no
-                    // intersection), then the overlap.
-                    let g = match if mixed {
-                        with_workspaces(|w32, w64| {
-                            overlap_pair_mixed_with(w32, w64, body_a, body_b, wide_lp)
-                        })
-                    } else {
-                        with_workspace(|ws| overlap_pair(ws, body_a, body_b))
-                    } {
-                        Ok(g) => g,
-                        Err(e) => {
-                            let error = SimulationError::Geometry {
-                                step,
-                                what: format!("particles {} and {}", p.id[a], p.id[b]),
-                                message: format!(
-                                    "{e}; to reproduce with `polydem probe overlap{}`: A {}, B {}",
-                                    if mixed { " --precision mixed" } else { "" },
-                                    probe_body(ta, p.scale[a], &pose_a),
-                                    probe_body(tb, p.scale[b], &pose_b)
-                                ),
-                            };
-                            failure.offer(pair_failure_key(p.id[a], p.id[b]), error);
-                            return PairOutcome::default();
-                        }
-                    };
-                    if g.overlap.volume <= 0.0 {
-                        return PairOutcome {
-                            separating_axis: g.separating_axis.unwrap_or_default(),
-                            ..PairOutcome::default()
-                        };
-                    }
-                    g.overlap
-                };
-                // Stage 7: contact law.
-                let params = self.contact_parameters(a, Some(b), 0);
-                let key = ContactKey::particles(p.id[a], p.id[b]);
-                let mut state = self.history.get(&key).copied().unwrap_or_default();
-                let (split_a, split_b) = (mass_share(p.contacts[a]), mass_share(p.contacts[b]));
-                // A lens's centroid is on the line of centres: no rotational term.
-                let (effective_mass, dashpot_mass) = if spheres {
-                    (
-                        1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b]),
-                        1.0 / (split_a / p.mass[a] + split_b / p.mass[b]),
-                    )
-                } else {
-                    normal_effective_mass(p, &[(a, p.position[a]), (b, xb)], &overlap)
-                };
-                let kin = ContactKinematics {
-                    x_a: p.position[a],
-                    x_b: xb,
-                    v_a: p.velocity[a],
-                    v_b: p.velocity[b],
-                    w_a: p.angular_velocity[a],
-                    w_b: p.angular_velocity[b],
-                    effective_mass,
-                    inverse_mass_a: 1.0 / p.mass[a],
-                    inverse_mass_b: 1.0 / p.mass[b],
-                    dashpot_mass,
-                    q_a: p.orientation[a],
-                    q_b: p.orientation[b],
-                    inverse_inertia_a: p.inertia[a].map(|x| 1.0 / x),
-                    inverse_inertia_b: p.inertia[b].map(|x| 1.0 / x),
-                    sphere_radius_a: if spheres { self.radius[a] } else { 0.0 },
-                    sphere_radius_b: if spheres { self.radius[b] } else { 0.0 },
-                    split_a,
-                    split_b,
-                };
-                let forces = contact_forces(&params, &overlap, &kin, &mut state, dt);
-                PairOutcome {
-                    separating_axis: Vector3::zeros(),
-                    forces,
-                    state: Some((key, state)),
-                    penetration: overlap.volume
-                        / self.equivalent_volume(a).min(self.equivalent_volume(b)),
+                let xb = self.partner_image(a, b);
+                match self.pair_overlap(a, b, xb, axis, wide_lp, &failure) {
+                    Ok(overlap) => self.pair_law(a, b, xb, &overlap, dt),
+                    Err(separating_axis) => PairOutcome {
+                        separating_axis,
+                        ..PairOutcome::default()
+                    },
                 }
             })
             // Into the buffer of the last evaluation: its pages are already mapped, where a
             // fresh vector of this size (tens of MB) faults them in again every step.
             .collect_into_vec(outcomes);
         failure.into_result()
+    }
+
+    /// B's periodic image from the current centroids by the list build's minimum-image
+    /// arithmetic (not the build's shift: a particle wrapped across a periodic face since the
+    /// build keeps its contacts); B's centre without periodic axes.
+    fn partner_image(&self, a: usize, b: usize) -> Vector3<f64> {
+        let p = &self.particles;
+        if self.bounds.periodic.iter().any(|&k| k) {
+            let (xa, xb) = (p.position[a], p.position[b]);
+            xb + (self.bounds.displacement(&xa, &xb) - (xb - xa))
+        } else {
+            p.position[b]
+        }
+    }
+
+    /// Stages 3–5 for pair (`a`, `b`), B at `xb`: the overlap in world coordinates, or for a
+    /// pair that does not overlap the separating axis to keep for the next step (zero for none).
+    /// `axis` is last step's separating axis (zero for none); a failed geometry is offered to
+    /// `failure` and counts as no contact.
+    fn pair_overlap(
+        &self,
+        a: usize,
+        b: usize,
+        xb: Vector3<f64>,
+        axis: &Vector3<f64>,
+        wide_lp: bool,
+        failure: &FirstFailure,
+    ) -> Result<Overlap<f64>, Vector3<f64>> {
+        let p = &self.particles;
+        let s = &self.scene;
+        let d = xb - p.position[a];
+        let reach = self.radius[a] + self.radius[b];
+        // Stage 3: bounding spheres.
+        if d.norm_squared() >= reach * reach {
+            return Err(Vector3::zeros());
+        }
+        if s.spheres_only() {
+            // Stages 4–5 for spheres: the lens in closed form.
+            let o = sphere_lens(self.radius[a], self.radius[b], &d).to_world(&p.position[a]);
+            return if o.volume <= 0.0 {
+                Err(Vector3::zeros())
+            } else {
+                Ok(o)
+            };
+        }
+        let mixed = self.pair_precision == Precision::Mixed;
+        let ta = &s.templates[s.particle_types[p.kind[a] as usize].template];
+        let tb = &s.templates[s.particle_types[p.kind[b] as usize].template];
+        let pose_a = Isometry3::from_parts(p.position[a].into(), p.orientation[a]);
+        let pose_b = Isometry3::from_parts(xb.into(), p.orientation[b]);
+        let (body_a, body_b) = ((ta, p.scale[a], &pose_a), (tb, p.scale[b], &pose_b));
+        // Stage 4 shortcut: last step's separating axis, with a margin far above GJK's touching
+        // tolerance (1e-12 of the size in f64), so the verdict is GJK's.
+        if *axis != Vector3::zeros() && axis_separates(body_a, body_b, axis, 1e-9 * reach) {
+            return Err(*axis);
+        }
+        // Stages 4–5: the narrow phase (GJK where the Chebyshev centre proves no
+        // intersection), then the overlap.
+        let g = match if mixed {
+            with_workspaces(|w32, w64| overlap_pair_mixed_with(w32, w64, body_a, body_b, wide_lp))
+        } else {
+            with_workspace(|ws| overlap_pair(ws, body_a, body_b))
+        } {
+            Ok(g) => g,
+            Err(e) => {
+                let error = SimulationError::Geometry {
+                    step: self.step,
+                    what: format!("particles {} and {}", p.id[a], p.id[b]),
+                    message: format!(
+                        "{e}; to reproduce with `polydem probe overlap{}`: A {}, B {}",
+                        if mixed { " --precision mixed" } else { "" },
+                        probe_body(ta, p.scale[a], &pose_a),
+                        probe_body(tb, p.scale[b], &pose_b)
+                    ),
+                };
+                failure.offer(pair_failure_key(p.id[a], p.id[b]), error);
+                return Err(Vector3::zeros());
+            }
+        };
+        if g.overlap.volume <= 0.0 {
+            return Err(g.separating_axis.unwrap_or_default());
+        }
+        Ok(g.overlap)
+    }
+
+    /// Stage 7 for pair (`a`, `b`), B at `xb`, overlapping by `overlap`: the contact law's
+    /// forces and the contact's new history record.
+    fn pair_law(
+        &self,
+        a: usize,
+        b: usize,
+        xb: Vector3<f64>,
+        overlap: &Overlap<f64>,
+        dt: f64,
+    ) -> PairOutcome {
+        let p = &self.particles;
+        let spheres = self.scene.spheres_only();
+        let params = self.contact_parameters(a, Some(b), 0);
+        let key = ContactKey::particles(p.id[a], p.id[b]);
+        let mut state = self.history.get(&key).copied().unwrap_or_default();
+        let (split_a, split_b) = (mass_share(p.contacts[a]), mass_share(p.contacts[b]));
+        // A lens's centroid is on the line of centres: no rotational term.
+        let (effective_mass, dashpot_mass) = if spheres {
+            (
+                1.0 / (1.0 / p.mass[a] + 1.0 / p.mass[b]),
+                1.0 / (split_a / p.mass[a] + split_b / p.mass[b]),
+            )
+        } else {
+            normal_effective_mass(p, &[(a, p.position[a]), (b, xb)], overlap)
+        };
+        let kin = ContactKinematics {
+            x_a: p.position[a],
+            x_b: xb,
+            v_a: p.velocity[a],
+            v_b: p.velocity[b],
+            w_a: p.angular_velocity[a],
+            w_b: p.angular_velocity[b],
+            effective_mass,
+            inverse_mass_a: 1.0 / p.mass[a],
+            inverse_mass_b: 1.0 / p.mass[b],
+            dashpot_mass,
+            q_a: p.orientation[a],
+            q_b: p.orientation[b],
+            inverse_inertia_a: p.inertia[a].map(|x| 1.0 / x),
+            inverse_inertia_b: p.inertia[b].map(|x| 1.0 / x),
+            sphere_radius_a: if spheres { self.radius[a] } else { 0.0 },
+            sphere_radius_b: if spheres { self.radius[b] } else { 0.0 },
+            split_a,
+            split_b,
+        };
+        let forces = contact_forces(&params, overlap, &kin, &mut state, dt);
+        PairOutcome {
+            separating_axis: Vector3::zeros(),
+            forces,
+            state: Some((key, state)),
+            penetration: overlap.volume / self.equivalent_volume(a).min(self.equivalent_volume(b)),
+        }
     }
 }
 

@@ -210,6 +210,139 @@ struct LoopEnd {
     max_steps_reached: bool,
 }
 
+/// The frames, series rows and checkpoints a run writes on schedule, and the checkpoints kept.
+struct Scheduled {
+    frame_at: Schedule,
+    series_at: Schedule,
+    checkpoint_at: Schedule,
+    kept: KeptCheckpoints,
+}
+
+impl Scheduled {
+    fn new(sim: &Simulation, dir: &std::path::Path) -> Self {
+        let o = &sim.scene.output;
+        Scheduled {
+            frame_at: Schedule::new(o.frame_interval, sim.time, sim.dt),
+            series_at: Schedule::new(Some(o.series_interval), sim.time, sim.dt),
+            checkpoint_at: Schedule::new(o.checkpoint_interval, sim.time, sim.dt),
+            kept: KeptCheckpoints::new(&sim.scene, dir, sim.step),
+        }
+    }
+
+    /// Writes what is due after the step just taken.
+    fn write_due(&mut self, engine: &mut Engine, out: &mut Outputs, id: &SceneId) -> Result<()> {
+        let (t, dt) = (engine.host().time, engine.host().dt);
+        if self.frame_at.due(t, dt) {
+            out.frame(engine.synced()?)?;
+        }
+        if self.series_at.due(t, dt) {
+            out.series(engine.synced()?)?;
+        }
+        if self.checkpoint_at.due(t, dt) {
+            let comm = out.comm.clone();
+            let path = save_checkpoint(&*comm, engine.synced()?, &out.dir, id)?;
+            self.kept.push(comm.rank(), path)?;
+        }
+        Ok(())
+    }
+}
+
+/// A run's progress: a bar on a terminal, else a log line every `log_interval_steps` (rank 0).
+struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+    start: Instant,
+    total_steps: u64,
+    log_every: u64,
+}
+
+impl Progress {
+    fn new(sim: &Simulation, rank: usize) -> Self {
+        let s = &sim.scene;
+        let total_steps = ((s.simulation.end_time - sim.time) / sim.dt)
+            .ceil()
+            .max(0.0) as u64;
+        let bar = (rank == 0 && std::io::stderr().is_terminal()).then(|| {
+            let b = indicatif::ProgressBar::new(total_steps);
+            b.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{bar:40} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            b
+        });
+        Progress {
+            bar,
+            start: Instant::now(),
+            total_steps,
+            log_every: s.output.log_interval_steps.max(1),
+        }
+    }
+
+    /// Shows `done` steps since the loop began. Whole-run counts are summed at deterministic
+    /// steps only, where every rank joins the sums.
+    fn show(&self, comm: &dyn Comm, sim: &Simulation, done: u64) {
+        let (n_all, contacts_all, removed_all) =
+            if done.is_multiple_of(100) || done.is_multiple_of(self.log_every) {
+                whole_run_counts(comm, sim)
+            } else {
+                (0, 0, 0)
+            };
+        let t = sim.time;
+        if let Some(b) = &self.bar {
+            b.set_position(done);
+            if done.is_multiple_of(100) {
+                b.set_message(format!(
+                    "t = {t:.4} s, {n_all} particles, {contacts_all} contacts"
+                ));
+            }
+        } else if done.is_multiple_of(self.log_every) && comm.rank() == 0 {
+            let elapsed = self.start.elapsed().as_secs_f64();
+            let rate = done as f64 / elapsed.max(1e-9);
+            let eta = (self.total_steps.saturating_sub(done)) as f64 / rate.max(1e-9);
+            // Removed particles (domain.on_leaving = "remove") are named only when there are
+            // any, so that a closed scene's log reads as before.
+            let removed = if removed_all > 0 {
+                format!("  {removed_all} removed (left the domain)")
+            } else {
+                String::new()
+            };
+            tracing::info!(
+                "step {} t = {:.5} s  {:.0} steps/s  {} particles  {} contacts{removed}  ETA {:.0} s",
+                sim.step,
+                t,
+                rate,
+                n_all,
+                contacts_all,
+                eta
+            );
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+}
+
+/// The stop signal the ranks agree on after a step, if any. A signal reaches the ranks of a
+/// decomposed run at different moments: they agree on it after every step (one small sum), so
+/// that all stop after the same step, within the second mpirun leaves between its SIGTERM and
+/// SIGKILL (crate::interrupt).
+fn agreed_signal(
+    comm: &dyn Comm,
+    signals: &crate::interrupt::StopSignals,
+) -> Option<(i32, &'static str)> {
+    let received = signals.received();
+    let counts = if comm.size() > 1 {
+        comm.sum_u64(&received)
+    } else {
+        received.to_vec()
+    };
+    crate::interrupt::stop_signal(&counts)
+}
+
 /// Steps to the end time (or `--max-steps`), writing the scheduled frames, series rows and
 /// checkpoints, showing progress, and stopping with a checkpoint on SIGINT or SIGTERM. A
 /// stability stop leaves the state at the stop beside the checkpoints ([`stopped_unstable`]).
@@ -220,30 +353,12 @@ fn step_loop(
     id: &SceneId,
 ) -> Result<LoopEnd> {
     let comm = out.comm.clone();
-    let (rank, ranks) = (comm.rank(), comm.size());
+    let rank = comm.rank();
     let dir = out.dir.clone();
-    let sim = engine.host();
-    let s = &sim.scene;
-    let mut frame_at = Schedule::new(s.output.frame_interval, sim.time, sim.dt);
-    let mut series_at = Schedule::new(Some(s.output.series_interval), sim.time, sim.dt);
-    let mut checkpoint_at = Schedule::new(s.output.checkpoint_interval, sim.time, sim.dt);
-    let mut kept = KeptCheckpoints::new(s, &dir, sim.step);
-    let end_time = s.simulation.end_time;
-    let log_every = s.output.log_interval_steps.max(1);
-
+    let mut scheduled = Scheduled::new(engine.host(), &dir);
+    let end_time = engine.host().scene.simulation.end_time;
     let signals = crate::interrupt::StopSignals::install().map_err(anyhow::Error::msg)?;
-    let total_steps = ((end_time - sim.time) / sim.dt).ceil().max(0.0) as u64;
-    let bar = (rank == 0 && std::io::stderr().is_terminal()).then(|| {
-        let b = indicatif::ProgressBar::new(total_steps);
-        b.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{bar:40} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        b
-    });
-    let start = Instant::now();
+    let progress = Progress::new(engine.host(), rank);
     let (step0, mut particle_steps) = (engine.host().step, 0u64);
     let mut stopped_by: Option<(i32, &str)> = None;
     let mut max_steps_reached = false;
@@ -265,64 +380,9 @@ fn step_loop(
                 engine.host().step
             );
         }
-        let (t, dt) = (engine.host().time, engine.host().dt);
-        if frame_at.due(t, dt) {
-            out.frame(engine.synced()?)?;
-        }
-        if series_at.due(t, dt) {
-            out.series(engine.synced()?)?;
-        }
-        if checkpoint_at.due(t, dt) {
-            let path = save_checkpoint(&*comm, engine.synced()?, &dir, id)?;
-            kept.push(rank, path)?;
-        }
-        let sim = engine.host();
-        let done = sim.step - step0;
-        // Whole-run counts at deterministic steps only: every rank joins the sums.
-        let (n_all, contacts_all, removed_all) =
-            if done.is_multiple_of(100) || done.is_multiple_of(log_every) {
-                whole_run_counts(&*comm, sim)
-            } else {
-                (0, 0, 0)
-            };
-        if let Some(b) = &bar {
-            b.set_position(done);
-            if done.is_multiple_of(100) {
-                b.set_message(format!(
-                    "t = {t:.4} s, {n_all} particles, {contacts_all} contacts"
-                ));
-            }
-        } else if done.is_multiple_of(log_every) && rank == 0 {
-            let elapsed = start.elapsed().as_secs_f64();
-            let rate = done as f64 / elapsed.max(1e-9);
-            let eta = (total_steps.saturating_sub(done)) as f64 / rate.max(1e-9);
-            // Removed particles (domain.on_leaving = "remove") are named only when there are
-            // any, so that a closed scene's log reads as before.
-            let removed = if removed_all > 0 {
-                format!("  {removed_all} removed (left the domain)")
-            } else {
-                String::new()
-            };
-            tracing::info!(
-                "step {} t = {:.5} s  {:.0} steps/s  {} particles  {} contacts{removed}  ETA {:.0} s",
-                sim.step,
-                t,
-                rate,
-                n_all,
-                contacts_all,
-                eta
-            );
-        }
-        // A signal reaches the ranks of a decomposed run at different moments: they agree on
-        // it after every step (one small sum), so that all stop after the same step, within
-        // the second mpirun leaves between its SIGTERM and SIGKILL (crate::interrupt).
-        let received = signals.received();
-        let counts = if ranks > 1 {
-            comm.sum_u64(&received)
-        } else {
-            received.to_vec()
-        };
-        if let Some(signal) = crate::interrupt::stop_signal(&counts) {
+        scheduled.write_due(engine, out, id)?;
+        progress.show(&*comm, engine.host(), engine.host().step - step0);
+        if let Some(signal) = agreed_signal(&*comm, &signals) {
             let path = save_checkpoint(&*comm, engine.synced()?, &dir, id)?;
             if rank == 0 {
                 tracing::warn!(
@@ -338,12 +398,10 @@ fn step_loop(
             break;
         }
     }
-    if let Some(b) = &bar {
-        b.finish_and_clear();
-    }
+    progress.finish();
     Ok(LoopEnd {
         first_step: step0,
-        wall: start.elapsed().as_secs_f64(),
+        wall: progress.start.elapsed().as_secs_f64(),
         particle_steps,
         stopped_by,
         max_steps_reached,
