@@ -34,7 +34,8 @@ use super::error::CudaError;
 use super::history::history_rows;
 use super::launch::{cfg, zeros};
 use super::layout::HISTORY_WIDTH;
-use super::pairs::{HistorySource, PairList};
+use super::pair_list::PairList;
+use super::pairs::HistorySource;
 use super::particles::{DeviceParticles, at_least_one};
 use super::simulation::CudaSimulation;
 use super::upload::host_arrays;
@@ -193,6 +194,17 @@ impl RebuildLayout {
     }
 }
 
+/// What the migration of a rebuild on the device leaves: whether the subdomains were redrawn,
+/// the old slots that left (rank by rank), the particles that arrived and the contact history
+/// entries they brought, and the seconds spent copying the leavers down.
+struct Migration {
+    redrawn: bool,
+    leaving_slots: Vec<u32>,
+    arrivals: Particles,
+    brought: Vec<(ContactKey, ContactState)>,
+    download: f64,
+}
+
 impl CudaSimulation {
     /// Whether this rebuild of a decomposed run can stay on the device: it is asked for
     /// (`POLYDEM_GPU_EXCHANGE`), no insertion is due on any rank (`pending` is the same on
@@ -212,18 +224,66 @@ impl CudaSimulation {
     /// migration and the ghosts chosen afresh, the particle arrays assembled anew on the
     /// device, and the next list build set to carry the history over.
     pub(super) fn rebuild_on_device(&mut self) -> Result<(), CudaError> {
-        let st = self.gpu.stream.clone();
         let t_down = Instant::now();
-        let n = self.particles.n;
         let (ghost, id, position) = self.agree_device(self.centroids())?;
-        let owned: Vec<u32> = (0..n as u32).filter(|&i| ghost[i as usize] == 0).collect();
-        let owned_x: Vec<Vector3<f64>> = owned.iter().map(|&s| position[s as usize]).collect();
         let mut download = t_down.elapsed().as_secs_f64();
-        let step = self.host.step;
-        let ghosts_error =
-            |message: String| SimulationError::from(ExchangeError::Ghosts { step, message });
+        let migration = self.migrate_from_device(&ghost, &position)?;
+        download += migration.download;
+        let kept = staying(&ghost, &migration.leaving_slots);
+        download += self.choose_ghosts(&kept, &id, &position, &migration.arrivals)?;
 
-        // Balance, then who leaves for whom.
+        // Up: the arrivals and the ghosts after the particles that stay.
+        let t_up = Instant::now();
+        let Migration {
+            redrawn,
+            leaving_slots,
+            arrivals,
+            brought,
+            ..
+        } = migration;
+        let n_arrivals = arrivals.len();
+        let mut tail = arrivals;
+        let par = self.host.parallel.as_deref().expect("a decomposed run");
+        tail.extend_from(&par.ghosts.particles);
+        let particles = self.assemble_after_rebuild(&kept, &tail, n_arrivals)?;
+        let n_new = particles.n;
+        let layout = RebuildLayout::new(&ghost, &id, &kept, &leaving_slots, &tail.id, n_arrivals);
+        let received = ContactHistory::from_entries(brought);
+        let arrival_ids = &tail.id[..n_arrivals];
+        let wall_spring =
+            self.carried_wall_springs(&layout, n_new, kept.len(), arrival_ids, &received)?;
+        let history = self.exchange_history(&received, particles, layout.old_slot)?;
+        if redrawn {
+            // The walls this rank keeps follow its new box.
+            self.host.restrict_walls();
+            self.upload_walls()?;
+        }
+        let st = self.gpu.stream.clone();
+        if let (Some(w), Some(spring)) = (&mut self.walls, wall_spring) {
+            w.install(&st, n_new, spring)?;
+        }
+        self.pairs
+            .reset(HistorySource::Exchanged(Box::new(history)));
+        self.halo.reset();
+        self.host_current = false;
+        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
+        par.timers.device_download += download;
+        par.timers.device_upload += t_up.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// Steps 1–2 of a rebuild on the device, for the old slots' ghost flags and centroids:
+    /// the balance, the owned particles that leave and their records and history sent to
+    /// their new owners, and what arrived.
+    fn migrate_from_device(
+        &mut self,
+        ghost: &[u32],
+        position: &[Vector3<f64>],
+    ) -> Result<Migration, CudaError> {
+        let owned: Vec<u32> = (0..ghost.len() as u32)
+            .filter(|&i| ghost[i as usize] == 0)
+            .collect();
+        let owned_x: Vec<Vector3<f64>> = owned.iter().map(|&s| position[s as usize]).collect();
         let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
         let t0 = Instant::now();
         let redrawn = par
@@ -239,7 +299,6 @@ impl CudaSimulation {
         let t_pack = Instant::now();
         let (batch, entries) = self.agree_device(self.leavers_state(&leaving_slots))?;
         let pack = t_pack.elapsed().as_secs_f64();
-        download += pack;
         let history = ContactHistory::from_entries(entries);
         let mut at = 0;
         let sends: Vec<Vec<u8>> = leaving
@@ -263,16 +322,36 @@ impl CudaSimulation {
         }
         par.timers.migrated += moved as u64;
         par.timers.migrate += t0.elapsed().as_secs_f64() - pack;
+        Ok(Migration {
+            redrawn,
+            leaving_slots,
+            arrivals,
+            brought,
+            download: pack,
+        })
+    }
 
-        // The particles that stay, in slot order, then the arrivals: the new owned numbering.
+    /// Step 3: the halo planned for the particles that stay (old slots `kept`, in order) and
+    /// the `arrivals`, and the ghosts exchanged with the neighbours, checked against the owned
+    /// ids (`id`, `position`: the old slots'). Returns the seconds spent copying down.
+    fn choose_ghosts(
+        &mut self,
+        kept: &[u32],
+        id: &[u64],
+        position: &[Vector3<f64>],
+        arrivals: &Particles,
+    ) -> Result<f64, CudaError> {
+        let step = self.host.step;
+        let ghosts_error =
+            |message: String| SimulationError::from(ExchangeError::Ghosts { step, message });
         let t0 = Instant::now();
-        let kept = staying(&ghost, &leaving_slots);
         let new_x: Vec<Vector3<f64>> = kept
             .iter()
             .map(|&s| position[s as usize])
             .chain(arrivals.position.iter().copied())
             .collect();
-        par.plan = HaloPlan::new(&par.subdomains, me, &new_x);
+        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
+        par.plan = HaloPlan::new(&par.subdomains, par.rank(), &new_x);
         let (compact, sent) = par.plan.compact();
         let n_kept = kept.len();
         let sent_kept: Vec<u32> = sent
@@ -283,7 +362,6 @@ impl CudaSimulation {
         let t_src = Instant::now();
         let mut source = self.agree_device(self.download_particles(&sent_kept))?;
         let sources = t_src.elapsed().as_secs_f64();
-        download += sources;
         let arrived: Vec<usize> = sent
             .iter()
             .filter(|&&m| (m as usize) >= n_kept)
@@ -301,21 +379,27 @@ impl CudaSimulation {
             .collect();
         par.check_ghosts(&owned_ids).map_err(ghosts_error)?;
         par.timers.halo += t0.elapsed().as_secs_f64() - sources;
+        Ok(sources)
+    }
 
-        // Up: the arrivals and the ghosts after the particles that stay.
-        let t_up = Instant::now();
-        let n_arrivals = arrivals.len();
-        let mut tail = arrivals;
-        tail.extend_from(&par.ghosts.particles);
-        let k = &self.gpu.k;
-        let kept_slots = st.clone_htod(&at_least_one(kept.clone()))?;
+    /// Step 4: the particle arrays anew, the old slots `kept` gathered on the device, then
+    /// `tail` (its first `n_arrivals` the arrivals, the rest the ghosts) uploaded after them.
+    fn assemble_after_rebuild(
+        &self,
+        kept: &[u32],
+        tail: &Particles,
+        n_arrivals: usize,
+    ) -> Result<DeviceParticles, CudaError> {
+        let st = &self.gpu.stream;
+        let n_kept = kept.len();
+        let kept_slots = st.clone_htod(&at_least_one(kept.to_vec()))?;
         let n_tail = tail.len();
-        let particles = DeviceParticles::assemble(
-            k,
-            &st,
+        DeviceParticles::assemble(
+            &self.gpu.k,
+            st,
             &self.particles,
             (&kept_slots, n_kept),
-            host_arrays(&self.host.scene, &tail, n_arrivals),
+            host_arrays(&self.host.scene, tail, n_arrivals),
             n_tail,
         )
         .map_err(|e| {
@@ -324,47 +408,67 @@ impl CudaSimulation {
                 || format!("the particle arrays of {n} particles"),
                 Some(n * DeviceParticles::BYTES_PER_PARTICLE),
             )
-        })?;
-        let n_new = particles.n;
+        })
+    }
 
-        let layout = RebuildLayout::new(&ghost, &id, &kept, &leaving_slots, &tail.id, n_arrivals);
-        // The walls' springs: a particle that stays keeps its live ones, an arrival takes
-        // those it brought, a ghost that was owned here keeps its own (the host's history
-        // would; a ghost's walls are its owner's to evaluate).
-        let received = ContactHistory::from_entries(brought);
-        let wall_spring = match &self.walls {
-            Some(w) if w.n > 0 => {
-                let mut spring = zeros::<f64>(&st, HISTORY_WIDTH * w.n * n_new)?;
-                let source_slot = st.clone_htod(&at_least_one(layout.wall_source.clone()))?;
-                let (nn, nw) = (n_new as i32, w.n as i32);
-                // SAFETY: `source_slot` holds n_new slots of the old arrays (or NO_SLOT), the
-                // old flags and springs a row per old slot and wall, `spring` n_new · walls.
-                unsafe {
-                    k.gather_live_wall_springs(
-                        &st,
-                        cfg(n_new * w.n),
-                        &nn,
-                        &nw,
-                        &source_slot,
-                        &w.contact,
-                        &w.spring_in,
-                        &mut spring,
-                    )?;
-                }
-                let rows = history_rows(&tail.id[..n_arrivals], &received, w.n).wall_spring;
-                let (from, len) = (
-                    HISTORY_WIDTH * w.n * n_kept,
-                    HISTORY_WIDTH * w.n * n_arrivals,
-                );
-                if n_arrivals > 0 {
-                    st.memcpy_htod(&rows[..len], &mut spring.slice_mut(from..from + len))?;
-                }
-                Some(spring)
-            }
-            _ => None,
+    /// The walls' springs for the `n_new` particles after a rebuild, `None` without walls: a
+    /// particle that stays keeps its live ones, an arrival takes those it brought
+    /// (`received`, for the ids `arrival_ids` after the `n_kept` that stay), a ghost that was
+    /// owned here keeps its own (the host's history would; a ghost's walls are its owner's to
+    /// evaluate).
+    fn carried_wall_springs(
+        &self,
+        layout: &RebuildLayout,
+        n_new: usize,
+        n_kept: usize,
+        arrival_ids: &[u64],
+        received: &ContactHistory,
+    ) -> Result<Option<CudaSlice<f64>>, CudaError> {
+        let w = match &self.walls {
+            Some(w) if w.n > 0 => w,
+            _ => return Ok(None),
         };
+        let (st, k) = (&self.gpu.stream, &self.gpu.k);
+        let n_arrivals = arrival_ids.len();
+        let mut spring = zeros::<f64>(st, HISTORY_WIDTH * w.n * n_new)?;
+        let source_slot = st.clone_htod(&at_least_one(layout.wall_source.clone()))?;
+        let (nn, nw) = (n_new as i32, w.n as i32);
+        // SAFETY: `source_slot` holds n_new slots of the old arrays (or NO_SLOT), the old
+        // flags and springs a row per old slot and wall, `spring` n_new · walls.
+        unsafe {
+            k.gather_live_wall_springs(
+                st,
+                cfg(n_new * w.n),
+                &nn,
+                &nw,
+                &source_slot,
+                &w.contact,
+                &w.spring_in,
+                &mut spring,
+            )?;
+        }
+        let rows = history_rows(arrival_ids, received, w.n).wall_spring;
+        let (from, len) = (
+            HISTORY_WIDTH * w.n * n_kept,
+            HISTORY_WIDTH * w.n * n_arrivals,
+        );
+        if n_arrivals > 0 {
+            st.memcpy_htod(&rows[..len], &mut spring.slice_mut(from..from + len))?;
+        }
+        Ok(Some(spring))
+    }
 
-        // The pair entries the arrivals brought, sorted by key, for the build's look-up.
+    /// The history the next list build carries over ([`ExchangedHistory`]): what it needs of
+    /// the list before the rebuild, the old particles' ids (the arrays `particles` replace),
+    /// each new index's slot before (`old_slot`), and the pair entries the arrivals brought
+    /// (`received`), sorted by key.
+    fn exchange_history(
+        &mut self,
+        received: &ContactHistory,
+        particles: DeviceParticles,
+        old_slot: Vec<u32>,
+    ) -> Result<ExchangedHistory, CudaError> {
+        let st = self.gpu.stream.clone();
         let recv: Vec<&(ContactKey, ContactState)> = received
             .entries()
             .iter()
@@ -389,35 +493,19 @@ impl CudaSimulation {
             .take()
             .ok_or(super::error::HaloError::MissingHistory)?;
         let old = std::mem::replace(&mut self.particles, particles);
-        let history = ExchangedHistory {
+        Ok(ExchangedHistory {
             old_pairs,
             old_ref_offset,
             old_refs,
             old_contact,
             old_spring,
             old_id: old.id,
-            old_slot: st.clone_htod(&at_least_one(layout.old_slot))?,
+            old_slot: st.clone_htod(&at_least_one(old_slot))?,
             n_recv: recv.len(),
             recv_a: st.clone_htod(&at_least_one(recv_a))?,
             recv_b: st.clone_htod(&at_least_one(recv_b))?,
             recv_spring: st.clone_htod(&at_least_one(recv_spring))?,
-        };
-        if redrawn {
-            // The walls this rank keeps follow its new box.
-            self.host.restrict_walls();
-            self.upload_walls()?;
-        }
-        if let (Some(w), Some(spring)) = (&mut self.walls, wall_spring) {
-            w.install(&st, n_new, spring)?;
-        }
-        self.pairs
-            .reset(HistorySource::Exchanged(Box::new(history)));
-        self.halo.reset();
-        self.host_current = false;
-        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
-        par.timers.device_download += download;
-        par.timers.device_upload += t_up.elapsed().as_secs_f64();
-        Ok(())
+        })
     }
 
     /// `local`, the outcome of this rank's device copies between two collectives of a

@@ -7,7 +7,7 @@ use super::error::CudaError;
 use super::gpu::Gpu;
 use super::launch::{cfg, ptr};
 use super::layout::{KickDriftParams, ReduceKickParams, StepFlags};
-use super::pairs::PairList;
+use super::pair_list::PairList;
 use super::particles::DeviceParticles;
 use super::walls::WallStage;
 use cudarc::driver::CudaSlice;

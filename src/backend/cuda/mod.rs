@@ -23,6 +23,7 @@ mod launch;
 pub mod layout;
 mod list_builder;
 mod pair_contacts;
+mod pair_list;
 mod pairs;
 mod particles;
 pub mod probe;

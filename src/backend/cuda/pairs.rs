@@ -7,145 +7,17 @@
 use super::error::{CudaError, HaloError};
 use super::exchange::ExchangedHistory;
 use super::gpu::Gpu;
-use super::history::PairOutcomes;
 use super::launch::{cfg, ptr, zeros};
 use super::layout::{GridParams, HISTORY_WIDTH, PairSearchParams, staged_planes_bytes};
+use super::pair_list::{PairList, list_bytes, staging_batch};
 use super::particles::DeviceParticles;
 use super::walls::WallStage;
 use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
 use crate::neighbor::SlotList;
-use cudarc::driver::{CudaSlice, CudaStream};
-use std::sync::Arc;
+use cudarc::driver::CudaSlice;
 
 /// Plane-count buckets of the lean pair passes: counts 0..=ENUM_MAX_PLANES (`PD_PLANE_BUCKETS`).
 pub(super) const PLANE_BUCKETS: usize = ENUM_MAX_PLANES + 1;
-
-/// The pair list and everything indexed by pair.
-pub(super) struct PairList {
-    pub(super) n: usize,
-    /// In a decomposed run, the pairs `0..n_interior` have two owned members and need nothing
-    /// from the halo; the rest have a ghost. Otherwise `n`.
-    pub(super) n_interior: usize,
-    /// Per particle, its pairs as first member (`offset[i]..offset[i + 1]`): the history source
-    /// of the next build; `None` for a decomposed run's two-part list.
-    pub(super) offset: Option<CudaSlice<u32>>,
-    pub(super) pairs: CudaSlice<i32>,
-    /// Each pair's cached separating axis, in f32 (a hint: `store_axis` of cuda/contact.cu).
-    pub(super) axes: CudaSlice<f32>,
-    /// Each pair's contact history ([`HISTORY_WIDTH`] values): read and written in place by
-    /// the one thread that settles the pair in a step (`pair_contact_law` reads the record
-    /// before it writes it; a pair without contact has it cleared, unread), so one buffer
-    /// serves as last step's history and this step's.
-    pub(super) spring: CudaSlice<f64>,
-    pub(super) forces: CudaSlice<f64>,
-    pub(super) energy: CudaSlice<f64>,
-    pub(super) contact: CudaSlice<u32>,
-    pub(super) ref_offset: CudaSlice<u32>,
-    pub(super) refs: CudaSlice<u32>,
-    /// The pairs the lean passes leave to the full evaluation (GJK, the dual hull), and their
-    /// count.
-    pub(super) deferred: CudaSlice<u32>,
-    pub(super) deferred_count: CudaSlice<u32>,
-    /// Pairs per batch of the lean passes ([`staging_batch`]).
-    pub(super) batch: usize,
-    /// Between the two lean passes of polyhedral pairs (`pair_planes`, `pair_faces`), for the
-    /// pairs of one batch: each staged pair's planes (`StagedPlanes` of cuda/contact.cu,
-    /// [`staged_planes_bytes`] each), its plane-count bucket, the staged pairs listed bucket by
-    /// bucket, and per bucket the count and the fill cursor ([`PLANE_BUCKETS`] values each).
-    pub(super) staged: CudaSlice<u8>,
-    pub(super) bucket: CudaSlice<u8>,
-    pub(super) order: CudaSlice<u32>,
-    pub(super) bucket_count: CudaSlice<u32>,
-    pub(super) bucket_fill: CudaSlice<u32>,
-}
-
-impl PairList {
-    /// The members' slots of the listed pairs.
-    pub(super) fn slots(&self, st: &Arc<CudaStream>) -> Result<Vec<[usize; 2]>, CudaError> {
-        let pairs = st.clone_dtoh(&self.pairs)?;
-        Ok(pairs
-            .chunks_exact(2)
-            .take(self.n)
-            .map(|ab| [ab[0] as usize, ab[1] as usize])
-            .collect())
-    }
-
-    /// The contact flags of the listed pairs.
-    pub(super) fn flags(&self, st: &Arc<CudaStream>) -> Result<Vec<u32>, CudaError> {
-        let mut contact = st.clone_dtoh(&self.contact)?;
-        contact.truncate(self.n);
-        Ok(contact)
-    }
-
-    /// The last evaluation's outcomes, copied down.
-    pub(super) fn outcomes(&self, st: &Arc<CudaStream>) -> Result<PairOutcomes, CudaError> {
-        let (slots, contact) = (self.slots(st)?, self.flags(st)?);
-        let mut spring = st.clone_dtoh(&self.spring)?;
-        spring.truncate(HISTORY_WIDTH * self.n);
-        let mut energy = st.clone_dtoh(&self.energy)?;
-        energy.truncate(self.n);
-        let mut refs = st.clone_dtoh(&self.refs)?;
-        refs.truncate(2 * self.n);
-        Ok(PairOutcomes {
-            slots,
-            contact,
-            spring,
-            energy,
-            ref_offset: st.clone_dtoh(&self.ref_offset)?,
-            refs,
-        })
-    }
-
-    /// Bytes of device memory held by the list and its per-pair buffers.
-    fn bytes(&self) -> usize {
-        fn b<T>(s: &CudaSlice<T>) -> usize {
-            s.len() * std::mem::size_of::<T>()
-        }
-        self.offset.as_ref().map_or(0, b)
-            + b(&self.pairs)
-            + b(&self.deferred)
-            + b(&self.deferred_count)
-            + b(&self.staged)
-            + b(&self.bucket)
-            + b(&self.order)
-            + b(&self.bucket_count)
-            + b(&self.bucket_fill)
-            + b(&self.axes)
-            + b(&self.spring)
-            + b(&self.forces)
-            + b(&self.energy)
-            + b(&self.contact)
-            + b(&self.ref_offset)
-            + b(&self.refs)
-    }
-}
-
-/// Device bytes of a list of `np` pairs ([`PairStage::allocate_list`]): per pair, the pair,
-/// its two references, the cached separating axis (f32), the spring (one record, updated in place),
-/// the forces, energy and contact flag and the deferred index; for polyhedra, per pair of one
-/// staging batch of `batch` ([`staging_batch`]), the staged planes (`staged_bytes`), the
-/// plane-count bucket and the bucket order.
-pub(super) fn list_bytes(np: usize, batch: usize, spheres: bool, staged_bytes: usize) -> usize {
-    let per_pair = 2 * 4 + 2 * 4 + 3 * 4 + HISTORY_WIDTH * 8 + 9 * 8 + 8 + 4 + 4;
-    let staging = if spheres { 0 } else { staged_bytes + 1 + 4 };
-    np * per_pair + batch * staging
-}
-
-/// Most bytes of staged planes a list holds by default: the lean passes run over the pairs in
-/// batches of as many pairs as that holds ([`staging_batch`]), so that a list of millions of
-/// pairs does not hold a staging record for each (160 B a pair in mixed precision, as much as
-/// everything else of a pair together).
-const STAGING_BYTES: usize = 256 << 20;
-
-/// Pairs per staging batch of the lean passes for a list of `np` pairs of `staged_bytes` a
-/// staged record: all of them when they fit [`STAGING_BYTES`] (or `POLYDEM_PAIR_BATCH`), else
-/// as many as fit. The batches change no result: each pair is settled by itself.
-pub(super) fn staging_batch(np: usize, staged_bytes: usize) -> usize {
-    let most = crate::tuning::Tuning::get()
-        .pair_batch
-        .map_or(STAGING_BYTES / staged_bytes.max(1), |b| b as usize);
-    np.min(most.max(1)).max(1)
-}
 
 /// The contact history handed to the next list build.
 pub(super) enum HistorySource {
@@ -194,6 +66,16 @@ pub(super) enum ListSource<'a> {
         list: &'a SlotList,
         snapshot: &'a CudaSlice<f64>,
     },
+}
+
+/// The pairs of one build ([`PairStage::listed_pairs`]): how many, how many of them are of two
+/// owned particles (listed first), the pairs as `int2`, and their CSR offsets by particle
+/// (`None` where a decomposed run's two ranges make none).
+struct ListedPairs {
+    np: usize,
+    n_interior: usize,
+    pairs: CudaSlice<i32>,
+    offset: Option<CudaSlice<u32>>,
 }
 
 impl PairStage {
@@ -256,32 +138,7 @@ impl PairStage {
         let k = &gpu.k;
         let n = p.n;
         let ni = n as i32;
-        // History of the current list (or the one uploaded from the host), in the numbering
-        // before this build.
-        let history = match (self.pending_history.take(), self.list.take()) {
-            (Some(h), _) => h,
-            (None, Some(old)) => {
-                let Some(old_offset) = old.offset else {
-                    return Err(HaloError::MissingHistory.into());
-                };
-                let mut partner = zeros::<u64>(&st, old.n)?;
-                let npi = old.n as i32;
-                // SAFETY: `partner` holds a value per pair of the old list.
-                unsafe {
-                    k.history_partners(&st, cfg(old.n), &npi, &old.pairs, &p.id, &mut partner)?;
-                }
-                HistorySource::Rows {
-                    offset: old_offset,
-                    partner,
-                    spring: old.spring,
-                }
-            }
-            (None, None) => HistorySource::Rows {
-                offset: zeros::<u32>(&st, n + 1)?,
-                partner: zeros::<u64>(&st, 1)?,
-                spring: zeros::<f64>(&st, HISTORY_WIDTH)?,
-            },
-        };
+        let history = self.history_before_build(gpu, p)?;
         // The order: by cell (global id within a cell), binned here or taken from the host.
         let (order, cell_start, skin) = match &source {
             ListSource::Device { skin, grid } => {
@@ -319,38 +176,12 @@ impl PairStage {
         }
         p.gather_u32s(k, &st, &order)?;
         p.gather_u64s(k, &st, &order)?;
-        // Pairs: count, exclusive prefix sum, fill. A decomposed run lists the pairs of two
-        // owned particles first and those with a ghost after them, so the first part can be
-        // evaluated while the halo is in flight.
-        let (np, n_interior, pairs, offset) = if let ListSource::Host { list, .. } = &source {
-            let np = list.pairs.len();
-            let flat: &[i32] = list.pairs.as_flattened();
-            let pairs = if np > 0 {
-                st.clone_htod(flat)?
-            } else {
-                zeros::<i32>(&st, 2)?
-            };
-            (np, np, pairs, Some(st.clone_htod(&list.offset)?))
-        } else if decomposed {
-            let (grid, cell_start) = (device_grid(&source), cell_start.as_ref().expect("binned"));
-            let (n1, p1, _) = list_pairs(gpu, p, 1, cell_start, grid, skin)?;
-            let (n2, p2, _) = list_pairs(gpu, p, 2, cell_start, grid, skin)?;
-            let np = n1 + n2;
-            let mut pairs = zeros::<i32>(&st, 2 * np)?;
-            if n1 > 0 {
-                st.memcpy_dtod(&p1.slice(0..2 * n1), &mut pairs.slice_mut(0..2 * n1))?;
-            }
-            if n2 > 0 {
-                st.memcpy_dtod(&p2.slice(0..2 * n2), &mut pairs.slice_mut(2 * n1..2 * np))?;
-            }
-            // Pairs of one particle are in two ranges now, so the list is no CSR by particle:
-            // this run's history comes up from the host at every rebuild instead.
-            (np, n1, pairs, None)
-        } else {
-            let (grid, cell_start) = (device_grid(&source), cell_start.as_ref().expect("binned"));
-            let (np, pairs, offset) = list_pairs(gpu, p, 0, cell_start, grid, skin)?;
-            (np, np, pairs, Some(offset))
-        };
+        let ListedPairs {
+            np,
+            n_interior,
+            pairs,
+            offset,
+        } = Self::listed_pairs(gpu, p, &source, cell_start.as_ref(), skin, decomposed)?;
         let spheres = gpu.config.spheres;
         let staged_bytes = staged_planes_bytes(gpu.config.precision);
         let bytes = list_bytes(np, staging_batch(np, staged_bytes), spheres, staged_bytes);
@@ -379,6 +210,99 @@ impl PairStage {
         self.builds += 1;
         self.generation += 1;
         Ok(order)
+    }
+
+    /// The history of the current list (or the one uploaded from the host) in the numbering
+    /// before a build: its rows by particle with each pair's partner id, or none yet.
+    fn history_before_build(
+        &mut self,
+        gpu: &Gpu,
+        p: &DeviceParticles,
+    ) -> Result<HistorySource, CudaError> {
+        let (st, k, n) = (&gpu.stream, &gpu.k, p.n);
+        Ok(match (self.pending_history.take(), self.list.take()) {
+            (Some(h), _) => h,
+            (None, Some(old)) => {
+                let Some(old_offset) = old.offset else {
+                    return Err(HaloError::MissingHistory.into());
+                };
+                let mut partner = zeros::<u64>(st, old.n)?;
+                let npi = old.n as i32;
+                // SAFETY: `partner` holds a value per pair of the old list.
+                unsafe {
+                    k.history_partners(st, cfg(old.n), &npi, &old.pairs, &p.id, &mut partner)?;
+                }
+                HistorySource::Rows {
+                    offset: old_offset,
+                    partner,
+                    spring: old.spring,
+                }
+            }
+            (None, None) => HistorySource::Rows {
+                offset: zeros::<u32>(st, n + 1)?,
+                partner: zeros::<u64>(st, 1)?,
+                spring: zeros::<f64>(st, HISTORY_WIDTH)?,
+            },
+        })
+    }
+
+    /// The pairs of a build, from the host's list or counted, prefix-summed and filled on the
+    /// device (`cell_start` the binned cells, `None` for a host list). A decomposed run lists
+    /// the pairs of two owned particles first and those with a ghost after them, so the first
+    /// part can be evaluated while the halo is in flight.
+    fn listed_pairs(
+        gpu: &Gpu,
+        p: &DeviceParticles,
+        source: &ListSource,
+        cell_start: Option<&CudaSlice<u32>>,
+        skin: f64,
+        decomposed: bool,
+    ) -> Result<ListedPairs, CudaError> {
+        let st = &gpu.stream;
+        if let ListSource::Host { list, .. } = source {
+            let np = list.pairs.len();
+            let flat: &[i32] = list.pairs.as_flattened();
+            let pairs = if np > 0 {
+                st.clone_htod(flat)?
+            } else {
+                zeros::<i32>(st, 2)?
+            };
+            return Ok(ListedPairs {
+                np,
+                n_interior: np,
+                pairs,
+                offset: Some(st.clone_htod(&list.offset)?),
+            });
+        }
+        let (grid, cell_start) = (device_grid(source), cell_start.expect("binned"));
+        if decomposed {
+            let (n1, p1, _) = list_pairs(gpu, p, 1, cell_start, grid, skin)?;
+            let (n2, p2, _) = list_pairs(gpu, p, 2, cell_start, grid, skin)?;
+            let np = n1 + n2;
+            let mut pairs = zeros::<i32>(st, 2 * np)?;
+            if n1 > 0 {
+                st.memcpy_dtod(&p1.slice(0..2 * n1), &mut pairs.slice_mut(0..2 * n1))?;
+            }
+            if n2 > 0 {
+                st.memcpy_dtod(&p2.slice(0..2 * n2), &mut pairs.slice_mut(2 * n1..2 * np))?;
+            }
+            // Pairs of one particle are in two ranges now, so the list is no CSR by particle:
+            // this run's history comes up from the host at every rebuild instead.
+            Ok(ListedPairs {
+                np,
+                n_interior: n1,
+                pairs,
+                offset: None,
+            })
+        } else {
+            let (np, pairs, offset) = list_pairs(gpu, p, 0, cell_start, grid, skin)?;
+            Ok(ListedPairs {
+                np,
+                n_interior: np,
+                pairs,
+                offset: Some(offset),
+            })
+        }
     }
 
     /// The per-pair buffers of a list of `np` pairs (`n_interior` of two owned particles),
@@ -553,35 +477,4 @@ fn list_pairs(
     // SAFETY: as above; `pairs` holds the 2 np values the offsets reach.
     unsafe { gpu.k.fill_pairs(&st, cfg(n), &args, &offset, &mut pairs)? };
     Ok((np, pairs, offset))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::backend::cuda::Precision;
-
-    /// A short list is staged whole; a long one in batches that hold at most 256 MiB of staged
-    /// planes, in either precision, and the list's bytes count the staging once per batch.
-    #[test]
-    fn long_lists_are_staged_in_batches_of_256_mib() {
-        for precision in [Precision::Mixed, Precision::Double] {
-            let staged = staged_planes_bytes(precision);
-            assert_eq!(staging_batch(0, staged), 1);
-            assert_eq!(staging_batch(5000, staged), 5000);
-            let long = 20_000_000;
-            let batch = staging_batch(long, staged);
-            assert!(batch < long && batch * staged <= STAGING_BYTES);
-            assert!((batch + 1) * staged > STAGING_BYTES);
-            let whole = list_bytes(long, long, false, staged);
-            let batched = list_bytes(long, batch, false, staged);
-            assert_eq!(whole - batched, (long - batch) * (staged + 1 + 4));
-            assert_eq!(
-                list_bytes(long, batch, true, staged),
-                list_bytes(long, 1, true, 0)
-            );
-        }
-        // Mixed precision stages 160 bytes a pair: 1.68e6 pairs a batch.
-        assert_eq!(staged_planes_bytes(Precision::Mixed), 160);
-        assert_eq!(staging_batch(usize::MAX, 160), 1_677_721);
-    }
 }
