@@ -30,6 +30,7 @@
 //! Insertion, removal through an open face, and the first rebuild after an upload (no list
 //! yet) still take the round trip: they are rare, and need the host's state anyway.
 
+use super::CudaSimulation;
 use super::error::CudaError;
 use super::history::history_rows;
 use super::launch::{cfg, zeros};
@@ -37,7 +38,6 @@ use super::layout::HISTORY_WIDTH;
 use super::pair_list::PairList;
 use super::pairs::HistorySource;
 use super::particles::{DeviceParticles, at_least_one};
-use super::simulation::CudaSimulation;
 use super::upload::host_arrays;
 use crate::contact::{ContactHistory, ContactKey, ContactState};
 use crate::domain::ExchangeError;

@@ -3,10 +3,10 @@
 //! with a decomposed run's halo refresh ([`super::halo`]), and the deterministic reduction
 //! fused with the second half kick ([`super::integrator`]); then the step's geometry errors.
 
+use super::CudaSimulation;
 use super::error::CudaError;
 use super::layout::CONTACT_FAILED;
 use super::pairs::ListSource;
-use super::simulation::CudaSimulation;
 use crate::pipeline::{SimulationError, first_failure_position, pair_failure_key};
 use std::time::Instant;
 

@@ -3,11 +3,11 @@
 //! slots, and the leaving particles with the live contact history they are members of, packed
 //! on the device.
 
+use super::CudaSimulation;
 use super::error::CudaError;
 use super::launch::{cfg, zeros};
 use super::layout::{CONTACT_LIVE, HISTORY_WIDTH, history_state};
 use super::particles::Gather;
-use super::simulation::CudaSimulation;
 use crate::contact::{ContactKey, ContactState};
 use crate::state::Particles;
 use nalgebra::Vector3;

@@ -1,14 +1,12 @@
-//! The step on the GPU: [`CudaSimulation`] keeps the particle state, the pair list and the
-//! contact history resident on the device and launches the kernels of `cuda/` stage by stage in
-//! the order of docs/design.md §1 (the GPU twin of [`Simulation`], as HOOMD-blue pairs a GPU class
-//! with each expensive CPU class). The host copy in [`CudaSimulation::host`] is refreshed only
-//! when it is read (output, checkpoint) or changed (insertion, removal), so an ordinary step
-//! copies nothing back but its status flags and error word (28 bytes).
+//! Making a [`CudaSimulation`]: the host's simulation moved onto a GPU with its kernels
+//! compiled for the scene, the first forces evaluated there, the binning grid of the domain;
+//! and what it reports (device bytes, counts, the list builds).
 
+use super::CudaSimulation;
 use super::error::CudaError;
 use super::gpu::{Gpu, StageClock, WallStream};
 use super::halo::HaloStage;
-use super::integrator::{DriftChecks, Integrator};
+use super::integrator::Integrator;
 use super::kernels::{KernelConfig, Precision};
 use super::launch::Kernels;
 use super::layout::{GridParams, PairMaterial};
@@ -18,22 +16,8 @@ use super::particles::DeviceParticles;
 use super::walls::WallStage;
 use crate::contact::hunt_crossley_alpha;
 use crate::neighbor::Bounds;
-use crate::pipeline::{Simulation, SimulationError};
+use crate::pipeline::Simulation;
 use cudarc::driver::CudaContext;
-use std::time::Instant;
-
-/// Waits for the wall stream before anything is freed: the fields drop in declaration order,
-/// and a step that failed between the walls' two events (a CUDA error, a guard stop) can leave
-/// `wall_facet_overlaps` queued on it, reading particle arrays and the wall list that would
-/// otherwise be freed under it. The main stream is waited for too (cudarc frees a slice on its
-/// own stream, but the wall stream's kernels read the main stream's slices).
-impl Drop for CudaSimulation {
-    fn drop(&mut self) {
-        // Errors here have nowhere to go; the context reports them on its next use.
-        let _ = self.gpu.wall_stream.stream.synchronize();
-        let _ = self.gpu.stream.synchronize();
-    }
-}
 
 /// The binning grid of `host`'s domain and a list builder on it. A rank of a decomposed run
 /// bins on the whole domain's grid (ghosts keep their true centroids), sized for the whole
@@ -65,32 +49,6 @@ impl CudaSimulation {
         self.list_builder = list_builder;
         self.pairs.rebuild = true;
     }
-}
-
-/// A simulation stepped on the GPU. See the module docs.
-pub struct CudaSimulation {
-    /// Host copy: scene, inserter, time, step, statistics, and (when synced) the state.
-    pub host: Simulation,
-    /// Device name.
-    pub device: String,
-    /// Arithmetic of the pair geometry.
-    pub precision: Precision,
-    /// The device, its streams and kernels, and the scene's constants.
-    pub(super) gpu: Gpu,
-    /// The particle arrays (with a decomposed run's ghosts).
-    pub(super) particles: DeviceParticles,
-    /// Stage 2: the pair list, and everything indexed by pair.
-    pub(super) pairs: PairStage,
-    /// Stage 2: who builds the pair list (`[simulation.neighbor] mode`).
-    pub(super) list_builder: ListBuilder,
-    /// Stage 6: the walls, `None` without walls.
-    pub(super) walls: Option<WallStage>,
-    /// A decomposed run's halo ([`super::halo`]).
-    pub(super) halo: HaloStage,
-    /// Stage 9: the two passes over the particle state.
-    pub(super) integrator: Integrator,
-    /// The host copy holds the device state (no step since the last sync or upload).
-    pub(super) host_current: bool,
 }
 
 impl CudaSimulation {
@@ -266,129 +224,5 @@ impl CudaSimulation {
     /// half the skin since the last one); 0 without walls.
     pub fn wall_list_builds(&self) -> u64 {
         self.walls.as_ref().map_or(0, |w| w.list_builds)
-    }
-}
-
-impl CudaSimulation {
-    /// Advances one time step: the stage order of [`Simulation::step`], in two passes over the
-    /// particle state (`kick_drift` and, after the contacts, `reduce_and_kick` of
-    /// cuda/integrate.cu).
-    pub fn step(&mut self) -> Result<(), CudaError> {
-        let t0 = Instant::now();
-        // The device state changes from here on: the host copy is stale until synced again.
-        self.host_current = false;
-        let g = self.host.scene.gravity;
-        let dt = self.host.dt;
-        // The checks need the list's reference positions; before the first build there are none.
-        let checks = self.particles.n > 0 && self.pairs.list.is_some();
-        let (wall_reference, wall_half_reach) = match &mut self.walls {
-            Some(w) if checks => w.check(&self.gpu, &self.host.scene, self.host.time + dt),
-            _ => (0u64, 0.0),
-        };
-        let limits = DriftChecks {
-            reference: &self.pairs.reference,
-            half_skin: self.pairs.half_skin,
-            snapshot_distance: self.list_builder.snapshot_distance(),
-            wall_reference,
-            wall_half_reach,
-            max_speed: self.host.guard.max_speed,
-        };
-        let wrap = self.gpu.config.periodic;
-        let flags = self.integrator.kick_drift(
-            &self.gpu,
-            &mut self.particles,
-            g,
-            dt,
-            wrap,
-            checks,
-            limits,
-        )?;
-        self.host.time += dt;
-        self.host.step += 1;
-        self.host.timers.integrate += t0.elapsed().as_secs_f64();
-        // Stage 1: the periodic wrap and the per-step checks ran on the device with the drift;
-        // insertion and removal on the host (rare steps).
-        let t0 = Instant::now();
-        let motion = if flags.unstable != 0 {
-            self.sync_host()?;
-            let i = flags.first_unstable();
-            Err(if i < self.host.particles.len() {
-                let problem = self.host.instability_of(i);
-                self.host.unstable(i, problem)
-            } else {
-                SimulationError::NonFinite {
-                    step: self.host.step,
-                    id: 0,
-                    field: "position or velocity (of a ghost)",
-                }
-            })
-        } else {
-            Ok(())
-        };
-        // In a decomposed run every rank stops after this step if one does
-        // ([`Simulation::agree`]).
-        self.host.agree(motion)?;
-        let pending = self.host.inserter_pending();
-        if let Some(par) = self.host.parallel.as_deref_mut() {
-            // All ranks rebuild together: when some rank inserts, removes or has a particle
-            // that moved half the skin.
-            let local = flags.rebuild != 0 || flags.outside > 0 || self.pairs.rebuild;
-            let t_wait = Instant::now();
-            let rebuild = par.comm.any(local) || pending;
-            par.timers.wait += t_wait.elapsed().as_secs_f64();
-            if rebuild && self.rebuild_stays_on_device(pending, flags.outside > 0) {
-                // Migration and the ghosts' choice with the state left on the device
-                // ([`super::exchange`]).
-                self.rebuild_on_device()?;
-            } else if rebuild {
-                // A round trip through the host, where insertion, removal, migration,
-                // balancing and the choice of ghosts run as on the CPU backend.
-                let t_download = Instant::now();
-                self.sync_host()?;
-                let download = t_download.elapsed().as_secs_f64();
-                // A particle that left through a closed face stops every rank together, before
-                // the exchange's collectives (on the CPU backend the step checks it after the
-                // drift; here the host sees positions at rebuilds, which an exit forces).
-                let inside = self.host.check_inside();
-                self.host.agree(inside)?;
-                self.host.rebuild_exchange_on_host()?;
-                let t_upload = Instant::now();
-                self.upload_walls()?;
-                self.upload_from_host()?;
-                if let Some(par) = self.host.parallel.as_deref_mut() {
-                    par.timers.device_download += download;
-                    par.timers.device_upload += t_upload.elapsed().as_secs_f64();
-                }
-            }
-            // Ghosts were not integrated: between rebuilds their owners' motion comes through
-            // the halo, overlapped with the pairs of owned particles ([`Self::forces`]).
-            self.halo.due = !rebuild;
-        } else {
-            if flags.outside > 0 || self.host.inserter_pending() {
-                // Insertion or removal: the host does it on a synced copy, then everything
-                // goes back up (with the history) and the list is rebuilt.
-                self.sync_host()?;
-                self.host.exchange_on_host()?;
-                self.upload_from_host()?;
-            }
-            if flags.rebuild != 0 {
-                self.pairs.rebuild = true;
-            } else if flags.snapshot != 0 && !self.pairs.rebuild {
-                // The hybrid list's snapshot (seed Fig. 1B, B4): the host builds the next list
-                // while the GPU steps on this one.
-                let generation = self.pairs.generation;
-                self.list_builder
-                    .start_prebuild(&self.gpu, &self.particles, generation)?;
-            }
-        }
-        if flags.wall_rebuild != 0
-            && let Some(w) = &mut self.walls
-        {
-            w.list = None;
-        }
-        self.host.timers.exchange += t0.elapsed().as_secs_f64();
-        // The contacts, then the reduction with the second half kick.
-        self.forces(dt, true)?;
-        Ok(())
     }
 }

@@ -2,10 +2,10 @@
 //! host-side insertion: particles in the device's order, the contact history rebuilt from the
 //! pair slots and per-particle wall slots, and the step statistics.
 
+use super::CudaSimulation;
 use super::error::CudaError;
 use super::history::gather_contacts;
 use super::layout::CONTACT_LIVE;
-use super::simulation::CudaSimulation;
 use crate::pipeline::Simulation;
 
 impl CudaSimulation {

@@ -2,12 +2,12 @@
 //! their facet grids, and the particles with their contact history (as a CSR over the upload
 //! order, which the next list build carries over).
 
+use super::CudaSimulation;
 use super::error::CudaError;
 use super::history::{HistoryRows, history_rows};
 use super::layout::TemplateTables;
 use super::pairs::HistorySource;
 use super::particles::{DeviceParticles, HostParticleArrays};
-use super::simulation::CudaSimulation;
 use super::walls::WallStage;
 use crate::scene::Scene;
 use crate::state::Particles;
