@@ -148,7 +148,8 @@ template <class T> PD_HD void set_shares(OverlapWorkspace<T>& ws, int m, int na,
 
 // overlap::enumerate_faces: face areas and first moments by vertex enumeration for
 // m <= PD_ENUM_MAX_PLANES, coincident planes keeping the first copy; returns whether the faces
-// close (|Σ A_u n_u| <= 256 ε Σ |A_u|), else the caller uses the hull.
+// close (|Σ A_u n_u| <= 256 ε Σ |A_u|) and the enumeration held its vertices, else the caller
+// uses the hull.
 template <class T> PD_HD bool enumerate_faces(OverlapWorkspace<T>& ws, int m, int na, T scale) {
     T max_coord = T(0);
     for (int i = 0; i < m; ++i) {
@@ -163,13 +164,13 @@ template <class T> PD_HD bool enumerate_faces(OverlapWorkspace<T>& ws, int m, in
         if (!copy) active |= 1u << j;
     }
     const T vertex_tol = T(64.0) * Limits<T>::epsilon() * scale;
-    ws.faces.enumerate(ws.normal, ws.delta, m, active, vertex_tol);
+    if (!ws.faces.enumerate(ws.normal, ws.delta, m, active, vertex_tol)) return false;
     V3<T> closure = zero3<T>();
     T total = T(0);
     for (int u = 0; u < m; ++u) {
         ws.first_moment[u] = zero3<T>();
         if (active & (1u << u)) {
-            ws.faces.face(u, ws.normal[u], ws.delta[u], &ws.area[u], &ws.first_moment[u]);
+            if (!ws.faces.face(u, ws.normal[u], ws.delta[u], &ws.area[u], &ws.first_moment[u])) return false;
             closure += ws.normal[u] * ws.area[u];
             total += abs_(ws.area[u]);
         }

@@ -8,10 +8,23 @@
 
 #include "common.cuh"
 
-// Rust vertex_enumeration::{ENUM_MAX_PLANES, ENUM_MAX_VERTICES, ENUM_MAX_FACE_VERTICES}.
+// Rust vertex_enumeration::{enum_planes, ENUM_MAX_VERTICES, ENUM_MAX_FACE_VERTICES}: the
+// planes up to which pairs take the enumeration (8 unless POLYDEM_ENUM_PLANES sets 9-16, from
+// Rust), and the vertices it keeps. At 8 planes every triple fits (C(8, 3) = 56, C(7, 2) = 21 on
+// a face) and the workspace keeps its size; past 8 it holds Rust's 96 and 32 and declines, as
+// Rust does, when a pair finds more.
+#ifndef PD_ENUM_MAX_PLANES
 #define PD_ENUM_MAX_PLANES 8
+#endif
+#if PD_ENUM_MAX_PLANES <= 8
 #define PD_ENUM_MAX_VERTICES 56
 #define PD_ENUM_MAX_FACE_VERTICES 21
+typedef unsigned char EnumPlaneBits;
+#else
+#define PD_ENUM_MAX_VERTICES 96
+#define PD_ENUM_MAX_FACE_VERTICES 32
+typedef unsigned short EnumPlaneBits;
+#endif
 
 namespace pd {
 
@@ -29,14 +42,15 @@ template <class T> PD_HD T pseudo_angle(T s, T t) {
 template <class T> struct FaceEnumeration {
     V3<T> vertex[PD_ENUM_MAX_VERTICES];
     // Bit u set: the vertex was computed from plane u.
-    unsigned char on[PD_ENUM_MAX_VERTICES];
+    EnumPlaneBits on[PD_ENUM_MAX_VERTICES];
     int n_vertices;
     unsigned char order[PD_ENUM_MAX_FACE_VERTICES];
     T key[PD_ENUM_MAX_FACE_VERTICES];
 
     // FaceEnumeration::enumerate: the vertices of {x : normal[u]·x <= delta[u]} over the planes
-    // u < m whose bit is set in `active`, within `tol` of every other plane.
-    PD_HD void enumerate(const V3<T>* normal, const T* delta, int m, unsigned int active, T tol) {
+    // u < m whose bit is set in `active`, within `tol` of every other plane; false (declined)
+    // when there are more than PD_ENUM_MAX_VERTICES.
+    PD_HD bool enumerate(const V3<T>* normal, const T* delta, int m, unsigned int active, T tol) {
         m = min_(m, PD_ENUM_MAX_PLANES);
         const T singular = T(64.0) * Limits<T>::epsilon();
         n_vertices = 0;
@@ -67,23 +81,27 @@ template <class T> struct FaceEnumeration {
                         }
                     }
                     if (inside) {
+                        if (n_vertices == PD_ENUM_MAX_VERTICES) return false;
                         vertex[n_vertices] = scaled / det;
-                        on[n_vertices] = (unsigned char)((1u << i) | (1u << j) | (1u << k));
+                        on[n_vertices] = (EnumPlaneBits)((1u << i) | (1u << j) | (1u << k));
                         n_vertices += 1;
                     }
                 }
             }
         }
+        return true;
     }
 
     // FaceEnumeration::face: area and first moment of the face on plane u (unit normal n,
-    // distance delta from the interior point); zero when fewer than three vertices lie on it.
-    PD_HD void face(int u, V3<T> n, T delta, T* area_out, V3<T>* first_moment_out) {
+    // distance delta from the interior point); zero when fewer than three vertices lie on it;
+    // false (declined) when more than PD_ENUM_MAX_FACE_VERTICES do.
+    PD_HD bool face(int u, V3<T> n, T delta, T* area_out, V3<T>* first_moment_out) {
         const unsigned int bit = 1u << u;
         int count = 0;
         V3<T> mean = zero3<T>();
         for (int v = 0; v < n_vertices; ++v) {
             if (on[v] & bit) {
+                if (count == PD_ENUM_MAX_FACE_VERTICES) return false;
                 order[count] = (unsigned char)v;
                 mean += vertex[v];
                 count += 1;
@@ -91,7 +109,7 @@ template <class T> struct FaceEnumeration {
         }
         *area_out = T(0);
         *first_moment_out = zero3<T>();
-        if (count < 3) return;
+        if (count < 3) return true;
         mean = mean / T(count);
         T ax = abs_(n.x), ay = abs_(n.y), az = abs_(n.z);
         V3<T> axis = (ax <= ay && ax <= az) ? v3<T>(T(1), T(0), T(0))
@@ -125,6 +143,7 @@ template <class T> struct FaceEnumeration {
         }
         *area_out = area;
         *first_moment_out = first_moment;
+        return true;
     }
 };
 

@@ -10,6 +10,8 @@
 #   bash scripts/gpu_session.sh all       # both
 #   bash scripts/gpu_session.sh settled   # docs/performance.md's settled packings, and what the
 #                                         # face trajectory (the default) costs them
+#   bash scripts/gpu_session.sh enum      # the many-faced settled packings with the enumeration
+#                                         # taking up to 8, 12 and 16 planes (POLYDEM_ENUM_PLANES)
 #   bash scripts/gpu_session.sh regress   # the settled many-faced packings with this CLI and each
 #                                         # .device/bin/polydem_<name> (scripts/pack-commit.sh),
 #                                         # alternating, then this CLI's phase clocks
@@ -75,6 +77,7 @@ tests=(
   "validation_impact|$T/validation_impact --ignored"
   "stability_guard|$T/stability --ignored --exact the_guard_stops_gpu_runs_at_the_same_steps"
   "scene_limits|$T/scene_limits --ignored"
+  "cuda_geometry_enum16|POLYDEM_ENUM_PLANES=16 $T/cuda_geometry_host --ignored --exact cuda_geometry_kernels_match_the_rust_reference_on_the_gpu"
 )
 # ONLY="name name ..." runs just those groups (the names before the '|').
 if [ -n "${ONLY:-}" ]; then
@@ -166,6 +169,25 @@ if [ "$what" = settled ]; then
   bench mineral_grains_mixed_secant X=1 polydem bench $s/mineral_grains_1e6_secant.toml --backend cuda --gpu-precision mixed --warmup 5 --steps 40
   bench cylinders_mixed X=1 polydem bench $s/cylinders_1e6.toml --backend cuda --gpu-precision mixed --warmup 5 --steps 40
   bench spheres_mixed X=1 polydem bench $s/spheres_1e6.toml --backend cuda --gpu-precision mixed $steps
+fi
+if [ "$what" = enum ]; then
+  # The lean passes take every pair the enumeration can: with POLYDEM_ENUM_PLANES above 8 the
+  # mineral grains' and cylinders' contacts of 9-16 planes (three quarters and four fifths,
+  # docs/performance.md) stay out of the deferred pass. One binary, the setting alternated;
+  # the dodecahedra (92 % at most 8 planes) as the control.
+  s=launch/bench/settled
+  short="--backend cuda --gpu-precision mixed --warmup 5 --steps 20"
+  for round in $(seq "${ROUNDS:-1}"); do
+    for n in 8 12 16; do
+      for name in ${SCENES:-mineral_grains cylinders dodecahedra}; do
+        bench "${name}_enum${n}_$round" POLYDEM_ENUM_PLANES=$n polydem bench $s/${name}_1e6.toml $short
+      done
+    done
+  done
+  [ "${DOUBLE:-1}" = 0 ] || for n in 8 16; do
+    bench "mineral_grains_double_enum$n" POLYDEM_ENUM_PLANES=$n polydem bench \
+      $s/mineral_grains_1e6.toml --backend cuda --gpu-precision double --warmup 5 --steps 20
+  done
 fi
 if [ "$what" = regress ]; then
   # Where the many-faced shapes' pair stage went: this commit against older ones, one at a

@@ -52,6 +52,11 @@ pub struct Tuning {
     /// without a rebuild; a file missing there is taken from the binary. Kernel work only: the
     /// host code and the layout it shares with the kernels are the binary's.
     pub cuda_sources: Option<PathBuf>,
+    /// `POLYDEM_ENUM_PLANES`: the most planes whose overlap faces come from the vertex
+    /// enumeration rather than the dual hull (8–16; default 8), on the CPU and the GPU alike
+    /// (`geometry::vertex_enumeration::enum_planes`). Results change in the last bits where a
+    /// pair of 9 or more planes takes the enumeration.
+    pub enum_planes: Option<u32>,
     /// `POLYDEM_ROOT`: the repository root (its `meshes/`) for `polydem bench accuracy`.
     pub root: Option<PathBuf>,
     /// `POLYDEM_PANIC_AT=RANK:STEP`: that rank of `polydem run` panics after that step, so that
@@ -91,6 +96,7 @@ impl Tuning {
             n == 0 || (24..=255).contains(&n)
         });
         let mpi_round_bytes = number("POLYDEM_MPI_ROUND_BYTES", "a positive count", &|b| b > 0);
+        let enum_planes = number("POLYDEM_ENUM_PLANES", "8-16", &|n| (8..=16).contains(&n));
         let pair_batch = number("POLYDEM_PAIR_BATCH", "a count in 1-2147483647", &|b| {
             (1..=i32::MAX as u64).contains(&b)
         });
@@ -99,6 +105,7 @@ impl Tuning {
         t.pair_max_registers = pair_max_registers.map(|n| n as u32);
         t.mpi_round_bytes = mpi_round_bytes;
         t.pair_batch = pair_batch;
+        t.enum_planes = enum_planes.map(|n| n as u32);
         t.phase_clocks = var("POLYDEM_PHASE_CLOCKS").is_some();
         t.ptx_cache = var("POLYDEM_PTX_CACHE")
             .map(|v| (!(v.is_empty() || v == "0")).then(|| PathBuf::from(v)));
@@ -194,6 +201,10 @@ impl Tuning {
             self.root.as_ref().map(|p| p.display().to_string()),
         );
         put(
+            "POLYDEM_ENUM_PLANES",
+            self.enum_planes.map(|x| x.to_string()),
+        );
+        put(
             "POLYDEM_CUDA_SOURCES",
             self.cuda_sources.as_ref().map(|p| p.display().to_string()),
         );
@@ -248,7 +259,10 @@ mod tests {
             ("POLYDEM_MIXED_LP", "f32"),
             ("POLYDEM_PANIC_AT", "1:300"),
             ("POLYDEM_CUDA_SOURCES", "/tmp/kernels"),
+            ("POLYDEM_ENUM_PLANES", "12"),
         ]);
+        assert_eq!(t.enum_planes, Some(12));
+        assert!(t.set().contains(&"POLYDEM_ENUM_PLANES=12".to_string()));
         assert_eq!(t.cuda_sources, Some(PathBuf::from("/tmp/kernels")));
         assert!(
             t.set()
@@ -274,13 +288,16 @@ mod tests {
             ("POLYDEM_GPU_EXCHANGE", "gpu"),
             ("POLYDEM_MIXED_LP", "half"),
             ("POLYDEM_PANIC_AT", "1"),
+            ("POLYDEM_ENUM_PLANES", "17"),
         ]);
         assert_eq!(bad.panic_at, None);
+        assert_eq!(bad.enum_planes, None);
         assert_eq!(bad.cuda_block, None);
         assert_eq!(bad.mpi, None);
         assert_eq!(bad.gpu_exchange_on_device, None);
         assert!(!bad.mixed_lp_f32);
-        assert_eq!(bad.rejected.len(), 5);
+        assert_eq!(bad.rejected.len(), 6);
+        assert!(bad.rejected[5].contains("POLYDEM_ENUM_PLANES=\"17\" is not 8-16"));
         assert!(t.set().contains(&"POLYDEM_CUDA_BLOCK=96".to_string()));
     }
 }

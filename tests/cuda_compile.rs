@@ -15,7 +15,9 @@ use polydem::backend::cuda::probe::PROBE_FILE;
 /// - `contact.cu`: `PD_DOUBLE_GEOMETRY`, `PD_SPHERES`, `PD_WALLS`, `PD_PERIODIC`, and the hull
 ///   index type of `quickhull.cuh` (a byte for templates of fewer than 60 faces, else 16 bits).
 ///   Polyhedra: double with walls (the CPU-bitwise path), mixed with walls (the default GPU
-///   path), and double, periodic, without walls, with the 16-bit hull index and 3 templates.
+///   path), double, periodic, without walls, with the 16-bit hull index and 3 templates, and
+///   mixed with the enumeration taking up to 16 planes (`PD_ENUM_MAX_PLANES`, the wider
+///   staging and vertex workspace of `POLYDEM_ENUM_PLANES`).
 ///   Spheres: double with walls, mixed, periodic, without walls.
 /// - `integrate.cu`: `PD_GHOSTS`, `PD_WALLS`; `neighbor.cu`: `PD_GHOSTS`: both values of each.
 /// - `probe.cu`: only the template sizes, so the hull index type ([`probe_configs`]).
@@ -36,6 +38,7 @@ fn configs() -> Vec<KernelConfig> {
         materials: 2,
         ghosts: false,
         face_trajectory: false,
+        enum_planes: 8,
     };
     vec![
         base.clone(),
@@ -73,6 +76,15 @@ fn configs() -> Vec<KernelConfig> {
             precision: Precision::Mixed,
             max_vertices: 42,
             max_faces: 80,
+            ..base.clone()
+        },
+        // Many-faced grains with the enumeration up to 16 planes, mixed precision.
+        KernelConfig {
+            precision: Precision::Mixed,
+            periodic: true,
+            max_vertices: 18,
+            max_faces: 32,
+            enum_planes: 16,
             ..base
         },
     ]
@@ -94,12 +106,14 @@ fn jobs() -> Vec<(&'static str, KernelConfig)> {
     // Measured under NVRTC 13.0 (2 cores, other work running): contact.cu for polyhedra with the
     // byte hull index 140-210 s, probe.cu 190 s, contact.cu with the 16-bit index 64 s, for
     // spheres 3-13 s, the rest 0.2-4 s each. Longest first, so that the threads end together.
+    let wide = all.len() - 1; // the 16-plane enumeration, as costly as the other polyhedra
     let mut jobs = vec![
         ("contact.cu", all[1].clone()),
         ("contact.cu", all[0].clone()),
+        ("contact.cu", all[wide].clone()),
     ];
     jobs.extend(probe_configs().into_iter().map(|c| (PROBE_FILE, c)));
-    jobs.extend(all[2..].iter().map(|c| ("contact.cu", c.clone())));
+    jobs.extend(all[2..wide].iter().map(|c| ("contact.cu", c.clone())));
     for file in KERNEL_FILES {
         match *file {
             "contact.cu" => {}

@@ -1608,3 +1608,158 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         mismatches[..mismatches.len().min(5)].join("\n")
     );
 }
+
+/// The enumeration past 8 planes (`POLYDEM_ENUM_PLANES=16`; the headers with
+/// `-DPD_ENUM_MAX_PLANES=16`) gives the Rust results bit for bit: f64 and f32 pairs, and mixed
+/// precision's routing, on contacts of the committed settled cells of mineral grains and
+/// cylinders, most of which keep 9–16 planes. The setting is read once per process, so this runs
+/// [`sixteen_planes_in_this_process`] again in a child process with it.
+#[test]
+fn the_sixteen_plane_enumeration_matches_the_rust_reference_bitwise() {
+    let out = Command::new(std::env::current_exe().unwrap())
+        .env("POLYDEM_ENUM_PLANES", "16")
+        .args([
+            "--ignored",
+            "--exact",
+            "sixteen_planes_in_this_process",
+            "--nocapture",
+        ])
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    println!("{stdout}");
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stdout.contains("1 passed"), "{stdout}");
+}
+
+#[test]
+#[ignore = "run by the_sixteen_plane_enumeration_matches_the_rust_reference_bitwise"]
+fn sixteen_planes_in_this_process() {
+    use nalgebra::Translation3;
+    use polydem::geometry::pair::overlap_pair_mixed;
+    use polydem::geometry::vertex_enumeration::enum_planes;
+    use polydem::io::Packing;
+    assert_eq!(enum_planes(), 16, "POLYDEM_ENUM_PLANES=16 not seen");
+    let root = repo_root();
+    let mineral =
+        ConvexTemplate::from_file(&root.join("meshes/particles/mineral_grain.stl")).unwrap();
+    let cylinder =
+        polydem::scene::load_scene(&root.join("launch/bench/settled/cylinders_1e5.toml"))
+            .unwrap()
+            .templates[0]
+            .clone();
+    let shapes = vec![
+        Shape {
+            name: "mineral grain",
+            template: mineral,
+        },
+        Shape {
+            name: "cylinder",
+            template: cylinder,
+        },
+    ];
+    let mut pairs = Vec::new();
+    for (t, name) in [(0, "mineral_grains"), (1, "cylinders")] {
+        let cell =
+            Packing::read(&root.join(format!("launch/bench/packings/{name}.packing"))).unwrap();
+        let p = &cell.particles;
+        let reach = 2.0 * shapes[t].template.circumscribed_radius * p[0].scale;
+        let mut close = 0;
+        for i in 0..p.len() {
+            for j in i + 1..p.len() {
+                let mut x = p[j].position - p[i].position;
+                for a in 0..3 {
+                    x[a] -= cell.cell[a] * (x[a] / cell.cell[a]).round();
+                }
+                if x.norm() >= reach {
+                    continue;
+                }
+                close += 1;
+                if close % 8 != 0 {
+                    continue;
+                }
+                let pose =
+                    |c, q: UnitQuaternion<f64>| Isometry3::from_parts(Translation3::from(c), q);
+                pairs.push(PairCase {
+                    a: t,
+                    b: t,
+                    sa: p[i].scale,
+                    sb: p[j].scale,
+                    pose_a: pose(p[i].position, p[i].orientation),
+                    pose_b: pose(p[i].position + x, p[j].orientation),
+                    axis: Vector3::zeros(),
+                    margin: 0.0,
+                    kind: "settled packing",
+                });
+            }
+        }
+    }
+    let (mut w32, mut w64) = (PairWorkspace::<f32>::boxed(), PairWorkspace::<f64>::boxed());
+    let (mut plain, mut mixed) = (Vec::new(), Vec::new());
+    let mut past8 = 0;
+    for (i, c) in pairs.iter().enumerate() {
+        let (ta, tb) = (&shapes[c.a].template, &shapes[c.b].template);
+        let (a, b) = ((ta, c.sa, &c.pose_a), (tb, c.sb, &c.pose_b));
+        let mut l = format!("P {i}");
+        let r64 = from_rust(overlap_pair(&mut w64, a, b));
+        past8 += usize::from(r64.intersects && w64.a.planes().len() + w64.b.planes().len() > 8);
+        let r32 = from_rust(overlap_pair(&mut w32, a, b));
+        for r in [&r64, &r32] {
+            write!(l, " {} {}", r.status, u8::from(r.intersects)).unwrap();
+            hex3(&mut l, &r.axis);
+            put_overlap(&mut l, &r.overlap);
+        }
+        write!(l, " {}", u8::from(axis_separates(a, b, &c.axis, c.margin))).unwrap();
+        plain.push(l);
+        let r = from_rust(overlap_pair_mixed(&mut w32, &mut w64, a, b));
+        let mut l = format!("M {i} {} {}", r.status, u8::from(r.intersects));
+        hex3(&mut l, &r.axis);
+        put_overlap(&mut l, &r.overlap);
+        mixed.push(l);
+    }
+    println!(
+        "{} pairs of the settled cells, {past8} intersecting with more than 8 planes",
+        pairs.len()
+    );
+    assert!(past8 > 1500, "only {past8} pairs past 8 planes");
+    let text = case_file(&shapes, &pairs, &[]);
+    for (mode, want) in [("", &plain), ("--mixed", &mixed)] {
+        let root = repo_root();
+        let dir = temp_dir("cuda-enum16");
+        let exe = build_harness_with(&root, &dir, &["-DPD_ENUM_MAX_PLANES=16"]);
+        let cases = dir.join("cases.txt");
+        std::fs::write(&cases, &text).unwrap();
+        let mut cmd = Command::new(&exe);
+        if !mode.is_empty() {
+            cmd.arg(mode);
+        }
+        let out = cmd.arg(&cases).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let got: Vec<String> = String::from_utf8(out.stdout)
+            .unwrap()
+            .lines()
+            .map(|l| l.trim_end().to_string())
+            .collect();
+        assert_eq!(got.len(), want.len(), "{mode}");
+        let differ: Vec<String> = got
+            .iter()
+            .zip(want.iter())
+            .filter(|(g, w)| g.trim() != w.trim())
+            .map(|(g, w)| format!("C++  {g}\nRust {w}"))
+            .collect();
+        assert!(
+            differ.is_empty(),
+            "{mode}: {} of {} pairs differ:\n{}",
+            differ.len(),
+            want.len(),
+            differ[..differ.len().min(3)].join("\n")
+        );
+    }
+}

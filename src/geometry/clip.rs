@@ -333,7 +333,13 @@ pub fn prism_overlap_culled<T: Real>(
             .iter()
             .all(|p| p.distance(&centre.point) < -tol);
     let out = if proven {
-        overlap_about(ws, body.planes(), kept, centre.point, true)
+        overlap_about(
+            ws,
+            body.planes(),
+            kept,
+            centre.point,
+            super::vertex_enumeration::enum_planes(),
+        )
     } else {
         body.restore_aside();
         overlap_volume(ws, body.planes(), kept, start)

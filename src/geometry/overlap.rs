@@ -7,7 +7,7 @@
 //! vertices, its vertices are the planes that bound it (points inside the dual hull are redundant
 //! planes), and its edges are the intersection's edges.
 //!
-//! For the few planes a culled pair keeps (at most [`ENUM_MAX_PLANES`]) the faces are found by
+//! For the few planes a culled pair keeps (at most [`ENUM_MAX_PLANES`](super::vertex_enumeration::ENUM_MAX_PLANES), or `POLYDEM_ENUM_PLANES`) the faces are found by
 //! vertex enumeration instead ([`super::vertex_enumeration`]): the same faces, fanned the same
 //! way, from a workspace of a few hundred bytes; the hull takes over for more planes and
 //! wherever the enumerated faces do not close. [`overlap_volume_by_hull`] forces the hull, the
@@ -35,7 +35,7 @@ use super::Real;
 use super::interior::chebyshev_centre;
 use super::polytope::{Plane, widen};
 use super::quickhull::{DualHull, HullError, MAX_HULL_FACES, MAX_HULL_POINTS};
-use super::vertex_enumeration::{ENUM_MAX_PLANES, FaceEnumeration};
+use super::vertex_enumeration::{ENUM_PLANES_CAPACITY, FaceEnumeration, enum_planes};
 use nalgebra::Vector3;
 
 /// Geometric result of an overlap evaluation.
@@ -255,7 +255,7 @@ pub fn overlap_volume<T: Real>(
     b: &[Plane<T>],
     start: Vector3<T>,
 ) -> Result<Overlap<T>, OverlapError> {
-    overlap_about_centre(ws, a, b, start, true)
+    overlap_about_centre(ws, a, b, start, enum_planes())
 }
 
 /// [`overlap_volume`] with the faces always taken from the dual hull, also for the few planes
@@ -267,23 +267,24 @@ pub fn overlap_volume_by_hull<T: Real>(
     b: &[Plane<T>],
     start: Vector3<T>,
 ) -> Result<Overlap<T>, OverlapError> {
-    overlap_about_centre(ws, a, b, start, false)
+    overlap_about_centre(ws, a, b, start, 0)
 }
 
-/// [`overlap_volume`] with the faces from the vertex enumeration only: `None` where
-/// [`overlap_volume`] would use the dual hull (more than [`ENUM_MAX_PLANES`] planes, or faces
-/// that do not close). For tests of the enumeration and of how often it declines.
+/// [`overlap_volume`] with the faces from the vertex enumeration only, for as many planes as it
+/// can take ([`ENUM_PLANES_CAPACITY`], whatever `POLYDEM_ENUM_PLANES` says): `None` where there
+/// are more, or where it declines (faces that do not close, more vertices than it holds). For
+/// tests of the enumeration and of how often it declines.
 pub fn overlap_volume_by_enumeration<T: Real>(
     ws: &mut OverlapWorkspace<T>,
     a: &[Plane<T>],
     b: &[Plane<T>],
     start: Vector3<T>,
 ) -> Option<Overlap<T>> {
-    if a.len() + b.len() > ENUM_MAX_PLANES {
+    if a.len() + b.len() > ENUM_PLANES_CAPACITY {
         return None;
     }
     ws.declined = false;
-    let o = overlap_about_centre(ws, a, b, start, true).ok()?;
+    let o = overlap_about_centre(ws, a, b, start, ENUM_PLANES_CAPACITY).ok()?;
     (!ws.declined).then_some(o)
 }
 
@@ -293,25 +294,25 @@ fn overlap_about_centre<T: Real>(
     a: &[Plane<T>],
     b: &[Plane<T>],
     start: Vector3<T>,
-    enumerate: bool,
+    enumerate_up_to: usize,
 ) -> Result<Overlap<T>, OverlapError> {
     let m = a.len() + b.len();
     if m > MAX_HULL_POINTS {
         return Err(OverlapError::TooManyPlanes(m));
     }
     let centre = chebyshev_centre(a, b, start);
-    overlap_about(ws, a, b, centre.point, enumerate)
+    overlap_about(ws, a, b, centre.point, enumerate_up_to)
 }
 
 /// [`overlap_volume`] about a given interior point `x0` (normally the Chebyshev centre). The
-/// faces come from the vertex enumeration for at most [`ENUM_MAX_PLANES`] planes when
-/// `enumerate` is set, else from the dual hull.
+/// faces come from the vertex enumeration for at most `enumerate_up_to` planes (normally
+/// [`enum_planes`], 0 for never), else from the dual hull.
 pub(crate) fn overlap_about<T: Real>(
     ws: &mut OverlapWorkspace<T>,
     a: &[Plane<T>],
     b: &[Plane<T>],
     x0: Vector3<T>,
-    enumerate: bool,
+    enumerate_up_to: usize,
 ) -> Result<Overlap<T>, OverlapError> {
     let m = a.len() + b.len();
     if m > MAX_HULL_POINTS {
@@ -345,8 +346,9 @@ pub(crate) fn overlap_about<T: Real>(
         ws.dual[i] = ws.normal[i] / ws.delta[i];
     }
     let na = a.len();
-    let enumerated = enumerate && m <= ENUM_MAX_PLANES && enumerate_faces(ws, m, na, scale);
-    ws.declined = enumerate && m <= ENUM_MAX_PLANES && !enumerated;
+    let enumerate = m <= enumerate_up_to.min(ENUM_PLANES_CAPACITY);
+    let enumerated = enumerate && enumerate_faces(ws, m, na, scale);
+    ws.declined = enumerate && !enumerated;
     if !enumerated {
         for i in 0..m {
             ws.area[i] = T::zero();
@@ -438,14 +440,15 @@ fn set_shares<T: Real>(ws: &mut OverlapWorkspace<T>, m: usize, na: usize, tol: T
 }
 
 /// Face areas and first moments of the intersection of the `m` planes in `ws` (the first `na`
-/// of A) by vertex enumeration ([`super::vertex_enumeration`]), for `m <= ENUM_MAX_PLANES`.
+/// of A) by vertex enumeration ([`super::vertex_enumeration`]), for `m <= ENUM_PLANES_CAPACITY`.
 /// Coincident planes (dual points within the dual hull's first tolerance) keep the first copy.
 /// `scale`: the largest distance δ, to which the vertex tolerance is relative.
 ///
 /// Returns whether the faces close: `|Σ_u A_u n_u| <= 256 ε Σ_u |A_u|` (the vector area of a
 /// closed surface is zero). A face given an area it does not have, or one that lost a vertex
 /// (a triple skipped as singular, as where two planes cross at an angle of round-off size and
-/// both would claim the whole face), leaves the surface open; the caller then uses the hull.
+/// both would claim the whole face), leaves the surface open; the caller then uses the hull,
+/// as it does when the enumeration finds more vertices than it holds.
 fn enumerate_faces<T: Real>(ws: &mut OverlapWorkspace<T>, m: usize, na: usize, scale: T) -> bool {
     let mut max_coord = T::zero();
     for y in &ws.dual[..m] {
@@ -453,7 +456,7 @@ fn enumerate_faces<T: Real>(ws: &mut OverlapWorkspace<T>, m: usize, na: usize, s
     }
     let tol = T::of(HULL_EPS[0]) * T::EPSILON * max_coord;
     set_shares(ws, m, na, tol);
-    let mut active = 0u8;
+    let mut active = 0u32;
     for j in 0..m {
         let copy = (0..j).any(|i| (ws.dual[i] - ws.dual[j]).norm_squared() <= tol * tol);
         if !copy {
@@ -461,14 +464,21 @@ fn enumerate_faces<T: Real>(ws: &mut OverlapWorkspace<T>, m: usize, na: usize, s
         }
     }
     let vertex_tol = T::of(64.0) * T::EPSILON * scale;
-    ws.faces
-        .enumerate(&ws.normal[..m], &ws.delta[..m], active, vertex_tol);
+    if !ws
+        .faces
+        .enumerate(&ws.normal[..m], &ws.delta[..m], active, vertex_tol)
+    {
+        return false;
+    }
     let mut closure = Vector3::zeros();
     let mut total = T::zero();
     for u in 0..m {
         ws.first_moment[u] = Vector3::zeros();
         if active & (1 << u) != 0 {
-            (ws.area[u], ws.first_moment[u]) = ws.faces.face(u, ws.normal[u], ws.delta[u]);
+            let Some(face) = ws.faces.face(u, ws.normal[u], ws.delta[u]) else {
+                return false;
+            };
+            (ws.area[u], ws.first_moment[u]) = face;
             closure += ws.normal[u] * ws.area[u];
             total += ws.area[u].abs();
         }

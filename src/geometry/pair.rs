@@ -247,7 +247,7 @@ fn overlap_in_pair_frame<T: Real>(
         ws.a.planes(),
         ws.b.planes(),
         Vector3::zeros(),
-        true,
+        super::vertex_enumeration::enum_planes(),
     )?
     .to_world(&origin))
 }

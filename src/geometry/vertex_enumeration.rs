@@ -28,21 +28,39 @@
 use super::Real;
 use nalgebra::Vector3;
 
-/// Most planes handled by enumeration; more go to the dual hull. `C(m, 3)` triples are tested
-/// against `m − 3` planes each, so the cost grows as `m⁴`; at 8 planes it is still well below
-/// the hull's.
+/// Most planes handled by enumeration by default; more go to the dual hull. `C(m, 3)` triples
+/// are tested against `m − 3` planes each, so the cost grows as `m⁴`; at 8 planes it is still
+/// well below the hull's. `POLYDEM_ENUM_PLANES` raises it (see [`enum_planes`]).
 pub const ENUM_MAX_PLANES: usize = 8;
-/// Most vertices: one per triple of [`ENUM_MAX_PLANES`] planes, `C(8, 3)`.
-pub const ENUM_MAX_VERTICES: usize = 56;
-/// Most vertices on one face: one per pair of the other planes, `C(7, 2)`.
-const ENUM_MAX_FACE_VERTICES: usize = 21;
+/// The most planes the enumeration takes at any setting (`POLYDEM_ENUM_PLANES` at its largest).
+pub const ENUM_PLANES_CAPACITY: usize = 16;
+/// Most vertices kept: `C(8, 3) = 56` holds every triple of 8 planes. Past 8 planes a
+/// polytope of `m` faces has at most `2m − 4` vertices where three planes meet at each, plus a
+/// copy for every further triple where more meet (a vertex of a triangulated grain inside the
+/// other, five faces through it, is found ten times); an enumeration that finds more declines,
+/// and the hull takes the pair.
+pub const ENUM_MAX_VERTICES: usize = 96;
+/// Most vertices on one face: `C(7, 2) = 21` for 8 planes; an enumeration that puts more on
+/// one face declines.
+const ENUM_MAX_FACE_VERTICES: usize = 32;
+
+/// The planes up to which pairs take the enumeration rather than the hull: [`ENUM_MAX_PLANES`],
+/// or `POLYDEM_ENUM_PLANES` (8–[`ENUM_PLANES_CAPACITY`]), on the CPU and the GPU alike, so that
+/// GPU double stays bitwise the CPU at any setting. Past 8 planes the enumeration is slower than
+/// the hull on the CPU (docs/performance.md); the setting is there to measure it on the GPU,
+/// whose lean passes take every pair the enumeration can.
+pub fn enum_planes() -> usize {
+    crate::tuning::Tuning::get()
+        .enum_planes
+        .map_or(ENUM_MAX_PLANES, |n| n as usize)
+}
 
 /// Workspace and result of one enumeration.
 #[derive(Clone, Debug)]
 pub struct FaceEnumeration<T: Real> {
     vertex: [Vector3<T>; ENUM_MAX_VERTICES],
     /// Bit `u` set: the vertex was computed from plane `u`.
-    on: [u8; ENUM_MAX_VERTICES],
+    on: [u16; ENUM_MAX_VERTICES],
     n_vertices: usize,
     order: [u8; ENUM_MAX_FACE_VERTICES],
     key: [T; ENUM_MAX_FACE_VERTICES],
@@ -86,9 +104,10 @@ impl<T: Real> FaceEnumeration<T> {
     /// Step 1: the vertices of `{x : normal[u]·x <= delta[u]}` over the planes `u < m` whose bit
     /// is set in `active`; `tol` is how far outside a plane a vertex may lie (round-off).
     /// Triples whose normals are nearly dependent (`|det| <= 64 ε`) are skipped, as the hull
-    /// path skips them when it recomputes a vertex.
-    pub fn enumerate(&mut self, normal: &[Vector3<T>], delta: &[T], active: u8, tol: T) {
-        let m = normal.len().min(ENUM_MAX_PLANES);
+    /// path skips them when it recomputes a vertex. Returns `false`, declining, when more than
+    /// [`ENUM_MAX_VERTICES`] vertices are found.
+    pub fn enumerate(&mut self, normal: &[Vector3<T>], delta: &[T], active: u32, tol: T) -> bool {
+        let m = normal.len().min(ENUM_PLANES_CAPACITY);
         let is_active = |u: usize| active & (1 << u) != 0;
         let singular = T::of(64.0) * T::EPSILON;
         self.n_vertices = 0;
@@ -131,6 +150,9 @@ impl<T: Real> FaceEnumeration<T> {
                         }
                     }
                     if inside {
+                        if self.n_vertices == ENUM_MAX_VERTICES {
+                            return false;
+                        }
                         self.vertex[self.n_vertices] = scaled / det;
                         self.on[self.n_vertices] = (1 << i) | (1 << j) | (1 << k);
                         self.n_vertices += 1;
@@ -138,24 +160,29 @@ impl<T: Real> FaceEnumeration<T> {
                 }
             }
         }
+        true
     }
 
     /// Step 2: area and first moment (`Σ area × centroid` of the fan triangles) of the face on
     /// plane `u` (unit normal `n`, distance `delta` from the interior point), from the vertices of
-    /// the last [`Self::enumerate`]. Both are zero when fewer than three vertices lie on `u`.
-    pub fn face(&mut self, u: usize, n: Vector3<T>, delta: T) -> (T, Vector3<T>) {
-        let bit = 1u8 << u;
+    /// the last [`Self::enumerate`]. Both are zero when fewer than three vertices lie on `u`;
+    /// `None`, declining, when more than `ENUM_MAX_FACE_VERTICES` (32) do.
+    pub fn face(&mut self, u: usize, n: Vector3<T>, delta: T) -> Option<(T, Vector3<T>)> {
+        let bit = 1u16 << u;
         let mut count = 0;
         let mut mean = Vector3::zeros();
         for v in 0..self.n_vertices {
             if self.on[v] & bit != 0 {
+                if count == ENUM_MAX_FACE_VERTICES {
+                    return None;
+                }
                 self.order[count] = v as u8;
                 mean += self.vertex[v];
                 count += 1;
             }
         }
         if count < 3 {
-            return (T::zero(), Vector3::zeros());
+            return Some((T::zero(), Vector3::zeros()));
         }
         mean /= T::of(count as f64);
         // A basis (e1, e2 = n × e1) of the plane, so that increasing angle is counter-clockwise
@@ -196,6 +223,6 @@ impl<T: Real> FaceEnumeration<T> {
             area += tri_area;
             first_moment += (foot + p + q) * (tri_area * third);
         }
-        (area, first_moment)
+        Some((area, first_moment))
     }
 }

@@ -77,6 +77,10 @@ pub struct KernelConfig {
     /// `simulation.face_window = "trajectory"`: face contacts take the impulse of their own
     /// normal motion (`contact::trajectory`); the secant's kernels carry none of its code.
     pub face_trajectory: bool,
+    /// The most planes whose faces come from the vertex enumeration (`PD_ENUM_MAX_PLANES`,
+    /// [`crate::geometry::vertex_enumeration::enum_planes`]): the lean passes stage and take
+    /// the pairs of at most that many planes.
+    pub enum_planes: usize,
 }
 
 impl KernelConfig {
@@ -104,6 +108,7 @@ impl KernelConfig {
             materials: scene.materials.len().max(1),
             ghosts: false,
             face_trajectory: scene.simulation.face_window == crate::contact::FaceWindow::Trajectory,
+            enum_planes: crate::geometry::vertex_enumeration::enum_planes(),
         }
     }
 
@@ -125,6 +130,7 @@ impl KernelConfig {
             format!("-DPD_MATERIALS={}", self.materials),
             format!("-DPD_GHOSTS={}", flag(self.ghosts)),
             format!("-DPD_FACE_TRAJECTORY={}", flag(self.face_trajectory)),
+            format!("-DPD_ENUM_MAX_PLANES={}", self.enum_planes),
         ];
         // Most grid cells merged per particle and wall when the wall list is built (default
         // 27; a box spanning more walks the facet grid in id order instead):
@@ -155,7 +161,7 @@ impl KernelConfig {
         d.extend(layout::layout_defines());
         d.push(format!(
             "-DPD_SIZEOF_STAGED_PLANES={}",
-            layout::staged_planes_bytes(self.precision)
+            layout::staged_planes_bytes(self.precision, self.enum_planes)
         ));
         d
     }

@@ -6,7 +6,6 @@
 //! carry explicit `pad` fields where C would insert padding.
 
 use super::kernels::Precision;
-use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
 use crate::neighbor::Bounds;
 use cudarc::driver::{DeviceRepr, ValidAsZeroBits};
 
@@ -405,14 +404,15 @@ pub struct ProbeTemplates {
 // SAFETY: seven device pointers and three ints, laid out as the C struct.
 unsafe impl DeviceRepr for ProbeTemplates {}
 
-/// Bytes of one `StagedPlanes` record of cuda/contact.cu: ENUM_MAX_PLANES planes (normal and
-/// offset in the geometry's arithmetic), the frame origin in f64, two plane counts.
-pub fn staged_planes_bytes(precision: Precision) -> usize {
+/// Bytes of one `StagedPlanes` record of cuda/contact.cu: `planes` planes (the enumeration's
+/// limit, [`crate::geometry::vertex_enumeration::enum_planes`]; normal and offset in the
+/// geometry's arithmetic), the frame origin in f64, two plane counts.
+pub fn staged_planes_bytes(precision: Precision, planes: usize) -> usize {
     let real = match precision {
         Precision::Double => 8,
         Precision::Mixed => 4,
     };
-    ENUM_MAX_PLANES * 4 * real + 3 * 8 + 2 * 4
+    planes * 4 * real + 3 * 8 + 2 * 4
 }
 
 /// Declares the shared structs whose layout is checked: each as `Type => "C_NAME" { fields }`,

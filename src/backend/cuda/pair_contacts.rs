@@ -90,7 +90,7 @@ impl PairStage {
             // SAFETY: `deferred` holds one slot per pair of the list; `bucket`, `order` one per
             // pair of a batch and `staged` one StagedPlanes record per pair of a batch (sizes
             // checked by static_assert), indexed from `start`; the bucket counts and fill
-            // cursors PLANE_BUCKETS values.
+            // cursors plane_buckets values.
             unsafe {
                 k.pair_planes(
                     st,

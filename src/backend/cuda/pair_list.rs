@@ -39,8 +39,8 @@ pub(super) struct PairList {
     pub(super) batch: usize,
     /// Between the two lean passes of polyhedral pairs (`pair_planes`, `pair_faces`), for the
     /// pairs of one batch: each staged pair's planes (`StagedPlanes` of cuda/contact.cu,
-    /// [`staged_planes_bytes`] each), its plane-count bucket, the staged pairs listed bucket by
-    /// bucket, and per bucket the count and the fill cursor ([`PLANE_BUCKETS`] values each).
+    /// `layout::staged_planes_bytes` each), its plane-count bucket, the staged pairs listed bucket by
+    /// bucket, and per bucket the count and the fill cursor (`pairs::plane_buckets` values each).
     pub(super) staged: CudaSlice<u8>,
     pub(super) bucket: CudaSlice<u8>,
     pub(super) order: CudaSlice<u32>,
@@ -147,7 +147,7 @@ mod tests {
     #[test]
     fn long_lists_are_staged_in_batches_of_256_mib() {
         for precision in [Precision::Mixed, Precision::Double] {
-            let staged = staged_planes_bytes(precision);
+            let staged = staged_planes_bytes(precision, 8);
             assert_eq!(staging_batch(0, staged), 1);
             assert_eq!(staging_batch(5000, staged), 5000);
             let long = 20_000_000;
@@ -163,7 +163,8 @@ mod tests {
             );
         }
         // Mixed precision stages 160 bytes a pair: 1.68e6 pairs a batch.
-        assert_eq!(staged_planes_bytes(Precision::Mixed), 160);
+        assert_eq!(staged_planes_bytes(Precision::Mixed, 8), 160);
+        assert_eq!(staged_planes_bytes(Precision::Mixed, 16), 288);
         assert_eq!(staging_batch(usize::MAX, 160), 1_677_721);
     }
 }

@@ -12,12 +12,14 @@ use super::layout::{GridParams, HISTORY_WIDTH, PairSearchParams, staged_planes_b
 use super::pair_list::{PairList, list_bytes, staging_batch};
 use super::particles::DeviceParticles;
 use super::walls::WallStage;
-use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
 use crate::neighbor::SlotList;
 use cudarc::driver::CudaSlice;
 
-/// Plane-count buckets of the lean pair passes: counts 0..=ENUM_MAX_PLANES (`PD_PLANE_BUCKETS`).
-pub(super) const PLANE_BUCKETS: usize = ENUM_MAX_PLANES + 1;
+/// Plane-count buckets of the lean pair passes for the enumeration's limit `enum_planes`: counts
+/// 0..=enum_planes (`PD_PLANE_BUCKETS`).
+pub(super) fn plane_buckets(enum_planes: usize) -> usize {
+    enum_planes + 1
+}
 
 /// The contact history handed to the next list build.
 pub(super) enum HistorySource {
@@ -183,7 +185,7 @@ impl PairStage {
             offset,
         } = Self::listed_pairs(gpu, p, &source, cell_start.as_ref(), skin, decomposed)?;
         let spheres = gpu.config.spheres;
-        let staged_bytes = staged_planes_bytes(gpu.config.precision);
+        let staged_bytes = staged_planes_bytes(gpu.config.precision, gpu.config.enum_planes);
         let bytes = list_bytes(np, staging_batch(np, staged_bytes), spheres, staged_bytes);
         let list = Self::allocate_list(
             gpu,
@@ -369,7 +371,7 @@ impl PairStage {
                 h.remap(k, &st, np, &pairs, &p.id, order, &mut carried)?
             }
         }
-        let staged_bytes = staged_planes_bytes(gpu.config.precision);
+        let staged_bytes = staged_planes_bytes(gpu.config.precision, gpu.config.enum_planes);
         let batch = staging_batch(np, staged_bytes);
         Ok(PairList {
             n: np,
@@ -391,8 +393,8 @@ impl PairStage {
             staged: zeros::<u8>(&st, if spheres { 1 } else { batch * staged_bytes })?,
             bucket: zeros::<u8>(&st, if spheres { 1 } else { batch })?,
             order: zeros::<u32>(&st, if spheres { 1 } else { batch })?,
-            bucket_count: zeros::<u32>(&st, PLANE_BUCKETS)?,
-            bucket_fill: zeros::<u32>(&st, PLANE_BUCKETS)?,
+            bucket_count: zeros::<u32>(&st, plane_buckets(gpu.config.enum_planes))?,
+            bucket_fill: zeros::<u32>(&st, plane_buckets(gpu.config.enum_planes))?,
         })
     }
 }

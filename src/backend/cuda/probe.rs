@@ -160,6 +160,8 @@ impl GeometryProbe {
             materials: 1,
             ghosts: false,
             face_trajectory: false,
+            // The CPU's setting, so that the probe's pairs take the CPU's paths.
+            enum_planes: crate::geometry::vertex_enumeration::enum_planes(),
         };
         let ptx = compile(PROBE_FILE, &config, (major * 10 + minor) as u32)?;
         let module = ctx.load_module(ptx)?;
