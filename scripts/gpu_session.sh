@@ -77,6 +77,7 @@ tests=(
   "validation_impact|$T/validation_impact --ignored"
   "stability_guard|$T/stability --ignored --exact the_guard_stops_gpu_runs_at_the_same_steps"
   "scene_limits|$T/scene_limits --ignored"
+  "gpu_minerals|$T/gpu_pipeline --ignored --exact settled_many_faced_grains_end_bitwise_equal_to_the_cpu"
   "cuda_geometry_enum16|POLYDEM_ENUM_PLANES=16 $T/cuda_geometry_host --ignored --exact cuda_geometry_kernels_match_the_rust_reference_on_the_gpu"
 )
 # ONLY="name name ..." runs just those groups (the names before the '|').
