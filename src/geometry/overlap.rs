@@ -318,100 +318,145 @@ pub(crate) fn overlap_about<T: Real>(
     if m > MAX_HULL_POINTS {
         return Err(OverlapError::TooManyPlanes(m));
     }
-    ws.x0 = x0;
-    ws.m = m;
-    ws.by_hull = false;
-    let mut scale = T::zero();
-    let mut radius = T::max_value().unwrap_or(T::one());
-    for (i, p) in a.iter().chain(b).enumerate() {
-        ws.normal[i] = p.normal;
-        ws.delta[i] = p.offset - p.normal.dot(&x0);
-        scale = scale.max(ws.delta[i]);
-        radius = radius.min(ws.delta[i]);
-    }
+    let (scale, radius) = ws.place_about(a, b, x0);
     let none = Overlap {
         depth: radius,
         ..Overlap::default()
     };
-    for i in 0..m {
-        ws.area[i] = T::zero();
-    }
     if radius <= T::of(16.0) * T::EPSILON * scale {
         return Ok(none);
     }
-    // Polar transform (seed Alg. II). Every δ is at least the inscribed radius, so every dual
-    // point is finite.
-    for i in 0..m {
-        ws.delta[i] = ws.delta[i].max(radius);
-        ws.dual[i] = ws.normal[i] / ws.delta[i];
-    }
+    ws.polar_transform(radius);
     let na = a.len();
-    let enumerate = m <= enumerate_up_to.min(ENUM_PLANES_CAPACITY);
-    let enumerated = enumerate && enumerate_faces(ws, m, na, scale);
-    ws.declined = enumerate && !enumerated;
-    if !enumerated {
-        for i in 0..m {
-            ws.area[i] = T::zero();
-        }
-        hull_faces(ws, m, na)?;
-        ws.by_hull = true;
-    }
-    // The hull's traversal orientation is a global convention; make the areas positive (the
-    // enumeration's are by construction).
-    let third = T::of(1.0 / 3.0);
-    let mut volume = T::zero();
-    for i in 0..m {
-        volume += ws.delta[i] * ws.area[i];
-    }
-    if volume < T::zero() {
-        for i in 0..m {
-            ws.area[i] = -ws.area[i];
-            ws.first_moment[i] = -ws.first_moment[i];
-        }
-        volume = -volume;
-    }
-    volume *= third;
-    if volume <= T::zero() {
+    ws.find_faces(na, scale, enumerate_up_to)?;
+    let Some(o) = ws.volume_and_moments() else {
         return Ok(none);
-    }
-    let mut centroid = Vector3::zeros();
-    let mut dv_dxb = Vector3::zeros();
-    let mut moment_b = Vector3::zeros();
-    for i in 0..m {
-        centroid += ws.first_moment[i] * (ws.delta[i] * T::of(0.25));
-        let share = ws.share_b[i];
-        if share > T::zero() {
-            dv_dxb += ws.normal[i] * (ws.area[i] * share);
-            moment_b += ws.first_moment[i].cross(&ws.normal[i]) * share;
-        }
-    }
-    centroid /= volume;
-    // Moment about the overlap centroid rather than x₀.
-    moment_b -= centroid.cross(&dv_dxb);
-    // The depth along the normal −S/|S|: the distance to separation the overlap's vertices
-    // give where it is at least half the face value V/|S| (which no convex overlap's depth is
-    // below), else its extent (`by_hull` is `!enumerated` here).
-    let area = dv_dxb.norm();
-    let thickness = if area > T::zero() {
-        let n = dv_dxb / area;
-        let extent = ws.extent_along(&n);
-        let separation = ws.separation_along(&(-n), na, area);
-        if separation * area >= T::of(0.5) * volume {
-            separation.min(extent)
-        } else {
-            extent
-        }
-    } else {
-        T::zero()
     };
     Ok(Overlap {
-        volume,
-        centroid: centroid + x0,
-        dv_dxb,
-        moment_b,
+        centroid: o.centroid + x0,
         depth: radius,
-        thickness,
+        thickness: ws.thickness(&o.dv_dxb, na, o.volume),
+        ..o
     })
+}
+
+impl<T: Real> OverlapWorkspace<T> {
+    /// The planes of `a` then `b` about `x0`: their normals and distances δ from it, the areas
+    /// cleared; returns the largest δ (the scale of round-off) and the smallest (the radius of
+    /// the ball about `x0` inside all of them, negative when `x0` is outside one).
+    fn place_about(&mut self, a: &[Plane<T>], b: &[Plane<T>], x0: Vector3<T>) -> (T, T) {
+        let m = a.len() + b.len();
+        self.x0 = x0;
+        self.m = m;
+        self.by_hull = false;
+        let mut scale = T::zero();
+        let mut radius = T::max_value().unwrap_or(T::one());
+        for (i, p) in a.iter().chain(b).enumerate() {
+            self.normal[i] = p.normal;
+            self.delta[i] = p.offset - p.normal.dot(&x0);
+            scale = scale.max(self.delta[i]);
+            radius = radius.min(self.delta[i]);
+        }
+        for i in 0..m {
+            self.area[i] = T::zero();
+        }
+        (scale, radius)
+    }
+
+    /// Polar transform (seed Alg. II): each plane's dual point `n / δ`. Every δ is at least
+    /// the inscribed `radius`, so every dual point is finite.
+    fn polar_transform(&mut self, radius: T) {
+        for i in 0..self.m {
+            self.delta[i] = self.delta[i].max(radius);
+            self.dual[i] = self.normal[i] / self.delta[i];
+        }
+    }
+
+    /// Every face's area and first moment: by the vertex enumeration for at most
+    /// `enumerate_up_to` planes (where it declines, and for more, by the dual hull).
+    fn find_faces(
+        &mut self,
+        na: usize,
+        scale: T,
+        enumerate_up_to: usize,
+    ) -> Result<(), OverlapError> {
+        let m = self.m;
+        let enumerate = m <= enumerate_up_to.min(ENUM_PLANES_CAPACITY);
+        let enumerated = enumerate && enumerate_faces(self, m, na, scale);
+        self.declined = enumerate && !enumerated;
+        if !enumerated {
+            for i in 0..m {
+                self.area[i] = T::zero();
+            }
+            hull_faces(self, m, na)?;
+            self.by_hull = true;
+        }
+        Ok(())
+    }
+
+    /// The volume `Σ δ A / 3`, the centroid about x₀ (`Σ δ/4 × first moment / V`), S and the
+    /// surface moment about the centroid, from the faces (depth and thickness left zero);
+    /// `None` for no volume. The hull's traversal orientation is a global convention, so its
+    /// areas are made positive here (the enumeration's are by construction).
+    fn volume_and_moments(&mut self) -> Option<Overlap<T>> {
+        let m = self.m;
+        let third = T::of(1.0 / 3.0);
+        let mut volume = T::zero();
+        for i in 0..m {
+            volume += self.delta[i] * self.area[i];
+        }
+        if volume < T::zero() {
+            for i in 0..m {
+                self.area[i] = -self.area[i];
+                self.first_moment[i] = -self.first_moment[i];
+            }
+            volume = -volume;
+        }
+        volume *= third;
+        if volume <= T::zero() {
+            return None;
+        }
+        let mut centroid = Vector3::zeros();
+        let mut dv_dxb = Vector3::zeros();
+        let mut moment_b = Vector3::zeros();
+        for i in 0..m {
+            centroid += self.first_moment[i] * (self.delta[i] * T::of(0.25));
+            let share = self.share_b[i];
+            if share > T::zero() {
+                dv_dxb += self.normal[i] * (self.area[i] * share);
+                moment_b += self.first_moment[i].cross(&self.normal[i]) * share;
+            }
+        }
+        centroid /= volume;
+        // Moment about the overlap centroid rather than x₀.
+        moment_b -= centroid.cross(&dv_dxb);
+        Some(Overlap {
+            volume,
+            centroid,
+            dv_dxb,
+            moment_b,
+            ..Overlap::default()
+        })
+    }
+
+    /// The depth along the normal −S/|S|: the distance to separation the overlap's vertices
+    /// give where it is at least half the face value V/|S| (which no convex overlap's depth is
+    /// below), else its extent; zero where S vanishes.
+    fn thickness(&self, dv_dxb: &Vector3<T>, na: usize, volume: T) -> T {
+        let area = dv_dxb.norm();
+        if area > T::zero() {
+            let n = dv_dxb / area;
+            let extent = self.extent_along(&n);
+            let separation = self.separation_along(&(-n), na, area);
+            if separation * area >= T::of(0.5) * volume {
+                separation.min(extent)
+            } else {
+                extent
+            }
+        } else {
+            T::zero()
+        }
+    }
 }
 
 /// The share of `|S|` that one face of A, projected on the normal, must carry for the depth to
