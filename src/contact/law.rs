@@ -321,6 +321,80 @@ struct NormalPart {
     cap_b: f64,
 }
 
+/// The Hunt–Crossley dashpot of a contact's loading cycle and its caps (docs/contact.md §2):
+/// what the normal force needs besides the pressure.
+struct Dashpot {
+    /// The damping coefficient's scale `ᾱ(e)`.
+    damping: f64,
+    /// The reference speed: the cycle's approach speed, or the floor of a contact at rest.
+    v_ref: f64,
+    /// The share of the relative speed a dashpot may take per step ([`DASHPOT_STEP_FRACTION`]).
+    share: f64,
+    /// The mass the cap is taken against.
+    cap_mass: f64,
+    /// The bodies' shares in the caps' and locks' mass splitting.
+    cap_a: f64,
+    cap_b: f64,
+}
+
+impl Dashpot {
+    /// The dashpot of a contact of potential `energy` whose cycle's approach speed is in
+    /// `state` (updated before).
+    fn new(
+        params: &ContactParameters,
+        state: &ContactState,
+        energy: f64,
+        kin: &ContactKinematics,
+    ) -> Self {
+        let (cycle, floor) = (
+            state.approach_speed.abs(),
+            (2.0 * energy / kin.effective_mass).sqrt(),
+        );
+        let v_ref = cycle.max(floor);
+        // The share of the relative speed a dashpot may take per step: the whole of it for a
+        // contact damped to its cycle's approach speed (an impact), DASHPOT_STEP_FRACTION where
+        // the floor sets the damping (a contact at rest or loaded slowly, overcritical at low
+        // e), and there against the bodies' masses split among their contacts
+        // (DASHPOT_STEP_FRACTION).
+        let at_floor = floor > cycle;
+        let (share, cap_mass) = if at_floor {
+            (DASHPOT_STEP_FRACTION, kin.dashpot_mass)
+        } else {
+            (1.0, kin.effective_mass)
+        };
+        // The bodies' shares in the caps' and locks' mass splitting.
+        let (cap_a, cap_b) = if at_floor {
+            (kin.split_a, kin.split_b)
+        } else {
+            (1.0, 1.0)
+        };
+        Dashpot {
+            damping: params.damping,
+            v_ref,
+            share,
+            cap_mass,
+            cap_a,
+            cap_b,
+        }
+    }
+
+    /// For `pressure` on the area `area` at normal speed `vn`: the elastic force, the
+    /// Hunt–Crossley coefficient and the normal force with damping, capped and never pulling.
+    fn normal(&self, pressure: f64, area: f64, vn: f64, dt: f64) -> (f64, f64, f64) {
+        let f_elastic = pressure * area;
+        let c_n = self.damping * f_elastic / self.v_ref;
+        let mut f_damp = -c_n * vn;
+        // An explicit step's dashpot impulse takes at most `share` of the normal approach
+        // speed: never reverses it on its own.
+        if dt > 0.0 {
+            let limit = self.share * self.cap_mass * vn.abs() / dt;
+            f_damp = f_damp.clamp(-limit, limit);
+        }
+        // The contact pushes, never pulls.
+        (f_elastic, c_n, (f_elastic + f_damp).max(0.0))
+    }
+}
+
 /// The elastic normal force as the step samples it (the secant window, the trajectory, the
 /// slope at V; the entry and exit), the Hunt–Crossley damping of the loading cycle and its
 /// caps (docs/contact.md §1–2). Updates the cycle's approach speed in `state`.
@@ -338,8 +412,7 @@ fn normal_part(
     // face, local exponent k < 3/2), U' is the mean slope over the volume swept in the kick
     // window ±Δt/2; elsewhere the slope at V, the seed's Eq. 12 (symplectic).
     let stiffness = params.normal_stiffness;
-    let travel = 0.5 * vn.abs() * dt;
-    let sweep = travel * area;
+    let sweep = 0.5 * vn.abs() * dt * area;
     let local = LocalPowerLaw::new(volume, area, overlap.thickness);
     let windowed = local.exponent < SINGULAR_EXPONENT;
     // The potential is regularized where the step cannot resolve the stiffness (a face at
@@ -348,58 +421,17 @@ fn normal_part(
     // continuous force; an edge or a vertex never gets below V* in practice (V* grows as
     // A_n³, faster than its V).
     let resolved = resolved_volume(stiffness, area, dt, kin.effective_mass);
-    // Where the window is narrow against the volume the slope at V is as good (and keeps the
-    // step symplectic: a contact at rest or in slow motion is Eq. 12 exactly).
     let secant = windowed && params.face_window == FaceWindow::Secant;
-    let mut pressure = if secant && sweep > WINDOW_FRACTION * volume {
-        resolved_mean_pressure(stiffness, volume - sweep, volume + sweep, resolved)
+    let mut pressure = if secant {
+        secant_pressure(stiffness, volume, sweep, resolved, first_touch)
     } else {
         resolved_pressure(stiffness, volume, resolved)
     };
-    // A contact that began during the last drift (the last position, V − 2 A s, was apart)
-    // missed the part of the last kick's window that lay in contact, [0, V − A s]: it is
-    // carried now.
-    if secant && first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0 {
-        pressure += resolved_potential(stiffness, volume - sweep, resolved) / (2.0 * sweep);
-    }
     // Hunt–Crossley damping, on the elastic force's line of action, referred to this loading
     // cycle's approach speed.
     state.approach_speed = loading_cycle_speed(state.approach_speed, vn);
     let energy = resolved_potential(stiffness, volume, resolved);
-    let (cycle, floor) = (
-        state.approach_speed.abs(),
-        (2.0 * energy / kin.effective_mass).sqrt(),
-    );
-    let v_ref = cycle.max(floor);
-    // The share of the relative speed a dashpot may take per step: the whole of it for a
-    // contact damped to its cycle's approach speed (an impact), DASHPOT_STEP_FRACTION where the
-    // floor sets the damping (a contact at rest or loaded slowly, overcritical at low e), and
-    // there against the bodies' masses split among their contacts (DASHPOT_STEP_FRACTION).
-    let at_floor = floor > cycle;
-    let (share, cap_mass) = if at_floor {
-        (DASHPOT_STEP_FRACTION, kin.dashpot_mass)
-    } else {
-        (1.0, kin.effective_mass)
-    };
-    // The bodies' shares in the caps' and locks' mass splitting.
-    let (cap_a, cap_b) = if at_floor {
-        (kin.split_a, kin.split_b)
-    } else {
-        (1.0, 1.0)
-    };
-    let normal = |pressure: f64| {
-        let f_elastic = pressure * area;
-        let c_n = params.damping * f_elastic / v_ref;
-        let mut f_damp = -c_n * vn;
-        // An explicit step's dashpot impulse takes at most `share` of the normal approach
-        // speed: never reverses it on its own.
-        if dt > 0.0 {
-            let limit = share * cap_mass * vn.abs() / dt;
-            f_damp = f_damp.clamp(-limit, limit);
-        }
-        // The contact pushes, never pulls.
-        (f_elastic, c_n, (f_elastic + f_damp).max(0.0))
-    };
+    let dashpot = Dashpot::new(params, state, energy, kin);
     // Or the impulse of the contact's own normal motion over the kick window, its entry and
     // its exit included (trajectory.rs), from the slope at V as the first guess. Whether the
     // coming drift ends apart (the window after) is judged with the force the kick applies,
@@ -407,10 +439,10 @@ fn normal_part(
     // A contact deep against its step's travel keeps the slope at V (see TRAJECTORY_FRACTION).
     if windowed && !secant && dt > 0.0 && sweep > TRAJECTORY_FRACTION * volume {
         let motion = NormalMotion::new(local, stiffness, resolved, kin.effective_mass);
-        let kick = |force: f64| normal(force / area).2;
+        let kick = |force: f64| dashpot.normal(force / area, area, vn, dt).2;
         pressure = motion.window_force(vn, dt, first_touch, pressure * area, kick) / area;
     }
-    let (mut f_elastic, mut c_n, mut f_normal) = normal(pressure);
+    let (mut f_elastic, mut c_n, mut f_normal) = dashpot.normal(pressure, area, vn, dt);
     // The exit, the mirror of the entry: a separating contact that the coming drift carries
     // apart (its depth h is at most 2 s', s' = u Δt/2 with u the normal speed after this
     // step's kick) lies in contact over part of the next kick's window, which the next step,
@@ -421,7 +453,7 @@ fn normal_part(
         if local.depth - 2.0 * exit <= 0.0 && local.depth - exit > 0.0 {
             pressure += resolved_potential(stiffness, local.volume_at(-exit), resolved)
                 / (2.0 * exit * area);
-            (f_elastic, c_n, f_normal) = normal(pressure);
+            (f_elastic, c_n, f_normal) = dashpot.normal(pressure, area, vn, dt);
         }
     }
     NormalPart {
@@ -430,10 +462,35 @@ fn normal_part(
         c_n,
         f_normal,
         energy,
-        share,
-        cap_a,
-        cap_b,
+        share: dashpot.share,
+        cap_a: dashpot.cap_a,
+        cap_b: dashpot.cap_b,
     }
+}
+
+/// The secant window's `U'` of a windowed contact: the mean slope over the volume `V ± sweep`
+/// swept in the kick window where the window is wide against the volume, else the slope at V;
+/// and for a contact that began during the last drift (the last position, V − 2 A s, was
+/// apart), the part of the last kick's window that lay in contact, `[0, V − A s]`, which that
+/// kick missed, carried now.
+fn secant_pressure(
+    stiffness: f64,
+    volume: f64,
+    sweep: f64,
+    resolved: f64,
+    first_touch: bool,
+) -> f64 {
+    // Where the window is narrow against the volume the slope at V is as good (and keeps the
+    // step symplectic: a contact at rest or in slow motion is Eq. 12 exactly).
+    let mut pressure = if sweep > WINDOW_FRACTION * volume {
+        resolved_mean_pressure(stiffness, volume - sweep, volume + sweep, resolved)
+    } else {
+        resolved_pressure(stiffness, volume, resolved)
+    };
+    if first_touch && sweep > 0.0 && volume - 2.0 * sweep <= 0.0 && volume - sweep > 0.0 {
+        pressure += resolved_potential(stiffness, volume - sweep, resolved) / (2.0 * sweep);
+    }
+    pressure
 }
 
 /// Friction at `r_e`: the tangential Kelvin–Voigt element in series with the Coulomb slider
