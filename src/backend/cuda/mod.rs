@@ -98,6 +98,7 @@ impl CudaSimulation {
     /// particle state (`kick_drift` and, after the contacts, `reduce_and_kick` of
     /// cuda/integrate.cu).
     pub fn step(&mut self) -> Result<(), CudaError> {
+        let dt = self.host.dt;
         let flags = self.half_kick_and_drift()?; // 9a, with stage 1's wrap and the checks
         let t0 = Instant::now();
         let moved = self.check_motion(&flags)?;
@@ -107,7 +108,7 @@ impl CudaSimulation {
         self.exchange(&flags)?; // 1
         self.host.timers.exchange += t0.elapsed().as_secs_f64();
         // The contacts (2–8), then the reduction with the second half kick (9b).
-        self.forces(self.host.dt, true)
+        self.forces(dt, true)
     }
 
     /// Stage 9a on the device: the first half kick and the drift, with the periodic wrap and
