@@ -1022,8 +1022,9 @@ fn parity(what: &str, produce: Producer) {
     }
 }
 
-/// Runs the harness in `mode` (`--spheres`, `--law`) on the cases `text` and returns the lines
-/// that differ from the Rust results `want`, each as "C++ …\nRust …".
+/// Runs the harness in `mode` (`--spheres`, `--law`; empty for the pairs and facets of the
+/// parity test) on the cases `text` and returns the lines that differ from the Rust results
+/// `want`, each as "C++ …\nRust …".
 fn harness_mismatches(mode: &str, tag: &str, text: String, want: &[String]) -> Vec<String> {
     harness_mismatches_with(mode, tag, text, want, &[])
 }
@@ -1041,7 +1042,11 @@ fn harness_mismatches_with(
     let exe = build_harness_with(&root, &dir, defines);
     let cases = dir.join("cases.txt");
     std::fs::write(&cases, text).unwrap();
-    let out = Command::new(&exe).arg(mode).arg(&cases).output().unwrap();
+    let mut cmd = Command::new(&exe);
+    if !mode.is_empty() {
+        cmd.arg(mode);
+    }
+    let out = cmd.arg(&cases).output().unwrap();
     assert!(
         out.status.success(),
         "harness failed: {}",
@@ -1060,6 +1065,48 @@ fn harness_mismatches_with(
         .collect()
 }
 
+/// Pair cases of the committed periodic `packing` of template `shape` (its particles' scale):
+/// each pair whose centres lie within twice the circumscribed radius by the minimum image, the
+/// separation stretched by `1 + dilation`, kept where `keep` (called once for each such pair,
+/// in order) says so.
+fn packing_pairs(
+    packing: &polydem::io::Packing,
+    shapes: &[Shape],
+    shape: usize,
+    dilation: f64,
+    mut keep: impl FnMut() -> bool,
+) -> Vec<PairCase> {
+    use nalgebra::Translation3;
+    let p = &packing.particles;
+    let reach = 2.0 * shapes[shape].template.circumscribed_radius * p[0].scale;
+    let pose = |c, q: UnitQuaternion<f64>| Isometry3::from_parts(Translation3::from(c), q);
+    let mut pairs = Vec::new();
+    for i in 0..p.len() {
+        for j in i + 1..p.len() {
+            let mut x = p[j].position - p[i].position;
+            for a in 0..3 {
+                x[a] -= packing.cell[a] * (x[a] / packing.cell[a]).round();
+            }
+            let x = x * (1.0 + dilation);
+            if x.norm() >= reach || !keep() {
+                continue;
+            }
+            pairs.push(PairCase {
+                a: shape,
+                b: shape,
+                sa: p[i].scale,
+                sb: p[j].scale,
+                pose_a: pose(p[i].position, p[i].orientation),
+                pose_b: pose(p[i].position + x, p[j].orientation),
+                axis: Vector3::zeros(),
+                margin: 0.0,
+                kind: "settled packing",
+            });
+        }
+    }
+    pairs
+}
+
 /// Mixed precision's routing (`overlap_pair_mixed` of `cuda/pair.cuh`, which the GPU's
 /// full pair evaluation runs) against `geometry::pair::overlap_pair_mixed`, the CPU twin's
 /// pair geometry, bit for bit: on the random cases of the parity test above and on the
@@ -1069,7 +1116,6 @@ fn harness_mismatches_with(
 /// LP in f64 (the default) and in f32 (`POLYDEM_MIXED_LP=f32`, `PD_MIXED_LP_F32`, on trial).
 #[test]
 fn cuda_mixed_precision_routing_matches_the_cpu_twin_bitwise() {
-    use nalgebra::Translation3;
     use polydem::geometry::pair::overlap_pair_mixed_with;
     use polydem::io::Packing;
     let root = repo_root();
@@ -1082,41 +1128,13 @@ fn cuda_mixed_precision_routing_matches_the_cpu_twin_bitwise() {
             .unwrap(),
     });
     let d = shapes.len() - 1;
-    let scale = packing.particles[0].scale;
-    let reach = 2.0 * shapes[d].template.circumscribed_radius * scale;
     let mut close = 0usize;
     for (k, dilation) in [0.0, 1e-5, 3e-5, 1e-4].into_iter().enumerate() {
-        let p = &packing.particles;
-        for i in 0..p.len() {
-            for j in i + 1..p.len() {
-                let mut x = p[j].position - p[i].position;
-                for a in 0..3 {
-                    x[a] -= packing.cell[a] * (x[a] / packing.cell[a]).round();
-                }
-                let x = x * (1.0 + dilation);
-                if x.norm() >= reach {
-                    continue;
-                }
-                close += 1;
-                // One close pair in four of each dilation, a different quarter each time.
-                if close % 4 != k {
-                    continue;
-                }
-                let pose =
-                    |c, q: UnitQuaternion<f64>| Isometry3::from_parts(Translation3::from(c), q);
-                pairs.push(PairCase {
-                    a: d,
-                    b: d,
-                    sa: scale,
-                    sb: scale,
-                    pose_a: pose(p[i].position, p[i].orientation),
-                    pose_b: pose(p[i].position + x, p[j].orientation),
-                    axis: Vector3::zeros(),
-                    margin: 0.0,
-                    kind: "settled packing",
-                });
-            }
-        }
+        // One close pair in four of each dilation, a different quarter each time.
+        pairs.extend(packing_pairs(&packing, &shapes, d, dilation, || {
+            close += 1;
+            close % 4 == k
+        }));
     }
     let (mut w32, mut w64) = (PairWorkspace::<f32>::boxed(), PairWorkspace::<f64>::boxed());
     let mut f64_ws = PairWorkspace::<f64>::boxed();
@@ -1638,7 +1656,6 @@ fn the_sixteen_plane_enumeration_matches_the_rust_reference_bitwise() {
 #[test]
 #[ignore = "run by the_sixteen_plane_enumeration_matches_the_rust_reference_bitwise"]
 fn sixteen_planes_in_this_process() {
-    use nalgebra::Translation3;
     use polydem::geometry::pair::overlap_pair_mixed;
     use polydem::geometry::vertex_enumeration::enum_planes;
     use polydem::io::Packing;
@@ -1665,37 +1682,11 @@ fn sixteen_planes_in_this_process() {
     for (t, name) in [(0, "mineral_grains"), (1, "cylinders")] {
         let cell =
             Packing::read(&root.join(format!("launch/bench/packings/{name}.packing"))).unwrap();
-        let p = &cell.particles;
-        let reach = 2.0 * shapes[t].template.circumscribed_radius * p[0].scale;
         let mut close = 0;
-        for i in 0..p.len() {
-            for j in i + 1..p.len() {
-                let mut x = p[j].position - p[i].position;
-                for a in 0..3 {
-                    x[a] -= cell.cell[a] * (x[a] / cell.cell[a]).round();
-                }
-                if x.norm() >= reach {
-                    continue;
-                }
-                close += 1;
-                if close % 8 != 0 {
-                    continue;
-                }
-                let pose =
-                    |c, q: UnitQuaternion<f64>| Isometry3::from_parts(Translation3::from(c), q);
-                pairs.push(PairCase {
-                    a: t,
-                    b: t,
-                    sa: p[i].scale,
-                    sb: p[j].scale,
-                    pose_a: pose(p[i].position, p[i].orientation),
-                    pose_b: pose(p[i].position + x, p[j].orientation),
-                    axis: Vector3::zeros(),
-                    margin: 0.0,
-                    kind: "settled packing",
-                });
-            }
-        }
+        pairs.extend(packing_pairs(&cell, &shapes, t, 0.0, || {
+            close += 1;
+            close % 8 == 0
+        }));
     }
     let (mut w32, mut w64) = (PairWorkspace::<f32>::boxed(), PairWorkspace::<f64>::boxed());
     let (mut plain, mut mixed) = (Vec::new(), Vec::new());
@@ -1727,33 +1718,13 @@ fn sixteen_planes_in_this_process() {
     assert!(past8 > 1500, "only {past8} pairs past 8 planes");
     let text = case_file(&shapes, &pairs, &[]);
     for (mode, want) in [("", &plain), ("--mixed", &mixed)] {
-        let root = repo_root();
-        let dir = temp_dir("cuda-enum16");
-        let exe = build_harness_with(&root, &dir, &["-DPD_ENUM_MAX_PLANES=16"]);
-        let cases = dir.join("cases.txt");
-        std::fs::write(&cases, &text).unwrap();
-        let mut cmd = Command::new(&exe);
-        if !mode.is_empty() {
-            cmd.arg(mode);
-        }
-        let out = cmd.arg(&cases).output().unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let differ = harness_mismatches_with(
+            mode,
+            "cuda-enum16",
+            text.clone(),
+            want,
+            &["-DPD_ENUM_MAX_PLANES=16"],
         );
-        let got: Vec<String> = String::from_utf8(out.stdout)
-            .unwrap()
-            .lines()
-            .map(|l| l.trim_end().to_string())
-            .collect();
-        assert_eq!(got.len(), want.len(), "{mode}");
-        let differ: Vec<String> = got
-            .iter()
-            .zip(want.iter())
-            .filter(|(g, w)| g.trim() != w.trim())
-            .map(|(g, w)| format!("C++  {g}\nRust {w}"))
-            .collect();
         assert!(
             differ.is_empty(),
             "{mode}: {} of {} pairs differ:\n{}",
