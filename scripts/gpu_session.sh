@@ -189,6 +189,11 @@ if [ "$what" = enum ]; then
     bench "mineral_grains_double_enum$n" POLYDEM_ENUM_PLANES=$n polydem bench \
       $s/mineral_grains_1e6.toml --backend cuda --gpu-precision double --warmup 5 --steps 20
   done
+  # Where the pair time goes at each limit (per-phase thread-cycles in the .err logs).
+  [ "${CLOCKS:-1}" = 0 ] || for n in 8 16; do
+    bench "mineral_grains_enum${n}_clocks" "POLYDEM_ENUM_PLANES=$n POLYDEM_PHASE_CLOCKS=1" \
+      polydem bench $s/mineral_grains_1e6.toml $short
+  done
 fi
 if [ "$what" = regress ]; then
   # Where the many-faced shapes' pair stage went: this commit against older ones, one at a
