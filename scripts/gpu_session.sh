@@ -3,7 +3,7 @@
 #
 # Here (no GPU):  bash scripts/gpu-pack.sh --test gpu_pipeline --test mpi_decomposition \
 #                     --test neighbor_modes --test mixed_flat_contacts --test cuda_geometry_host \
-#                     --test validation_contact
+#                     --test validation_contact --test bench_packings
 # There, from the repository root with .device/ carried:
 #   bash scripts/gpu_session.sh tests     # the GPU tests, several processes at once (~5-8 min)
 #   bash scripts/gpu_session.sh benches   # the A/B benches, one at a time on an idle GPU
@@ -78,6 +78,7 @@ tests=(
   "stability_guard|$T/stability --ignored --exact the_guard_stops_gpu_runs_at_the_same_steps"
   "scene_limits|$T/scene_limits --ignored"
   "gpu_minerals|$T/gpu_pipeline --ignored --exact settled_many_faced_grains_end_bitwise_equal_to_the_cpu"
+  "pack_gpu|$T/bench_packings --ignored --exact compression_on_the_gpu_is_the_cpus --nocapture"
   "cuda_geometry_enum16|POLYDEM_ENUM_PLANES=16 $T/cuda_geometry_host --ignored --exact cuda_geometry_kernels_match_the_rust_reference_on_the_gpu"
 )
 # ONLY="name name ..." runs just those groups (the names before the '|').

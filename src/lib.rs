@@ -12,7 +12,7 @@
 //! | # | stage | CPU | GPU |
 //! |---|---|---|---|
 //! | 9a | half kick, drift, rotation | `pipeline/integration.rs`, [`integrate`] | `integrate.cu` |
-//! | 1 | exchange: insertion, removal, wrap; migration and halo | `pipeline/exchange.rs`, [`domain`] | wrap in `integrate.cu`; ghost motion and migration by `halo.cu` on the device; insertion and removal through the host |
+//! | 1 | exchange: insertion, removal, wrap; migration and halo | `run_state/exchange.rs`, [`domain`] | wrap in `integrate.cu`; ghost motion and migration by `halo.cu` on the device; insertion and removal through the host |
 //! | 2 | neighbour list (bins, 1D pair list, Verlet skin) | `pipeline/neighbors.rs`, [`neighbor`] | `neighbor.cu`, `scan.cu` |
 //! | 3–5 | broad phase, narrow phase, overlap volume | `pipeline/pairs.rs`, [`geometry`] | `contact.cu` |
 //! | 6 | walls: facet clipping | `pipeline/walls.rs`, [`contact::WallMesh`] | `contact.cu` |
@@ -23,8 +23,11 @@
 //!
 //! # Modules
 //!
-//! - [`pipeline`]: the [`pipeline::Simulation`], its builder and its step (the CPU backend's
-//!   stages).
+//! - [`run_state`]: the [`run_state::RunState`] both backends step (scene, particles, contact
+//!   history, walls, clock, inserter, statistics, a decomposed run's part), its stability
+//!   guard and the host part of stage 1.
+//! - [`pipeline`]: the [`pipeline::Simulation`] (a run state and the CPU's workspace), its
+//!   builder and its step (the CPU backend's stages).
 //! - [`backend`]: the [`backend::Backend`] trait, [`backend::Engine`] (the only way to make
 //!   one) and device selection; the CPU ([`backend::cpu`]) and CUDA ([`backend::cuda`])
 //!   implementations.
@@ -72,6 +75,7 @@ pub mod pipeline;
 pub mod probe;
 pub mod rng;
 pub mod run;
+pub mod run_state;
 pub mod scene;
 pub mod shape;
 pub mod stability;

@@ -14,6 +14,7 @@ use common::{repo_root, temp_dir};
 use polydem::io::Packing;
 use polydem::pipeline::Simulation;
 use polydem::run::{PackOptions, pack};
+use polydem::run_state::RunState;
 use polydem::scene::{SceneError, parse_scene};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -125,6 +126,37 @@ fn frictionless_spheres_compress_to_random_close_packing() {
     assert!((cell_phi - phi).abs() <= 1e-9 * phi, "{cell_phi} vs {phi}");
 }
 
+/// The compression on the GPU in double precision is the CPU's, bit for bit: the same cycles
+/// and steps and the same packing. Each rescale of the box is followed by a refresh of the
+/// forces (`Backend::refresh`), on the device on the GPU and by the pipeline on the CPU; the
+/// step of a sphere packing is bitwise the same on both (tests/gpu_pipeline.rs), so any
+/// difference is the refresh's.
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn compression_on_the_gpu_is_the_cpus() {
+    let (cpu_out, cpu_report) = packed();
+    let dir = temp_dir("bench-packing-gpu");
+    let scene = dir.join("loose.toml");
+    std::fs::write(&scene, loose_spheres()).unwrap();
+    let out = dir.join("spheres.packing");
+    let report = pack(&PackOptions {
+        scene,
+        contacts: 6.0,
+        out: out.clone(),
+        backend: polydem::backend::BackendChoice::Cuda,
+        precision: polydem::Precision::Double,
+    })
+    .expect("pack on the GPU");
+    println!("CPU: {cpu_report}\nGPU: {report}");
+    for key in ["cycles", "steps", "contacts_per_particle", "solid_fraction"] {
+        assert_eq!(report[key], cpu_report[key], "{key}");
+    }
+    assert!(
+        Packing::read(&out).unwrap() == Packing::read(cpu_out).unwrap(),
+        "the GPU's packing differs from the CPU's"
+    );
+}
+
 #[test]
 fn a_tiled_packing_repeats_the_cell_s_contacts_and_forces() {
     let (out, _) = packed();
@@ -139,30 +171,31 @@ fn a_tiled_packing_repeats_the_cell_s_contacts_and_forces() {
     let one = build([1, 1, 1]);
     let tiles = [2, 1, 3];
     let many = build(tiles);
-    assert_eq!(many.particles.len(), 6 * n);
+    assert_eq!(many.state.particles.len(), 6 * n);
     assert!(
-        one.stats.contacts > 2 * n as u64,
+        one.state.stats.contacts > 2 * n as u64,
         "{} contacts",
-        one.stats.contacts
+        one.state.stats.contacts
     );
-    assert_eq!(many.stats.contacts, 6 * one.stats.contacts);
+    assert_eq!(many.state.stats.contacts, 6 * one.state.stats.contacts);
     // Particle j of tile t is particle j mod n of the cell, shifted by whole cells: the same
     // force up to the rounding of the shifted centres.
     let scale = one
+        .state
         .particles
         .force
         .iter()
         .map(|f| f.norm())
         .fold(0.0, f64::max);
-    let by_id = |s: &Simulation| {
+    let by_id = |s: &RunState| {
         let mut v: Vec<(u64, usize)> = s.particles.id.iter().copied().zip(0..).collect();
         v.sort();
         v
     };
-    let (ones, manys) = (by_id(&one), by_id(&many));
+    let (ones, manys) = (by_id(&one.state), by_id(&many.state));
     for (k, &(_, i)) in manys.iter().enumerate() {
         let j = ones[k % n].1;
-        let (a, b) = (many.particles.force[i], one.particles.force[j]);
+        let (a, b) = (many.state.particles.force[i], one.state.particles.force[j]);
         assert!(
             (a - b).norm() <= 1e-6 * scale,
             "particle {k}: {a:?} against its cell image {b:?}"

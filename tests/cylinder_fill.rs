@@ -70,7 +70,7 @@ fn a_lattice_fills_a_cylinder_bottom_up_with_the_sites_inside() {
     )
     .unwrap();
     let sim = Simulation::builder(full).build().unwrap();
-    let p = &sim.particles;
+    let p = &sim.state.particles;
     assert_eq!(p.len(), 4 * inside);
     for (k, x) in p.position.iter().enumerate() {
         assert!(
@@ -97,6 +97,7 @@ fn a_lattice_fills_a_cylinder_bottom_up_with_the_sites_inside() {
     .unwrap();
     let sim = Simulation::builder(part).build().unwrap();
     let top = sim
+        .state
         .particles
         .position
         .iter()
@@ -163,7 +164,7 @@ fn a_packing_tiled_in_a_cylinder_keeps_the_spheres_inside_at_their_distances() {
     );
     let s = parse_scene(&scene(&format!("{region}\ncount = {kept}")), &dir, "p.toml").unwrap();
     let sim = Simulation::builder(s).build().unwrap();
-    let p = &sim.particles;
+    let p = &sim.state.particles;
     assert_eq!(p.len(), kept);
     let mut closest = f64::INFINITY;
     for (i, x) in p.position.iter().enumerate() {

@@ -9,6 +9,7 @@ mod common;
 use common::*;
 use polydem::Precision;
 use polydem::pipeline::{RestoredState, Simulation};
+use polydem::run_state::RunState;
 use polydem::scene::parse_scene;
 use std::collections::HashMap;
 
@@ -36,7 +37,7 @@ fn simulation() -> Simulation {
 
 /// A simulation of `scene` restored from the state of `s` (particles, contact history,
 /// inserter, time), as a checkpoint restores it.
-fn restored(scene: polydem::scene::Scene, s: &Simulation) -> Simulation {
+fn restored(scene: polydem::scene::Scene, s: &RunState) -> Simulation {
     Simulation::builder(scene)
         .restore(RestoredState {
             particles: s.particles.clone(),
@@ -52,7 +53,7 @@ fn restored(scene: polydem::scene::Scene, s: &Simulation) -> Simulation {
 
 /// Largest differences, by global id, of position (relative to the particle size), velocity
 /// (relative to the largest speed) and force (relative to the largest force).
-fn compare(cpu: &Simulation, gpu: &Simulation) -> (f64, f64, f64) {
+fn compare(cpu: &RunState, gpu: &RunState) -> (f64, f64, f64) {
     let (a, b) = (&cpu.particles, &gpu.particles);
     assert_eq!(a.len(), b.len(), "particle counts");
     let index: HashMap<u64, usize> = b.id.iter().enumerate().map(|(i, &g)| (g, i)).collect();
@@ -88,19 +89,19 @@ fn three_steps_from_a_cpu_state_match_contact_by_contact() {
     // A dense state: the pour stepped until it holds more than 100 contacts (3000 steps with
     // the damping of the time this test was written; how long depends on the contact law).
     let mut start = simulation();
-    while start.history.len() <= 100 {
+    while start.state.history.len() <= 100 {
         assert!(
-            start.step < 20_000,
+            start.state.step < 20_000,
             "only {} contacts after 20 000 steps",
-            start.history.len()
+            start.state.history.len()
         );
         start.step().unwrap();
     }
-    let copy = |s: &Simulation| restored(scene(), s);
+    let copy = |s: &RunState| restored(scene(), s);
     for precision in [Precision::Double, Precision::Mixed] {
         // Both start from a restored copy, so both build their list at the first step.
-        let mut cpu = copy(&start);
-        let mut engine = gpu_engine(copy(&start), precision);
+        let mut cpu = copy(&start.state);
+        let mut engine = gpu_engine(copy(&start.state), precision);
         let gpu = engine.cuda_mut().unwrap();
         cpu.step().unwrap();
         gpu.step().unwrap();
@@ -117,13 +118,13 @@ fn three_steps_from_a_cpu_state_match_contact_by_contact() {
             gpu.step().unwrap();
         }
         let g = gpu.sync_host().unwrap();
-        let (dx, dv, df) = compare(&cpu, g);
-        let keys = |s: &Simulation| -> Vec<_> { s.history.entries().iter().map(|e| e.0).collect() };
+        let (dx, dv, df) = compare(&cpu.state, g);
+        let keys = |s: &RunState| -> Vec<_> { s.history.entries().iter().map(|e| e.0).collect() };
         if precision == Precision::Mixed {
             println!(
                 "Mixed: {} contacts on the CPU, {} on the GPU; worst relative: position {dx:.2e}, \
                  velocity {dv:.2e}, force {df:.2e}",
-                cpu.history.len(),
+                cpu.state.history.len(),
                 g.history.len()
             );
             assert!(
@@ -132,14 +133,16 @@ fn three_steps_from_a_cpu_state_match_contact_by_contact() {
             );
             continue;
         }
-        assert_eq!(keys(&cpu), keys(g), "contact sets differ");
+        assert_eq!(keys(&cpu.state), keys(g), "contact sets differ");
         let smax = cpu
+            .state
             .history
             .entries()
             .iter()
             .map(|e| e.1.spring.norm())
             .fold(1e-30, f64::max);
         let worst_spring = cpu
+            .state
             .history
             .entries()
             .iter()
@@ -149,12 +152,12 @@ fn three_steps_from_a_cpu_state_match_contact_by_contact() {
         println!(
             "Double: {} contacts ({} with walls); worst relative: spring {worst_spring:.2e}, \
              position {dx:.2e}, velocity {dv:.2e}, force {df:.2e}",
-            cpu.history.len(),
-            cpu.stats.wall_contacts
+            cpu.state.history.len(),
+            cpu.state.stats.wall_contacts
         );
-        assert_eq!(cpu.stats.contacts, g.stats.contacts);
-        assert_eq!(cpu.stats.wall_contacts, g.stats.wall_contacts);
-        assert!(cpu.stats.wall_contacts > 0 && cpu.stats.contacts > 0);
+        assert_eq!(cpu.state.stats.contacts, g.stats.contacts);
+        assert_eq!(cpu.state.stats.wall_contacts, g.stats.wall_contacts);
+        assert!(cpu.state.stats.wall_contacts > 0 && cpu.state.stats.contacts > 0);
         assert!(worst_spring == 0.0 && df == 0.0 && dv == 0.0 && dx == 0.0);
     }
 }
@@ -180,7 +183,7 @@ fn a_thousand_steps_of_a_dense_pour_match_the_cpu() {
             cpu.step().unwrap();
             gpu.step().unwrap();
             if k % 100 == 0 {
-                let d = compare(&cpu, gpu.sync_host().unwrap());
+                let d = compare(&cpu.state, gpu.sync_host().unwrap());
                 println!(
                     "{precision:?} step {k}: position {:.2e} velocity {:.2e} force {:.2e}",
                     d.0, d.1, d.2
@@ -189,12 +192,12 @@ fn a_thousand_steps_of_a_dense_pour_match_the_cpu() {
             }
         }
         let g = gpu.sync_host().unwrap();
-        assert_eq!(g.particles.len(), cpu.particles.len());
+        assert_eq!(g.particles.len(), cpu.state.particles.len());
         assert!(g.particles.len() > 240, "the fed particles arrived");
         if precision == Precision::Double {
             // The diagnostics too: both backends sum the elastic energy and the walls' forces
             // in global id order, whatever the device's order after its list builds.
-            let bits = |s: &Simulation| {
+            let bits = |s: &RunState| {
                 let mut v = vec![s.stats.elastic_energy.to_bits()];
                 v.extend(
                     s.wall_forces
@@ -205,7 +208,7 @@ fn a_thousand_steps_of_a_dense_pour_match_the_cpu() {
             };
             assert_eq!(
                 bits(g),
-                bits(&cpu),
+                bits(&cpu.state),
                 "diagnostics of the GPU against the CPU"
             );
         }
@@ -242,21 +245,21 @@ fn six_thousand_steps_of_a_sphere_pour_match_the_cpu() {
         double.step().unwrap();
         mixed.step().unwrap();
         if k % 500 == 0 {
-            let d = compare(&cpu, double.sync_host().unwrap());
+            let d = compare(&cpu.state, double.sync_host().unwrap());
             let m = compare(double.sync_host().unwrap(), mixed.sync_host().unwrap());
             println!(
                 "spheres step {k}: {} contacts, {} wall contacts; GPU vs CPU: position {:.2e} \
                  velocity {:.2e} force {:.2e}; mixed vs double {:?}",
-                cpu.stats.contacts, cpu.stats.wall_contacts, d.0, d.1, d.2, m
+                cpu.state.stats.contacts, cpu.state.stats.wall_contacts, d.0, d.1, d.2, m
             );
             assert_eq!(m, (0.0, 0.0, 0.0), "mixed differs from double for spheres");
             worst = (worst.0.max(d.0), worst.1.max(d.1), worst.2.max(d.2));
         }
     }
-    assert!(cpu.stats.contacts > 100 && cpu.stats.wall_contacts > 50);
+    assert!(cpu.state.stats.contacts > 100 && cpu.state.stats.wall_contacts > 50);
     assert_eq!(
         double.sync_host().unwrap().particles.len(),
-        cpu.particles.len()
+        cpu.state.particles.len()
     );
     assert!(
         worst == (0.0, 0.0, 0.0),
@@ -336,7 +339,7 @@ fn checkpoint_view(c: &polydem::io::Checkpoint) -> StateView<'_> {
     (c.step, c.time, &c.particles, &c.history)
 }
 
-fn simulation_view(s: &Simulation) -> StateView<'_> {
+fn simulation_view(s: &RunState) -> StateView<'_> {
     (s.step, s.time, &s.particles, &s.history)
 }
 
@@ -485,18 +488,18 @@ fn the_examples_on_the_gpu_stay_bitwise_equal_to_the_cpu() {
         let g = gpu.sync_host().unwrap();
         println!(
             "{name}: {} particles, {} contacts at step 12000",
-            cpu.particles.len(),
-            cpu.history.len()
+            cpu.state.particles.len(),
+            cpu.state.history.len()
         );
-        assert!(!cpu.particles.is_empty(), "{name}: no particles");
+        assert!(!cpu.state.particles.is_empty(), "{name}: no particles");
         if name == "shaker.toml" {
             assert!(
-                cpu.history.len() > 20,
+                cpu.state.history.len() > 20,
                 "shaker: {} contacts",
-                cpu.history.len()
+                cpu.state.history.len()
             );
         }
-        assert_bitwise_equal(simulation_view(&cpu), simulation_view(g), &name);
+        assert_bitwise_equal(simulation_view(&cpu.state), simulation_view(g), &name);
     }
 }
 
@@ -536,9 +539,9 @@ fn moving_walls_on_the_gpu_match_the_cpu() {
         for _ in 0..6000 {
             start.step().unwrap();
         }
-        let copy = |s: &Simulation| restored(scene(), s);
-        let mut cpu = copy(&start);
-        let mut engine = gpu_engine(copy(&start), Precision::Double);
+        let copy = |s: &RunState| restored(scene(), s);
+        let mut cpu = copy(&start.state);
+        let mut engine = gpu_engine(copy(&start.state), Precision::Double);
         let gpu = engine.cuda_mut().unwrap();
         let mut worst = (0.0f64, 0.0f64, 0.0f64);
         // Contacts summed over the steps (the shaken bed is loose: 10–40 wall contacts at a
@@ -547,10 +550,10 @@ fn moving_walls_on_the_gpu_match_the_cpu() {
         for k in 1..=1500 {
             cpu.step().unwrap();
             gpu.step().unwrap();
-            wall_contacts += cpu.stats.wall_contacts;
-            contacts += cpu.stats.contacts;
+            wall_contacts += cpu.state.stats.wall_contacts;
+            contacts += cpu.state.stats.contacts;
             if k % 300 == 0 {
-                let d = compare(&cpu, gpu.sync_host().unwrap());
+                let d = compare(&cpu.state, gpu.sync_host().unwrap());
                 worst = (worst.0.max(d.0), worst.1.max(d.1), worst.2.max(d.2));
             }
         }
@@ -593,7 +596,7 @@ fn moving_walls_on_the_gpu_match_the_cpu() {
             "{what}: wall facets within reach: CPU {cpu_items} items on {cpu_particles} \
              particles, GPU list {gpu_items} on {gpu_particles}"
         );
-        let n = cpu.particles.len() as u64;
+        let n = cpu.state.particles.len() as u64;
         assert!(
             cpu_particles > 0 && cpu_items >= cpu_particles,
             "{what}: the cubes lie on the box's facets"

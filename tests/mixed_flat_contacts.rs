@@ -391,11 +391,12 @@ fn a_bent_f32_hull_is_evaluated_in_f64_on_the_gpu() {
         let mut sim = polydem::pipeline::Simulation::builder(scene)
             .build()
             .unwrap();
-        let t = sim.scene.templates[0].clone();
+        let t = sim.state.scene.templates[0].clone();
         for k in 0..2 {
             let pose = silo_pose(k);
             let x = pose.translation.vector;
-            sim.particles
+            sim.state
+                .particles
                 .push(k as u64, 0, 15.0, x, pose.rotation, &t, 2500.0);
         }
         sim.refresh().unwrap();
@@ -472,10 +473,11 @@ fn the_cpu_twin_of_mixed_precision_runs_a_settled_packing_as_f64_does() {
     let mixed = build(Precision::Mixed);
     assert_eq!(mixed.pair_precision(), Precision::Mixed);
     assert_eq!(
-        double.stats.contacts, mixed.stats.contacts,
+        double.state.stats.contacts, mixed.state.stats.contacts,
         "contacts found"
     );
     let scale = double
+        .state
         .particles
         .force
         .iter()
@@ -483,16 +485,16 @@ fn the_cpu_twin_of_mixed_precision_runs_a_settled_packing_as_f64_does() {
         .fold(0.0, f64::max);
     let mut worst = 0.0f64;
     let mut differing = 0;
-    for i in 0..double.particles.len() {
-        assert_eq!(double.particles.id[i], mixed.particles.id[i]);
-        let d = (double.particles.force[i] - mixed.particles.force[i]).norm();
+    for i in 0..double.state.particles.len() {
+        assert_eq!(double.state.particles.id[i], mixed.state.particles.id[i]);
+        let d = (double.state.particles.force[i] - mixed.state.particles.force[i]).norm();
         worst = worst.max(d / scale);
         differing += usize::from(d > 0.0);
     }
     println!(
         "first forces: {} contacts, {differing} of {} particles differ, worst {worst:.2e} of {scale:.3e} N",
-        double.stats.contacts,
-        double.particles.len()
+        double.state.stats.contacts,
+        double.state.particles.len()
     );
     assert!(
         differing > 100,
@@ -506,15 +508,15 @@ fn the_cpu_twin_of_mixed_precision_runs_a_settled_packing_as_f64_does() {
         Engine::new(double, Device::Cpu).unwrap(),
         Engine::new(mixed, Device::CpuMixed).unwrap(),
     ];
-    assert_eq!(runs[1].host().pair_precision(), Precision::Mixed);
+    assert_eq!(runs[1].device().pair_precision(), Precision::Mixed);
     for _ in 0..200 {
         for r in &mut runs {
             r.step().unwrap();
         }
     }
     let (e64, e32) = (
-        runs[0].host().stats.elastic_energy,
-        runs[1].host().stats.elastic_energy,
+        runs[0].state().stats.elastic_energy,
+        runs[1].state().stats.elastic_energy,
     );
     println!("after 200 steps: elastic energy {e64:.6e} (f64) and {e32:.6e} (mixed)");
     assert!(

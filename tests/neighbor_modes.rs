@@ -16,6 +16,7 @@ mod common;
 use common::*;
 use polydem::Precision;
 use polydem::pipeline::{RestoredState, Simulation};
+use polydem::run_state::RunState;
 use polydem::scene::{NeighborMode, Scene, parse_scene};
 use std::collections::HashMap;
 
@@ -37,7 +38,7 @@ fn pour(skin: Option<f64>, mode: NeighborMode) -> Scene {
 /// order so that they, too, do not depend on who built the list or when.
 type Bits = (Vec<(u64, Vec<u64>)>, Vec<(String, [u64; 5])>, Vec<u64>);
 
-fn bits(s: &Simulation) -> Bits {
+fn bits(s: &RunState) -> Bits {
     let p = &s.particles;
     let mut state: Vec<(u64, Vec<u64>)> = (0..p.len())
         .map(|i| {
@@ -133,10 +134,10 @@ fn the_trajectory_does_not_depend_on_the_skin_or_the_rebuild_moments() {
             s.step().unwrap();
         }
         (
-            bits(&s),
+            bits(&s.state),
             s.pair_list_builds(),
-            s.history.len(),
-            s.stats.wall_contacts,
+            s.state.history.len(),
+            s.state.stats.wall_contacts,
         )
     };
     let (reference, builds, contacts, walls) = run(default);
@@ -173,15 +174,15 @@ fn the_local_order_reaches_neither_the_trajectory_nor_the_diagnostics() {
     for _ in 0..1500 {
         a.step().unwrap();
     }
-    let reverse: Vec<usize> = (0..a.particles.len()).rev().collect();
+    let reverse: Vec<usize> = (0..a.state.particles.len()).rev().collect();
     let mut b = Simulation::builder(pour(None, NeighborMode::Gpu))
         .restore(RestoredState {
-            particles: a.particles.select(&reverse),
-            history: a.history.clone(),
-            inserter: a.inserter.clone(),
-            time: a.time,
-            step: a.step,
-            next_id: a.next_id,
+            particles: a.state.particles.select(&reverse),
+            history: a.state.history.clone(),
+            inserter: a.state.inserter.clone(),
+            time: a.state.time,
+            step: a.state.step,
+            next_id: a.state.next_id,
         })
         .build()
         .unwrap();
@@ -190,15 +191,15 @@ fn the_local_order_reaches_neither_the_trajectory_nor_the_diagnostics() {
         b.step().unwrap();
     }
     assert!(
-        a.stats.contacts > 50 && a.stats.wall_contacts > 0,
+        a.state.stats.contacts > 50 && a.state.stats.wall_contacts > 0,
         "{:?}",
-        a.stats
+        a.state.stats
     );
     assert!(
-        b.particles.id.windows(2).any(|w| w[0] > w[1]),
+        b.state.particles.id.windows(2).any(|w| w[0] > w[1]),
         "the restored run kept a local order other than the ids'"
     );
-    assert_eq!(first_difference(&bits(&a), &bits(&b)), None);
+    assert_eq!(first_difference(&bits(&a.state), &bits(&b.state)), None);
 }
 
 /// Steps `scene` on GPU 0 in double precision for `steps` (to the scene's end: `None`), with
@@ -219,7 +220,7 @@ fn on_gpu(
             }
         }
         None => {
-            while g.host.time + 0.5 * g.host.dt < end {
+            while g.state.time + 0.5 * g.state.dt < end {
                 g.step().unwrap();
             }
         }

@@ -52,14 +52,15 @@ generator = { kind = "cube", size = 0.017320508075688773 }
 fn run(xa: f64, steps: u64, device: Device) -> (Vector3<f64>, Vector3<f64>, u64) {
     let s = parse_scene(&scene(), &repo_root(), "seam.toml").unwrap();
     let mut sim = Simulation::builder(s).build().unwrap();
-    let t = sim.scene.templates[0].clone();
+    let t = sim.state.scene.templates[0].clone();
     let q = UnitQuaternion::identity();
     for (id, x, v) in [(0u64, xa, 1.0), (1, (xa + 0.0105) % L, 0.0)] {
-        sim.particles
+        sim.state
+            .particles
             .push(id, 0, 1.0, Vector3::new(x, 0.025, 0.025), q, &t, 2500.0);
-        sim.particles.velocity[id as usize] = Vector3::new(v, 0.0, 0.0);
+        sim.state.particles.velocity[id as usize] = Vector3::new(v, 0.0, 0.0);
     }
-    sim.next_id = 2;
+    sim.state.next_id = 2;
     sim.refresh().unwrap();
     let mut e = Engine::new(sim, device).unwrap();
     let mut wrapped_steps = 0;

@@ -8,6 +8,7 @@ use common::*;
 use nalgebra::Vector3;
 use polydem::analysis::{self, Disk};
 use polydem::pipeline::Simulation;
+use polydem::run_state::RunState;
 use polydem::scene::{WallPlacement, load_scene, load_wall_mesh};
 use std::f64::consts::PI;
 
@@ -16,7 +17,7 @@ fn run_twin(scene: &str) -> Simulation {
     let scene = load_scene(&repo_root().join("launch/production/twins").join(scene)).unwrap();
     let end = scene.simulation.end_time;
     let mut sim = Simulation::builder(scene).build().unwrap();
-    while sim.time < end {
+    while sim.state.time < end {
         sim.step().unwrap();
     }
     sim
@@ -481,36 +482,36 @@ fn production_scenes_are_what_make_scenes_py_writes() {
 #[test]
 fn dodecahedra_settle_in_the_cylinder_to_a_random_packing() {
     let mut sim = run_twin("dodecahedra_cylinder.toml");
-    assert_eq!(sim.particles.len(), 16);
+    assert_eq!(sim.state.particles.len(), 16);
     // Come to rest: the fastest grain moves at less than 5 % of the speed of a fall through
     // its own size (0.78 m/s). A pile of 16 grains can still shed a grain after it first
     // comes to rest (a late slide, chaotic: which pile forms depends on every bit of the
     // trajectory), so it gets up to twice the scene's time to be at rest.
     let scale = (2.0 * 9.81 * 0.0308f64).sqrt();
-    let fastest = |sim: &Simulation| {
+    let fastest = |sim: &RunState| {
         sim.particles
             .velocity
             .iter()
             .map(|v| v.norm())
             .fold(0.0, f64::max)
     };
-    let end = 2.0 * sim.scene.simulation.end_time;
-    while fastest(&sim) >= 0.05 * scale && sim.time < end {
+    let end = 2.0 * sim.state.scene.simulation.end_time;
+    while fastest(&sim.state) >= 0.05 * scale && sim.state.time < end {
         for _ in 0..100 {
             sim.step().unwrap();
         }
     }
-    let fastest = fastest(&sim);
+    let fastest = fastest(&sim.state);
     println!(
         "twin at rest by t = {:.3} s (fastest {fastest:.2e} m/s)",
-        sim.time
+        sim.state.time
     );
     assert!(
         fastest < 0.05 * scale,
         "fastest grain at {fastest} m/s at t = {}: not settled",
-        sim.time
+        sim.state.time
     );
-    let p = &sim.particles;
+    let p = &sim.state.particles;
     // Every grain inside the cylinder, above the floor.
     for x in &p.position {
         assert!(
@@ -518,7 +519,7 @@ fn dodecahedra_settle_in_the_cylinder_to_a_random_packing() {
             "a grain at {x:?} is outside the cylinder"
         );
     }
-    let solids = analysis::solids_of(&sim.scene, p);
+    let solids = analysis::solids_of(&sim.state.scene, p);
     let disk = Disk {
         centre: [0.0, 0.0],
         radius: 0.05,
@@ -556,15 +557,15 @@ fn the_drum_twin_lifts_its_bed_and_a_surface_layer_flows_down() {
     };
     let mut samples = analysis::DrumSamples::new(section, 0.005);
     let mut next = 0.5;
-    while sim.time < end {
+    while sim.state.time < end {
         sim.step().unwrap();
-        if sim.time >= next {
-            let p = &sim.particles;
+        if sim.state.time >= next {
+            let p = &sim.state.particles;
             samples.add_frame(p.position.iter().zip(&p.velocity));
             next += 0.01;
         }
     }
-    assert_eq!(sim.particles.len(), 45);
+    assert_eq!(sim.state.particles.len(), 45);
     let flow = samples.flow();
     println!(
         "drum twin: angle {:?}, layer {:?}, surface speed {:?}, line {:?}",
@@ -606,17 +607,17 @@ fn the_silo_twin_hangs_part_of_its_weight_on_the_wall() {
     // The walls' forces averaged over the last 0.05 s: a contact network rings at rest.
     let mut sum = vec![Vector3::zeros(); names.len()];
     let mut samples = 0.0;
-    while sim.time < end {
+    while sim.state.time < end {
         sim.step().unwrap();
-        if sim.time > end - 0.05 {
-            for (s, f) in sum.iter_mut().zip(&sim.wall_forces) {
+        if sim.state.time > end - 0.05 {
+            for (s, f) in sum.iter_mut().zip(&sim.state.wall_forces) {
                 *s += f;
             }
             samples += 1.0;
         }
     }
     let f: Vec<Vector3<f64>> = sum.iter().map(|s| s / samples).collect();
-    let p = &sim.particles;
+    let p = &sim.state.particles;
     assert_eq!(p.len(), 160, "every grain fed");
     let weight = 160.0 * 1.012_877_755e-9 * 11.6f64.powi(3) * 2500.0 * 9.81;
     // At rest: the bed's kinetic energy is below 1e-3 of lifting it by a grain (a grain or
@@ -655,7 +656,7 @@ fn the_silo_twin_hangs_part_of_its_weight_on_the_wall() {
         west.x
     );
     // The lower band's mean normal stress against the hydrostatic pressure at the bed's base.
-    let solids = analysis::solids_of(&sim.scene, p);
+    let solids = analysis::solids_of(&sim.state.scene, p);
     let disk = Disk {
         centre: [0.0, 0.0],
         radius: 0.05,
@@ -700,7 +701,7 @@ fn the_silo_twin_discharges_at_a_beverloo_rate() {
         load_scene(&repo_root().join("launch/production/twins/silo_discharge.toml")).unwrap();
     let end = scene.simulation.end_time;
     let mut sim = Simulation::builder(scene).build().unwrap();
-    assert_eq!(sim.particles.len(), 160);
+    assert_eq!(sim.state.particles.len(), 160);
     let mass = 1.012_877_755e-9 * 11.6f64.powi(3) * 2500.0;
     // The facets the wall stage clips: every wall contact has at least one within the
     // grain's bounding radius, and the settled bed has grains on the hopper and the gate.
@@ -708,19 +709,19 @@ fn the_silo_twin_discharges_at_a_beverloo_rate() {
     let (items, near) = sim.wall_candidates();
     println!(
         "silo discharge twin: {items} wall facets for {near} grains, {} wall contacts",
-        sim.stats.wall_contacts
+        sim.state.stats.wall_contacts
     );
     assert!(
-        items >= sim.stats.wall_contacts && near > 20 && near < 160,
+        items >= sim.state.stats.wall_contacts && near > 20 && near < 160,
         "{items} facets for {near} grains, {} wall contacts",
-        sim.stats.wall_contacts
+        sim.state.stats.wall_contacts
     );
     let mut left = vec![(0.0, 160usize)];
     let mut next = 0.02;
-    while sim.time < end {
+    while sim.state.time < end {
         sim.step().unwrap();
-        if sim.time >= next {
-            left.push((sim.time, sim.particles.len()));
+        if sim.state.time >= next {
+            left.push((sim.state.time, sim.state.particles.len()));
             next += 0.02;
         }
     }
@@ -756,7 +757,7 @@ fn the_silo_twin_discharges_at_a_beverloo_rate() {
 #[test]
 fn catalyst_pellets_pack_looser_at_the_tube_wall() {
     let sim = run_twin("fixed_bed.toml");
-    let p = &sim.particles;
+    let p = &sim.state.particles;
     assert_eq!(p.len(), 30);
     for x in &p.position {
         assert!(
@@ -764,7 +765,7 @@ fn catalyst_pellets_pack_looser_at_the_tube_wall() {
             "a pellet at {x:?} is outside the tube"
         );
     }
-    let solids = analysis::solids_of(&sim.scene, p);
+    let solids = analysis::solids_of(&sim.state.scene, p);
     let fill = analysis::fill_height(
         &solids,
         &Disk {

@@ -190,7 +190,12 @@ fn launch_scenes_start() {
             let sim = polydem::pipeline::Simulation::builder(scene)
                 .build()
                 .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
-            assert_eq!(sim.particles.len() as u64, to_place, "{}", f.display());
+            assert_eq!(
+                sim.state.particles.len() as u64,
+                to_place,
+                "{}",
+                f.display()
+            );
             started += 1;
         }
     }

@@ -161,21 +161,21 @@ fn leaving_the_domain_is_an_error_unless_the_scene_allows_it() {
         if let Err(e) = sim.step() {
             break e;
         }
-        assert!(sim.step < 2000, "no particle left the domain");
+        assert!(sim.state.step < 2000, "no particle left the domain");
     };
     let msg = err.to_string();
     let SimulationError::LeftDomain { step, count, .. } = err else {
         panic!("expected LeftDomain, got {msg}");
     };
-    assert_eq!(step, sim.step);
+    assert_eq!(step, sim.state.step);
     assert!((1..=5).contains(&count), "{msg}");
     // Stopped before removal: all five are still there, the lowest below the floor.
-    assert_eq!(sim.particles.len(), 5);
+    assert_eq!(sim.state.particles.len(), 5);
     let (lowest, i) = (0..5)
-        .map(|i| (sim.particles.position[i].z, i))
+        .map(|i| (sim.state.particles.position[i].z, i))
         .fold((f64::INFINITY, 0), |a, b| if b.0 < a.0 { b } else { a });
     assert!(lowest < 0.0);
-    let id = sim.particles.id[i];
+    let id = sim.state.particles.id[i];
     assert!(
         msg.starts_with(&format!(
             "step {step}: {count} particle(s) left the domain through a closed face: "
@@ -185,17 +185,17 @@ fn leaving_the_domain_is_an_error_unless_the_scene_allows_it() {
     assert!(msg.contains(&format!("particle {id} at [")), "{msg}");
     assert!(msg.contains("crossed the z min face (z = 0 m)"), "{msg}");
     assert!(msg.contains("domain.on_leaving = \"remove\""), "{msg}");
-    assert_eq!(sim.stats.removed, 0);
+    assert_eq!(sim.state.stats.removed, 0);
 
     // Allowed: the same steps remove them and count them.
     let mut sim = Simulation::builder(parse(&thrown_down(Some("remove"))).unwrap())
         .build()
         .unwrap();
-    while sim.step < 1000 {
+    while sim.state.step < 1000 {
         sim.step().unwrap();
     }
-    assert_eq!(sim.particles.len(), 0);
-    assert_eq!(sim.stats.removed, 5);
+    assert_eq!(sim.state.particles.len(), 0);
+    assert_eq!(sim.state.stats.removed, 5);
 }
 
 /// `polydem run` of the thrown-down scene on `backend`: by default it fails (rc ≠ 0) with the

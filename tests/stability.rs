@@ -48,11 +48,12 @@ fn sphere_scene(e_modulus: f64, gravity: f64, dt: f64, guard: &str) -> String {
 }
 
 fn place(sim: &mut Simulation, at: &[(Vector3<f64>, Vector3<f64>)]) {
-    let t = sim.scene.templates[0].clone();
+    let t = sim.state.scene.templates[0].clone();
     for (k, (x, v)) in at.iter().enumerate() {
-        sim.particles
+        sim.state
+            .particles
             .push(k as u64, 0, 1.0, *x, UnitQuaternion::identity(), &t, 2500.0);
-        sim.particles.velocity[k] = *v;
+        sim.state.particles.velocity[k] = *v;
     }
     sim.refresh().unwrap();
 }
@@ -150,7 +151,9 @@ fn the_deepest_overlap_of_a_particle_is_found_without_a_list() {
             (Vector3::new(0.0, 0.0, 3.0 * a), Vector3::zeros()),
         ],
     );
-    let found: Vec<_> = (0..4).map(|i| sim.deepest_particle_overlap(i)).collect();
+    let found: Vec<_> = (0..4)
+        .map(|i| sim.state.deepest_particle_overlap(i))
+        .collect();
     println!("{found:?}");
     let near = |f: Option<(u64, f64)>, id: u64, x: f64| {
         f.is_some_and(|(j, y)| j == id && (y - x).abs() <= 1e-9 * x)
@@ -215,7 +218,7 @@ fn spinning_speed_bound(device: Device) {
     let (a, g, dt, vmax, w) = (0.01, 9.81, 1e-3, 1.0, 50.0);
     let mut sim = cube_scene(a, 1e7, -g, dt, "max_speed = 1.0");
     place(&mut sim, &[(Vector3::new(0.0, 0.0, 5.0), Vector3::zeros())]);
-    sim.particles.angular_velocity[0] = Vector3::z() * w;
+    sim.state.particles.angular_velocity[0] = Vector3::z() * w;
     let corner = w * a * 3f64.sqrt() / 2.0;
     let expected = (1u64..)
         .find(|&n| g * dt * (n as f64 - 0.5) + corner > vmax)
@@ -289,24 +292,24 @@ fn the_default_speed_bound_is_ten_times_the_scene_speed_scale() {
     let scene = parse_scene(&text, &repo_root(), "guard.toml").unwrap();
     let mut sim = Simulation::builder(scene).build().unwrap();
     let fall = (2.0 * 9.81 * 1200f64.sqrt()).sqrt();
-    assert!((sim.guard.speed_scale - fall).abs() <= 1e-12 * fall);
-    assert!((sim.guard.max_speed - 10.0 * fall).abs() <= 1e-12 * fall);
+    assert!((sim.state.guard.speed_scale - fall).abs() <= 1e-12 * fall);
+    assert!((sim.state.guard.max_speed - 10.0 * fall).abs() <= 1e-12 * fall);
     // A placed particle's speed counts, the spin with its circumscribed radius.
     place(&mut sim, &[(Vector3::zeros(), Vector3::new(3.0, 0.0, 4.0))]);
-    sim.particles.angular_velocity[0] = Vector3::new(0.0, 0.0, 100.0);
+    sim.state.particles.angular_velocity[0] = Vector3::new(0.0, 0.0, 100.0);
     sim.refresh().unwrap();
     let expected = fall + 5.0 + 100.0 * 0.01;
     assert!(
-        (sim.guard.speed_scale - expected).abs() <= 1e-12 * expected,
+        (sim.state.guard.speed_scale - expected).abs() <= 1e-12 * expected,
         "{} vs {expected}",
-        sim.guard.speed_scale
+        sim.state.guard.speed_scale
     );
     // With the guard off nothing is bounded.
     let text = sphere_scene(1e7, -9.81, 1e-4, "enabled = false");
     let sim = Simulation::builder(parse_scene(&text, &repo_root(), "guard.toml").unwrap())
         .build()
         .unwrap();
-    assert!(sim.guard.max_speed.is_infinite() && sim.guard.max_overlap.is_infinite());
+    assert!(sim.state.guard.max_speed.is_infinite() && sim.state.guard.max_overlap.is_infinite());
     // Bad values are refused with the key.
     let text = sphere_scene(1e7, -9.81, 1e-4, "max_overlap = -1.0");
     let err = parse_scene(&text, &repo_root(), "guard.toml").unwrap_err();
@@ -504,7 +507,7 @@ fn elastic_packing(device: Device, shape: &str, steps: u64) -> f64 {
     let scene = packing_scene(shape, spacing);
     let mut sim = Simulation::builder(scene).build().unwrap();
     let mut rng = polydem::rng::Rng::new(11);
-    for v in sim.particles.velocity.iter_mut() {
+    for v in sim.state.particles.velocity.iter_mut() {
         *v = Vector3::new(
             rng.uniform() - 0.5,
             rng.uniform() - 0.5,
@@ -512,8 +515,8 @@ fn elastic_packing(device: Device, shape: &str, steps: u64) -> f64 {
         );
     }
     sim.refresh().unwrap();
-    let e0 = sim.total_energy();
-    let contacts0 = sim.stats.contacts;
+    let e0 = sim.state.total_energy();
+    let contacts0 = sim.state.stats.contacts;
     let mut e = engine(sim, device);
     let mut worst = 0.0f64;
     let every = (steps / 20).max(1);

@@ -90,11 +90,8 @@ fn a_checkpoint_s_particles_in_the_region_come_back_as_they_were() {
         "second.toml",
     )
     .unwrap();
-    let sim = Simulation::builder(s)
-        .evaluate_forces(false)
-        .build()
-        .unwrap();
-    let q = &sim.particles;
+    let state = Simulation::builder(s).state().unwrap();
+    let q = &state.particles;
     assert_eq!(q.len(), west.len());
     for (j, &i) in west.iter().enumerate() {
         assert_eq!(q.position[j], p.position[i]);

@@ -22,8 +22,8 @@ fn pour_after(steps: u64, threads: usize) -> (Particles, usize) {
         for _ in 0..steps {
             sim.step().unwrap();
         }
-        let contacts = (sim.stats.contacts + sim.stats.wall_contacts) as usize;
-        (sim.particles.clone(), contacts)
+        let contacts = (sim.state.stats.contacts + sim.state.stats.wall_contacts) as usize;
+        (sim.state.particles.clone(), contacts)
     })
 }
 

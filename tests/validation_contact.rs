@@ -47,11 +47,11 @@ fn add(
     v: Vector3<f64>,
     w: Vector3<f64>,
 ) {
-    let t = sim.scene.templates[0].clone();
-    let i = sim.particles.len();
-    sim.particles.push(id, 0, 1.0, x, q, &t, RHO);
-    sim.particles.velocity[i] = v;
-    sim.particles.angular_velocity[i] = w;
+    let t = sim.state.scene.templates[0].clone();
+    let i = sim.state.particles.len();
+    sim.state.particles.push(id, 0, 1.0, x, q, &t, RHO);
+    sim.state.particles.velocity[i] = v;
+    sim.state.particles.angular_velocity[i] = w;
 }
 
 fn in_contact(e: &mut Engine) -> bool {
@@ -79,7 +79,7 @@ fn impact(e: &mut Engine) -> u64 {
 /// energy change).
 fn collide(mut sim: Simulation, device: Device) -> (u64, f64) {
     sim.refresh().unwrap();
-    let e0 = sim.total_energy();
+    let e0 = sim.state.total_energy();
     let mut e = engine(sim, device);
     let contact_steps = impact(&mut e);
     (
@@ -315,7 +315,7 @@ fn restitution_of(
                 // centred at z = −0.005, so that its top face is the floor's plane.
                 let build_at = |dt: f64, gap: f64| {
                     let mut s = simulation(e, 0.0, 0.0, dt, wall, cube);
-                    s.scene.simulation.face_window = window;
+                    s.state.scene.simulation.face_window = window;
                     add(
                         &mut s,
                         1,
@@ -461,7 +461,7 @@ fn rest(device: Device) {
         let mut s = Simulation::builder(parse_scene(&text, &repo_root(), "rest.toml").unwrap())
             .build()
             .unwrap();
-        let t = s.scene.templates[0].clone();
+        let t = s.state.scene.templates[0].clone();
         // Face 0 down: rotate its normal onto −z.
         let q = UnitQuaternion::rotation_between(&t.faces[0].normal, &-Vector3::z())
             .unwrap_or_else(UnitQuaternion::identity);
@@ -613,7 +613,7 @@ dir = "{}"
             }
         }
         sim.refresh().unwrap();
-        let e0 = sim.total_energy();
+        let e0 = sim.state.total_energy();
         let steps = (0.04 / dt).round() as u64;
         let mut e = engine(sim, device);
         for _ in 0..steps {
@@ -791,7 +791,7 @@ fn faces_meeting_off_centre_keep_their_energy() {
         for offset in [0.002, 0.004] {
             let build_at = |dt: f64, gap: f64| {
                 let mut s = simulation(1.0, 0.0, 0.0, dt, false, cube);
-                s.scene.simulation.face_window = window;
+                s.state.scene.simulation.face_window = window;
                 let above = Vector3::new(offset, 0.5 * offset, 0.005 + gap);
                 let down = Vector3::new(0.0, 0.0, -1.0);
                 let q = UnitQuaternion::identity();
@@ -806,7 +806,7 @@ fn faces_meeting_off_centre_keep_their_energy() {
                 let changes: Vec<f64> = (0..16)
                     .map(|k| {
                         let s = build_at(dt, 1e-6 + dt * k as f64 / 16.0);
-                        let e0 = s.total_energy();
+                        let e0 = s.state.total_energy();
                         let mut e = engine(s, CPU);
                         impact(&mut e);
                         e.synced().unwrap().total_energy() / e0 - 1.0

@@ -27,6 +27,7 @@ use common::*;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use polydem::backend::{Device, Engine};
 use polydem::pipeline::Simulation;
+use polydem::run_state::RunState;
 use polydem::scene::parse_scene;
 
 struct Material {
@@ -129,7 +130,7 @@ struct Outcome {
 
 /// The body's orientation: a cube turned 45° about y (an edge along y below its centre), a
 /// dodecahedron with a vertex straight down.
-fn orientation(body: Body, sim: &Simulation) -> UnitQuaternion<f64> {
+fn orientation(body: Body, sim: &RunState) -> UnitQuaternion<f64> {
     let t = &sim.scene.templates[0];
     let down = -Vector3::z();
     match body {
@@ -149,7 +150,7 @@ fn kinetic(m: f64, inertia: &Matrix3<f64>, v: &Vector3<f64>, w: &Vector3<f64>) -
 }
 
 /// The world inertia tensor of particle 0.
-fn world_inertia(sim: &Simulation) -> Matrix3<f64> {
+fn world_inertia(sim: &RunState) -> Matrix3<f64> {
     let p = &sim.particles;
     let r = p.orientation[0].to_rotation_matrix();
     r.matrix() * Matrix3::from_diagonal(&p.inertia[0]) * r.matrix().transpose()
@@ -166,8 +167,8 @@ fn impact(
     inc: Incoming,
 ) -> (Outcome, Reference) {
     let mut sim = simulation(m, body, e, mu);
-    let t = sim.scene.templates[0].clone();
-    let q = orientation(body, &sim);
+    let t = sim.state.scene.templates[0].clone();
+    let q = orientation(body, &sim.state);
     let lowest = match body {
         Body::Sphere { radius } => -radius,
         _ => t
@@ -176,16 +177,16 @@ fn impact(
             .map(|v| (q * v).z)
             .fold(f64::INFINITY, f64::min),
     };
-    let dt = sim.dt;
+    let dt = sim.state.dt;
     let centre = Vector3::new(0.0, 0.0, -lowest + 0.37 * inc.vn * dt);
-    sim.particles.push(0, 0, 1.0, centre, q, &t, m.rho);
+    sim.state.particles.push(0, 0, 1.0, centre, q, &t, m.rho);
     let v0 = Vector3::new(inc.vt, 0.0, -inc.vn);
     let w0 = Vector3::new(0.0, inc.spin, 0.0);
-    sim.particles.velocity[0] = v0;
-    sim.particles.angular_velocity[0] = w0;
+    sim.state.particles.velocity[0] = v0;
+    sim.state.particles.angular_velocity[0] = w0;
     sim.refresh().unwrap();
-    let mass = sim.particles.mass[0];
-    let inertia = world_inertia(&sim);
+    let mass = sim.state.particles.mass[0];
+    let inertia = world_inertia(&sim.state);
     let reference = Reference::new(
         mass,
         &inertia,

@@ -43,7 +43,7 @@ fn impact(theta_deg: f64, device: Device) -> Impact {
     });
     let scene = parse_scene(&text, &root, "impact.toml").unwrap();
     let mut sim = Simulation::builder(scene).build().unwrap();
-    let t = sim.scene.templates[0].clone();
+    let t = sim.state.scene.templates[0].clone();
     // File frame: axis along z, a rim vertex towards +x. Tilt the axis to θ from the wall plane
     // by turning about y by 90° − θ: the rim vertex at +x of the lower cap becomes the lowest.
     let theta = theta_deg.to_radians();
@@ -62,9 +62,10 @@ fn impact(theta_deg: f64, device: Device) -> Impact {
     let v0 = 1.0;
     let gap = 1e-7;
     let centre = Vector3::new(0.0, 0.0, -low.z + gap);
-    sim.particles
+    sim.state
+        .particles
         .push(0, 0, 1.0, centre, orientation, &t, 1245.0);
-    sim.particles.velocity[0] = Vector3::new(0.0, 0.0, -v0);
+    sim.state.particles.velocity[0] = Vector3::new(0.0, 0.0, -v0);
     sim.refresh().unwrap();
     let mut e = engine(sim, device);
     let (mut touched, mut steps) = (false, 0);

@@ -100,12 +100,12 @@ dir = "{}"
     let mut sim = Simulation::builder(parse_scene(&text, dir, "mesh.toml").unwrap())
         .build()
         .unwrap();
-    let t = sim.scene.templates[0].clone();
+    let t = sim.state.scene.templates[0].clone();
     // Pressed in by 1 % of its edge, moving along x at 0.1 m/s (kinematically: position and
     // velocity are prescribed every step, the forces are what the wall answers).
     let depth = 0.01 * lc;
     let (v, x0) = (0.1, -0.08);
-    sim.particles.push(
+    sim.state.particles.push(
         0,
         0,
         1.0,
@@ -117,7 +117,7 @@ dir = "{}"
     // Facets within the cube's bounding radius (the GPU gathers the facet ids of the grid cells
     // the bounding box covers, sorts them and tests each facet's distance).
     let mut near = Vec::new();
-    sim.walls[0].facets_near(
+    sim.state.walls[0].facets_near(
         &Vector3::new(0.0, 0.013, 0.5 * lc - depth),
         t.circumscribed_radius,
         &mut near,

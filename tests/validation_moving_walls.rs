@@ -16,6 +16,7 @@ use common::*;
 use nalgebra::{UnitQuaternion, Vector3};
 use polydem::backend::{Device, Engine};
 use polydem::pipeline::Simulation;
+use polydem::run_state::RunState;
 use polydem::scene::parse_scene;
 use std::f64::consts::TAU;
 
@@ -89,7 +90,7 @@ fn cube_on_moving_floor(
     let mut sim = Simulation::builder(parse_scene(&text, &repo_root(), "moving.toml").unwrap())
         .build()
         .unwrap();
-    let t = sim.scene.templates[0].clone();
+    let t = sim.state.scene.templates[0].clone();
     // Equilibrium overlap of a resting face: c A^{4/3} δ^{1/3} = m g with V = A δ.
     let (m, area) = (RHO * t.volume, EDGE * EDGE);
     let c = stepping.e_modulus / t.equivalent_radius;
@@ -101,7 +102,7 @@ fn cube_on_moving_floor(
         shift = unit() * (1e-9 * EDGE);
         turn = unit() * 1e-9;
     }
-    sim.particles.push(
+    sim.state.particles.push(
         1,
         0,
         1.0,
@@ -110,7 +111,7 @@ fn cube_on_moving_floor(
         &t,
         RHO,
     );
-    sim.particles.velocity[0] = v0;
+    sim.state.particles.velocity[0] = v0;
     sim.refresh().unwrap();
     sim
 }
@@ -127,14 +128,14 @@ fn cube_on_fixed_floor(stepping: Stepping) -> Simulation {
 }
 
 fn run_until(sim: &mut Simulation, t: f64) {
-    while sim.time < t - 0.5 * sim.dt {
+    while sim.state.time < t - 0.5 * sim.state.dt {
         sim.step().unwrap();
     }
 }
 
 /// Steps `e` to time `t` and returns its synced state.
-fn run_to(e: &mut Engine, t: f64) -> &Simulation {
-    while e.host().time < t - 0.5 * e.host().dt {
+fn run_to(e: &mut Engine, t: f64) -> &RunState {
+    while e.state().time < t - 0.5 * e.state().dt {
         e.step().unwrap();
     }
     e.synced().unwrap()
@@ -175,19 +176,19 @@ fn belt(stepping: Stepping, until: f64, tolerance: f64) {
         None,
     );
     run_until(&mut sim, 0.001);
-    let v1 = sim.particles.velocity[0].x;
+    let v1 = sim.state.particles.velocity[0].x;
     run_until(&mut sim, until);
-    let v2 = sim.particles.velocity[0].x;
+    let v2 = sim.state.particles.velocity[0].x;
     let a = (v2 - v1) / (until - 0.001);
     let t_star = belt / (MU * G);
-    while sim.particles.velocity[0].x < belt && sim.time < 2.0 * t_star {
+    while sim.state.particles.velocity[0].x < belt && sim.state.time < 2.0 * t_star {
         sim.step().unwrap();
     }
-    let t_reach = sim.time;
+    let t_reach = sim.state.time;
     println!(
         "{stepping:?}, Δt = {:.3e} s: slipping: a = {a:.5} m/s² vs μg = {:.5}; belt speed \
          reached at {:.2} ms, t* = {:.2} ms",
-        sim.dt,
+        sim.state.dt,
         MU * G,
         t_reach * 1e3,
         t_star * 1e3
@@ -202,9 +203,9 @@ fn belt(stepping: Stepping, until: f64, tolerance: f64) {
         "belt speed reached at {t_reach} s, Coulomb time {t_star} s"
     );
     run_until(&mut sim, 0.1);
-    println!("after 0.1 s: v = {:?}", sim.particles.velocity[0]);
+    println!("after 0.1 s: v = {:?}", sim.state.particles.velocity[0]);
     run_until(&mut sim, 0.25);
-    let v = sim.particles.velocity[0];
+    let v = sim.state.particles.velocity[0];
     println!("after 0.25 s: v = {v:?}");
     assert!(
         (v.x / belt - 1.0).abs() < 5e-3,
@@ -302,7 +303,7 @@ fn vibrating_plate(stepping: Stepping, seed: Option<u64>, device: Device) {
         Vector3::new(0.0, 0.0, TAU * freq * amp),
         seed,
     );
-    let z0 = sim.particles.position[0].z;
+    let z0 = sim.state.particles.position[0].z;
     let mut e = engine(sim, device);
     let peak = TAU * freq * amp;
     let (mut worst_z, mut worst_v) = (0.0f64, 0.0f64);
@@ -376,19 +377,19 @@ fn resting_faces_at_the_default_step_on_gpu_mixed() {
 fn resting_cube(device: Device) {
     for stepping in DEFAULT_STEPS {
         let sim = cube_on_fixed_floor(stepping);
-        let t = sim.scene.templates[0].clone();
+        let t = sim.state.scene.templates[0].clone();
         let (m, c) = (RHO * t.volume, stepping.e_modulus / t.equivalent_radius);
-        let x = sim.dt * (c / m).sqrt() / polydem::contact::law::RESOLVED_STEP;
+        let x = sim.state.dt * (c / m).sqrt() / polydem::contact::law::RESOLVED_STEP;
         let expected = m * G * x * x / c;
         let mut lost = 0;
         let mut e = engine(sim, device);
-        while e.host().time < 0.05 {
+        while e.state().time < 0.05 {
             e.step().unwrap();
             let walls = e.contact_counts().unwrap().1;
             // The first step starts from the seed's resting overlap, 6e-16 m at 10 MPa: 3e-14
             // of the cube, below what the overlap's geometry resolves, so it may see no
             // contact; from the second on the cube has sunk to where it does.
-            if e.host().step > 1 {
+            if e.state().step > 1 {
                 lost += usize::from(walls == 0);
             }
         }
@@ -421,10 +422,10 @@ fn resting_cube(device: Device) {
 fn a_stack_of_cubes_rests_at_the_default_step() {
     for stepping in DEFAULT_STEPS {
         let mut sim = cube_on_fixed_floor(stepping);
-        let t = sim.scene.templates[0].clone();
-        let z0 = sim.particles.position[0].z;
+        let t = sim.state.scene.templates[0].clone();
+        let z0 = sim.state.particles.position[0].z;
         for k in 1..4u64 {
-            sim.particles.push(
+            sim.state.particles.push(
                 k + 1,
                 0,
                 1.0,
@@ -436,23 +437,26 @@ fn a_stack_of_cubes_rests_at_the_default_step() {
         }
         sim.refresh().unwrap();
         let mut missing = 0;
-        while sim.time < 0.2 {
+        while sim.state.time < 0.2 {
             sim.step().unwrap();
-            if sim.time > 0.15 {
-                missing += usize::from(sim.stats.contacts != 3 || sim.stats.wall_contacts != 1);
+            if sim.state.time > 0.15 {
+                missing += usize::from(
+                    sim.state.stats.contacts != 3 || sim.state.stats.wall_contacts != 1,
+                );
             }
         }
         let fastest = (0..4)
             .map(|i| {
-                sim.particles.velocity[i].norm() + sim.particles.angular_velocity[i].norm() * EDGE
+                sim.state.particles.velocity[i].norm()
+                    + sim.state.particles.angular_velocity[i].norm() * EDGE
             })
             .fold(0.0, f64::max);
         let weight = 4.0 * RHO * t.volume * G;
-        let floor = -sim.wall_forces[0].z;
+        let floor = -sim.state.wall_forces[0].z;
         println!(
             "{stepping:?}, Δt = {:.3e} s: fastest {fastest:.3e} m/s, floor force {floor:.9e} N \
              (weight {weight:.9e}), steps missing a contact in the last 0.05 s: {missing}",
-            sim.dt
+            sim.state.dt
         );
         assert_eq!(missing, 0, "{stepping:?}: a contact of the stack opened");
         assert!(
@@ -500,14 +504,15 @@ fn a_contact_formed_by_an_impact_settles_like_one_loaded_from_rest() {
         let mut sim = cube_on_fixed_floor(stepping);
         // Settled at its resting depth first (`resting_cube`: at rest to 1e-12 m/s by 0.05 s).
         run_until(&mut sim, 0.05);
-        let t = sim.scene.templates[0].clone();
+        let t = sim.state.scene.templates[0].clone();
         let (m, c) = (RHO * t.volume, stepping.e_modulus / t.equivalent_radius);
-        let x = sim.dt * (c / m).sqrt() / polydem::contact::law::RESOLVED_STEP;
+        let x = sim.state.dt * (c / m).sqrt() / polydem::contact::law::RESOLVED_STEP;
         let depth = m * G * x * x / c;
-        let v0 = 0.1 * depth * polydem::contact::law::RESOLVED_STEP / sim.dt;
-        sim.particles.velocity[0] = Vector3::new(0.0, 0.0, -v0);
+        let v0 = 0.1 * depth * polydem::contact::law::RESOLVED_STEP / sim.state.dt;
+        sim.state.particles.velocity[0] = Vector3::new(0.0, 0.0, -v0);
         if impact {
             let entries: Vec<_> = sim
+                .state
                 .history
                 .entries()
                 .iter()
@@ -517,7 +522,7 @@ fn a_contact_formed_by_an_impact_settles_like_one_loaded_from_rest() {
                 })
                 .collect();
             assert_eq!(entries.len(), 1);
-            sim.history = polydem::contact::ContactHistory::from_entries(entries);
+            sim.state.history = polydem::contact::ContactHistory::from_entries(entries);
         }
         let steps_per_period = TAU / polydem::contact::law::RESOLVED_STEP;
         let mut amplitude = vec![0.0f64; 41];
@@ -525,7 +530,7 @@ fn a_contact_formed_by_an_impact_settles_like_one_loaded_from_rest() {
         for k in 1..=(40.0 * steps_per_period).ceil() as usize {
             sim.step().unwrap();
             let period = k as f64 / steps_per_period;
-            let v = sim.particles.velocity[0].norm() / v0;
+            let v = sim.state.particles.velocity[0].norm() / v0;
             let a = &mut amplitude[(period as usize).min(40)];
             *a = a.max(v);
             if v >= 1e-3 {
@@ -593,13 +598,13 @@ fn low_restitution_cubes_bridging_four_come_to_rest() {
                 Simulation::builder(parse_scene(&text, &repo_root(), "bridge.toml").unwrap())
                     .build()
                     .unwrap();
-            let t = sim.scene.templates[0].clone();
+            let t = sim.state.scene.templates[0].clone();
             let half = 0.5 * EDGE + 0.0005;
             for (k, (x, y)) in [(-half, -half), (half, -half), (-half, half), (half, half)]
                 .into_iter()
                 .enumerate()
             {
-                sim.particles.push(
+                sim.state.particles.push(
                     k as u64 + 1,
                     0,
                     1.0,
@@ -609,7 +614,7 @@ fn low_restitution_cubes_bridging_four_come_to_rest() {
                     RHO,
                 );
             }
-            sim.particles.push(
+            sim.state.particles.push(
                 5,
                 0,
                 1.0,
@@ -618,14 +623,14 @@ fn low_restitution_cubes_bridging_four_come_to_rest() {
                 &t,
                 RHO,
             );
-            sim.particles.velocity[4] = Vector3::new(0.0, 0.0, -0.5);
+            sim.state.particles.velocity[4] = Vector3::new(0.0, 0.0, -0.5);
             sim.refresh().unwrap();
             let mut fastest = 0.0f64;
-            while sim.time < 0.3 {
+            while sim.state.time < 0.3 {
                 sim.step().unwrap();
-                if sim.time > 0.25 {
+                if sim.state.time > 0.25 {
                     for i in 0..5 {
-                        let p = &sim.particles;
+                        let p = &sim.state.particles;
                         fastest =
                             fastest.max(p.velocity[i].norm() + p.angular_velocity[i].norm() * EDGE);
                     }
@@ -634,13 +639,13 @@ fn low_restitution_cubes_bridging_four_come_to_rest() {
             println!(
                 "e = {restitution}, E = {e_modulus:e} Pa, Δt = {:.3e} s: fastest point over \
                  0.25–0.3 s {fastest:.3e} m/s, {} contacts between cubes, {} with the floor",
-                sim.dt, sim.stats.contacts, sim.stats.wall_contacts
+                sim.state.dt, sim.state.stats.contacts, sim.state.stats.wall_contacts
             );
             assert!(
                 fastest < 1e-9,
                 "e = {restitution}, E = {e_modulus:e}: still moving at {fastest:e} m/s"
             );
-            assert_eq!(sim.stats.wall_contacts, 4);
+            assert_eq!(sim.state.stats.wall_contacts, 4);
         }
     }
 }
@@ -680,12 +685,12 @@ fn compressed_cube_lattice(device: Device) -> (f64, u64, polydem::state::Particl
     let mut sim = Simulation::builder(parse_scene(&text, &repo_root(), "lattice.toml").unwrap())
         .build()
         .unwrap();
-    let t = sim.scene.templates[0].clone();
+    let t = sim.state.scene.templates[0].clone();
     let mut rng = polydem::rng::Rng::new(7);
     for i in 0..N * N * N {
         let at = |k: usize| (k as f64 + 0.5) * h;
         let (x, y, z) = (i / (N * N), i / N % N, i % N);
-        let p = &mut sim.particles;
+        let p = &mut sim.state.particles;
         p.push(
             i as u64 + 1,
             0,

@@ -79,10 +79,10 @@ fn pour(scene: polydem::scene::Scene, count: usize, half_width: f64, box_height:
     let end = scene.simulation.end_time;
     let mut sim = Simulation::builder(scene).build().unwrap();
     // `step` fails on a non-finite position or velocity, so reaching the end means no NaN.
-    while sim.time < end {
+    while sim.state.time < end {
         sim.step().unwrap();
     }
-    let p = &sim.particles;
+    let p = &sim.state.particles;
 
     // Nothing lost, nothing through a wall: every centre strictly inside the box, below its rim.
     assert_eq!(p.len(), count, "particles present at the end");
@@ -140,7 +140,7 @@ fn pour(scene: polydem::scene::Scene, count: usize, half_width: f64, box_height:
         "core: kinetic energy per unit mass {per_mass:.3e} J/kg; fastest grain {fastest:.3e} m/s"
     );
     let core = box_planes(&lo, &hi);
-    let template = &sim.scene.templates[0];
+    let template = &sim.state.scene.templates[0];
     let mut solid = 0.0;
     let mut total = 0.0;
     for i in 0..p.len() {

@@ -115,10 +115,10 @@ fn head_on(
     dt: f64,
 ) -> (f64, f64, f64) {
     let mut sim = simulation(m, restitution, 0.0, 0.0, dt, r, false);
-    let t = sim.scene.templates[0].clone();
+    let t = sim.state.scene.templates[0].clone();
     let gap = 0.5 * v * dt; // first touch within the first step
     for (k, s) in [(0u64, -1.0), (1, 1.0)] {
-        sim.particles.push(
+        sim.state.particles.push(
             k,
             0,
             1.0,
@@ -127,7 +127,7 @@ fn head_on(
             &t,
             m.rho,
         );
-        sim.particles.velocity[k as usize] = Vector3::new(-s * v, 0.0, 0.0);
+        sim.state.particles.velocity[k as usize] = Vector3::new(-s * v, 0.0, 0.0);
     }
     sim.refresh().unwrap();
     let mut e = engine(sim, device);
@@ -257,15 +257,16 @@ fn sphere_impact(
     wall: bool,
 ) -> f64 {
     let mut sim = simulation(m, restitution, 0.0, 0.0, dt, r, wall);
-    let t = sim.scene.templates[0].clone();
+    let t = sim.state.scene.templates[0].clone();
     let start = [
         (Vector3::new(0.0, 0.0, r + gap), -v),
         (Vector3::new(0.0, 0.0, -r), 0.0),
     ];
     for (k, (x, vz)) in start.iter().take(if wall { 1 } else { 2 }).enumerate() {
-        sim.particles
+        sim.state
+            .particles
             .push(k as u64, 0, 1.0, *x, UnitQuaternion::identity(), &t, m.rho);
-        sim.particles.velocity[k] = Vector3::new(0.0, 0.0, *vz);
+        sim.state.particles.velocity[k] = Vector3::new(0.0, 0.0, *vz);
     }
     sim.refresh().unwrap();
     let mut e = engine(sim, device);
@@ -365,11 +366,12 @@ fn rest_on_wall(device: Device) {
     }
     let h = 0.5 * (lo + hi);
     let mut sim = simulation(&m, 0.5, 0.5, -g, 1e-5, r, true);
-    let t = sim.scene.templates[0].clone();
+    let t = sim.state.scene.templates[0].clone();
     // Off the origin, so that the contact disk (radius ≈ 2.4 mm) lies across the seam x = y of
     // the two triangles.
     let centre = Vector3::new(0.001, 0.0, r - h);
-    sim.particles
+    sim.state
+        .particles
         .push(0, 0, 1.0, centre, UnitQuaternion::identity(), &t, m.rho);
     sim.refresh().unwrap();
     let mut e = engine(sim, device);
@@ -411,12 +413,13 @@ fn wall_impact(
     dt: f64,
 ) -> (f64, f64, f64) {
     let mut sim = simulation(m, e, mu, 0.0, dt, r, true);
-    let t = sim.scene.templates[0].clone();
+    let t = sim.state.scene.templates[0].clone();
     let centre = Vector3::new(0.0, 0.0, r + 0.37 * vn * dt);
-    sim.particles
+    sim.state
+        .particles
         .push(0, 0, 1.0, centre, UnitQuaternion::identity(), &t, m.rho);
-    sim.particles.velocity[0] = Vector3::new(vt, 0.0, -vn);
-    sim.particles.angular_velocity[0] = Vector3::new(0.0, omega, 0.0);
+    sim.state.particles.velocity[0] = Vector3::new(vt, 0.0, -vn);
+    sim.state.particles.angular_velocity[0] = Vector3::new(0.0, omega, 0.0);
     sim.refresh().unwrap();
     let mut eng = engine(sim, device);
     step_through_impact(&mut eng, 100_000);
@@ -530,12 +533,13 @@ fn sliding_onset(device: Device) {
 fn sliding_to_rolling(device: Device) {
     let (m, r, g, mu, v0): (Material, f64, f64, f64, f64) = (soft(), 0.01, 9.81, 0.3, 1.0);
     let mut sim = simulation(&m, 0.5, mu, -g, 1e-5, r, true);
-    let t = sim.scene.templates[0].clone();
+    let t = sim.state.scene.templates[0].clone();
     // Start near the static overlap (its height hardly matters for the sliding phase).
     let centre = Vector3::new(-0.3, 0.1, r - 2e-5);
-    sim.particles
+    sim.state
+        .particles
         .push(0, 0, 1.0, centre, UnitQuaternion::identity(), &t, m.rho);
-    sim.particles.velocity[0] = Vector3::new(v0, 0.0, 0.0);
+    sim.state.particles.velocity[0] = Vector3::new(v0, 0.0, 0.0);
     sim.refresh().unwrap();
     let t_star = 2.0 * v0 / (7.0 * mu * g);
     let dt = 1e-5;

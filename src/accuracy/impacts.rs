@@ -28,7 +28,7 @@ impl CaseRunner {
                 types: &types,
                 wall: Some(&self.dir.join("plane.stl")),
             })?;
-            let t = sim.scene.templates[0].clone();
+            let t = sim.state.scene.templates[0].clone();
             let tilt = UnitQuaternion::from_axis_angle(
                 &Vector3::y_axis(),
                 FRAC_PI_2 - theta_deg.to_radians(),
@@ -41,8 +41,8 @@ impl CaseRunner {
                 .min_by(|a, b| a.z.total_cmp(&b.z))
                 .unwrap_or_default();
             let v0 = 1.0;
-            let dt = sim.dt;
-            sim.particles.push(
+            let dt = sim.state.dt;
+            sim.state.particles.push(
                 0,
                 0,
                 1.0,
@@ -51,12 +51,12 @@ impl CaseRunner {
                 &t,
                 1245.0,
             );
-            sim.particles.velocity[0] = Vector3::new(0.0, 0.0, -v0);
+            sim.state.particles.velocity[0] = Vector3::new(0.0, 0.0, -v0);
             sim.refresh()?;
-            let m = sim.particles.mass[0];
+            let m = sim.state.particles.mass[0];
             let i_perp = {
                 let r = q.to_rotation_matrix();
-                let i = nalgebra::Matrix3::from_diagonal(&sim.particles.inertia[0]);
+                let i = nalgebra::Matrix3::from_diagonal(&sim.state.particles.inertia[0]);
                 (r * i * r.transpose())[(1, 1)]
             };
             let mut e = Engine::new(sim, device)?;
@@ -112,9 +112,9 @@ impl CaseRunner {
                     types,
                     wall: wall.then(|| self.dir.join("plane.stl")).as_deref(),
                 })?;
-                let t = sim.scene.templates[0].clone();
-                let gap = 1e-6 + sim.dt * k as f64 / 16.0;
-                sim.particles.push(
+                let t = sim.state.scene.templates[0].clone();
+                let gap = 1e-6 + sim.state.dt * k as f64 / 16.0;
+                sim.state.particles.push(
                     1,
                     0,
                     1.0,
@@ -123,10 +123,17 @@ impl CaseRunner {
                     &t,
                     2500.0,
                 );
-                sim.particles.velocity[0] = Vector3::new(0.0, 0.0, -1.0);
+                sim.state.particles.velocity[0] = Vector3::new(0.0, 0.0, -1.0);
                 if !wall {
-                    sim.particles
-                        .push(2, 0, 1.0, Vector3::new(0.0, 0.0, -0.005), face, &t, 2500.0);
+                    sim.state.particles.push(
+                        2,
+                        0,
+                        1.0,
+                        Vector3::new(0.0, 0.0, -0.005),
+                        face,
+                        &t,
+                        2500.0,
+                    );
                 }
                 sim.refresh()?;
                 let mut e = Engine::new(sim, device)?;
@@ -261,9 +268,9 @@ impl CaseRunner {
             types: &types,
             wall: Some(&self.dir.join("plane.stl")),
         })?;
-        let t = sim.scene.templates[0].clone();
-        let dt = sim.dt;
-        sim.particles.push(
+        let t = sim.state.scene.templates[0].clone();
+        let dt = sim.state.dt;
+        sim.state.particles.push(
             0,
             0,
             1.0,
@@ -272,8 +279,8 @@ impl CaseRunner {
             &t,
             c.density,
         );
-        sim.particles.velocity[0] = Vector3::new(c.vt, 0.0, -c.vn);
-        sim.particles.angular_velocity[0] = Vector3::new(0.0, c.omega, 0.0);
+        sim.state.particles.velocity[0] = Vector3::new(c.vt, 0.0, -c.vn);
+        sim.state.particles.angular_velocity[0] = Vector3::new(0.0, c.omega, 0.0);
         sim.refresh()?;
         let mut e = Engine::new(sim, device)?;
         let steps = Self::impact(&mut e, 1_000_000)?;

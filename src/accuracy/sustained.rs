@@ -6,6 +6,7 @@ use super::runner::{CaseRunner, Spec};
 use crate::backend::{Device, Engine};
 use crate::pipeline::Simulation;
 use crate::rng::Rng;
+use crate::run_state::RunState;
 use crate::scene::parse_scene;
 use anyhow::{Context, Result};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -27,7 +28,7 @@ impl CaseRunner {
             types,
             wall: None,
         })?;
-        let t = sim.scene.templates[0].clone();
+        let t = sim.state.scene.templates[0].clone();
         let mut rng = Rng::new(7);
         let mut id = 0;
         for i in 0..3 {
@@ -35,9 +36,10 @@ impl CaseRunner {
                 for k in 0..3 {
                     let x = Vector3::new(i as f64, j as f64, k as f64) * (side / 3.0)
                         + Vector3::repeat(side / 6.0);
-                    sim.particles
+                    sim.state
+                        .particles
                         .push(id, 0, 1.0, x, UnitQuaternion::identity(), &t, 2500.0);
-                    sim.particles.velocity[id as usize] = Vector3::new(
+                    sim.state.particles.velocity[id as usize] = Vector3::new(
                         rng.uniform() - 0.5,
                         rng.uniform() - 0.5,
                         rng.uniform() - 0.5,
@@ -47,8 +49,8 @@ impl CaseRunner {
             }
         }
         sim.refresh()?;
-        let e0 = sim.total_energy();
-        let steps = (0.02 / sim.dt).round() as u64;
+        let e0 = sim.state.total_energy();
+        let steps = (0.02 / sim.state.dt).round() as u64;
         let mut e = Engine::new(sim, device)?;
         for _ in 0..steps {
             e.step()?;
@@ -83,17 +85,17 @@ impl CaseRunner {
                 types: &types,
                 wall: Some(&self.dir.join(mesh)),
             })?;
-            let t = sim.scene.templates[0].clone();
+            let t = sim.state.scene.templates[0].clone();
             let (depth, v, x0) = (0.01 * lc, 0.1, -0.08);
-            let dt = sim.dt;
-            let place = |sim: &mut Simulation, k: u64| {
-                sim.particles.velocity[0] = Vector3::new(v, 0.0, 0.0);
-                sim.particles.angular_velocity[0] = Vector3::zeros();
-                sim.particles.position[0] =
+            let dt = sim.state.dt;
+            let place = |s: &mut RunState, k: u64| {
+                s.particles.velocity[0] = Vector3::new(v, 0.0, 0.0);
+                s.particles.angular_velocity[0] = Vector3::zeros();
+                s.particles.position[0] =
                     Vector3::new(x0 + v * dt * k as f64, 0.013, 0.5 * lc - depth);
-                sim.particles.orientation[0] = UnitQuaternion::identity();
+                s.particles.orientation[0] = UnitQuaternion::identity();
             };
-            sim.particles.push(
+            sim.state.particles.push(
                 0,
                 0,
                 1.0,
@@ -144,7 +146,7 @@ impl CaseRunner {
         let sim = Simulation::builder(scene).build()?;
         let mut e = Engine::new(sim, device)?;
         let mut steps = 0;
-        while e.host().time + 0.5 * e.host().dt < end {
+        while e.state().time + 0.5 * e.state().dt < end {
             e.step()?;
             steps += 1;
         }

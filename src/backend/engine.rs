@@ -5,6 +5,7 @@ use super::cuda::CudaSimulation;
 use super::{Backend, Device};
 use crate::domain::Comm;
 use crate::pipeline::Simulation;
+use crate::run_state::RunState;
 use crate::scene::Scene;
 use anyhow::Result;
 use std::sync::Arc;
@@ -50,7 +51,7 @@ impl Engine {
                     .build()?,
             ),
             (Start::State(sim), Device::Cuda { ordinal, precision }) => {
-                Box::new(CudaSimulation::new(*sim, ordinal, precision)?)
+                Box::new(CudaSimulation::new(sim.into_state(), ordinal, precision)?)
             }
             (Start::Scene { scene, comm }, Device::Cuda { ordinal, precision }) => Box::new(
                 CudaSimulation::from_scene(*scene, comm, ordinal, precision)?,
@@ -75,9 +76,9 @@ impl Engine {
         self.backend.step()
     }
 
-    /// See [`Backend::host`].
-    pub fn host(&self) -> &Simulation {
-        self.backend.host()
+    /// See [`Backend::state`].
+    pub fn state(&self) -> &RunState {
+        self.backend.state()
     }
 
     /// See [`Backend::particle_count`].
@@ -85,18 +86,23 @@ impl Engine {
         self.backend.particle_count()
     }
 
-    /// See [`Backend::host_mut`].
-    pub fn host_mut(&mut self) -> &mut Simulation {
-        self.backend.host_mut()
+    /// See [`Backend::state_mut`].
+    pub fn state_mut(&mut self) -> &mut RunState {
+        self.backend.state_mut()
     }
 
-    /// The host simulation with the backend's state copied in.
-    pub fn synced(&mut self) -> Result<&Simulation> {
+    /// The host state with the backend's state copied in.
+    pub fn synced(&mut self) -> Result<&RunState> {
         self.backend.sync()
     }
 
+    /// See [`Backend::refresh`].
+    pub fn refresh(&mut self) -> Result<()> {
+        self.backend.refresh()
+    }
+
     /// See [`Backend::edit`].
-    pub fn edit(&mut self, f: impl FnOnce(&mut Simulation)) -> Result<()> {
+    pub fn edit(&mut self, f: impl FnOnce(&mut RunState)) -> Result<()> {
         let mut f = Some(f);
         self.backend.edit(&mut |sim| {
             if let Some(f) = f.take() {

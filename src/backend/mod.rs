@@ -1,9 +1,9 @@
 //! Compute backends: one [`Backend`] trait, its CPU ([`cpu`]) and CUDA ([`cuda`])
 //! implementations side by side, and the [`Engine`] that is the only way to make one.
 //!
-//! A backend steps a [`Simulation`]: the CPU backend is the simulation itself (rayon), the
-//! CUDA backend keeps the particle state on the GPU and a host copy that it syncs on demand
-//! (docs/design.md §5). The choice is made once, from the command line's [`BackendChoice`]
+//! A backend steps a run's [`RunState`]: the CPU backend is the [`Simulation`](crate::pipeline::Simulation) of
+//! [`crate::pipeline`] (rayon), the CUDA backend keeps the particle state on the GPU and a host
+//! copy that it syncs on demand (docs/design.md §5). The choice is made once, from the command line's [`BackendChoice`]
 //! to the [`Device`] it resolves to ([`select_device`]); nothing downstream compares names.
 
 pub mod cpu;
@@ -16,7 +16,7 @@ pub use engine::{Engine, Start};
 
 use crate::domain::Comm;
 use crate::neighbor::NeighborReport;
-use crate::pipeline::Simulation;
+use crate::run_state::RunState;
 use anyhow::{Result, bail};
 use cuda::Precision;
 
@@ -27,27 +27,35 @@ pub trait Backend {
     /// Advances one time step (the stages of docs/design.md §1).
     fn step(&mut self) -> Result<()>;
 
-    /// The host simulation: time, step, dt and scene are always current; the particle state
-    /// and statistics only after [`Backend::sync`] (the count: [`Backend::particle_count`]).
-    fn host(&self) -> &Simulation;
+    /// The host state: time, step, dt and scene are always current; the particles, contact
+    /// history and statistics only after [`Backend::sync`] (the count:
+    /// [`Backend::particle_count`]).
+    fn state(&self) -> &RunState;
 
     /// Particles this rank owns now, without a sync (a GPU rank's rebuilds on the device move
     /// particles between ranks without updating the host's copy).
     fn particle_count(&self) -> usize {
-        self.host().particles.len()
+        self.state().particles.len()
     }
 
-    /// The host simulation for its bookkeeping (timers, counters), which the backend does
-    /// not hold elsewhere; its particle state may be stale (see [`Backend::host`]).
-    fn host_mut(&mut self) -> &mut Simulation;
+    /// The host state for its bookkeeping (timers, counters), which the backend does not hold
+    /// elsewhere; its particle state may be stale (see [`Backend::state`]).
+    fn state_mut(&mut self) -> &mut RunState;
 
-    /// The host simulation with the backend's state copied in.
-    fn sync(&mut self) -> Result<&Simulation>;
+    /// The host state with the backend's state copied in.
+    fn sync(&mut self) -> Result<&RunState>;
 
     /// Changes the state between steps (a prescribed motion, say): the state is made current
     /// on the host, changed there by `f` and taken back with its contact history; the next
-    /// step rebuilds the pair list.
-    fn edit(&mut self, f: &mut dyn FnMut(&mut Simulation)) -> Result<()>;
+    /// step rebuilds the pair list. The forces stay those of the last evaluation (see
+    /// [`Backend::refresh`]).
+    fn edit(&mut self, f: &mut dyn FnMut(&mut RunState)) -> Result<()>;
+
+    /// Evaluates the forces again at the current state without advancing the contact
+    /// history (as [`Simulation::refresh`](crate::pipeline::Simulation::refresh) does), after an [`Backend::edit`] that moved the
+    /// particles or the domain so far that the stored forces no longer fit them (a rescaled
+    /// periodic box).
+    fn refresh(&mut self) -> Result<()>;
 
     /// Particle–particle and particle–wall contacts of the last force evaluation.
     fn contact_counts(&mut self) -> Result<(u64, u64)>;

@@ -1,5 +1,6 @@
 //! How a [`Simulation`] starts: from a scene at t = 0 or from a checkpoint's state, on one rank
-//! or on this rank of a decomposed run, with or without the first force evaluation.
+//! or on this rank of a decomposed run; and the [`RunState`] another backend starts from, the
+//! first forces left to it.
 //!
 //! ```no_run
 //! # fn f(scene: polydem::scene::Scene, comm: std::sync::Arc<dyn polydem::domain::Comm>)
@@ -9,15 +10,13 @@
 //! # Ok(()) }
 //! ```
 
-use super::{Simulation, SimulationError, StageTimers};
+use super::{RunState, Simulation, SimulationError, Workspace};
 use crate::contact::{ContactHistory, hunt_crossley_alpha};
 use crate::domain::{Comm, Parallel};
 use crate::geometry::pair::Precision;
-use crate::neighbor::{Bounds, PairList};
+use crate::neighbor::PairList;
 use crate::scene::{Inserter, Scene};
-use crate::stability::StabilityGuard;
-use crate::state::{Particles, StepStats};
-use nalgebra::Vector3;
+use crate::state::Particles;
 use std::sync::Arc;
 
 /// A checkpoint's state, which a simulation restarts from (the inserter and its RNG come with
@@ -39,22 +38,21 @@ pub struct RestoredState {
     pub next_id: u64,
 }
 
-/// Builds a [`Simulation`] ([`Simulation::builder`]).
+/// Builds a [`Simulation`] ([`Simulation::builder`]), or the [`RunState`] another backend
+/// starts from ([`SimulationBuilder::state`]).
 ///
 /// - Without [`comm`](Self::comm), or with one of one rank, the simulation is the whole
 ///   domain on this process; with more ranks it is this rank's part of a run decomposed over
 ///   them (docs/design.md §6): it owns the particles in its subdomain and holds ghosts of its
 ///   neighbours' outer regions. All ranks build together (the exchange is collective).
 /// - Without [`restore`](Self::restore), it starts at t = 0 with the particles of count
-///   insertions placed and, unless [`evaluate_forces(false)`](Self::evaluate_forces), the
-///   first forces evaluated.
+///   insertions placed and (by [`build`](Self::build)) the first forces evaluated.
 /// - With [`restore`](Self::restore), it holds the checkpoint's state and its stored forces.
 #[must_use]
 pub struct SimulationBuilder {
     scene: Scene,
     comm: Option<Arc<dyn Comm>>,
     restore: Option<RestoredState>,
-    evaluate_forces: bool,
     precision: Precision,
 }
 
@@ -68,19 +66,9 @@ impl SimulationBuilder {
     /// Continues from a checkpoint's state. The checkpoint holds the forces and torques of the
     /// last evaluation, which the next half kick uses: they are kept as stored (re-evaluating
     /// them would advance the tangential springs a second time), so the restarted run continues
-    /// bitwise, on any rank count. [`evaluate_forces`](Self::evaluate_forces) has no effect
-    /// then.
+    /// bitwise, on any rank count.
     pub fn restore(mut self, state: RestoredState) -> Self {
         self.restore = Some(state);
-        self
-    }
-
-    /// Whether a new simulation evaluates its first forces (default: yes). Without, the
-    /// particles of count insertions are placed (and in a decomposed run sent to their owners
-    /// with the ghosts chosen) and nothing more: for a backend that evaluates the first forces
-    /// itself (a new GPU run through [`crate::backend::Engine::new`]).
-    pub fn evaluate_forces(mut self, evaluate: bool) -> Self {
-        self.evaluate_forces = evaluate;
         self
     }
 
@@ -95,6 +83,17 @@ impl SimulationBuilder {
         self
     }
 
+    /// The decomposition, when `comm` has more than one rank.
+    fn parallel(
+        comm: Option<Arc<dyn Comm>>,
+        scene: &Scene,
+    ) -> Result<Option<Box<Parallel>>, SimulationError> {
+        Ok(match comm {
+            Some(comm) if comm.size() > 1 => Some(Box::new(Parallel::new(comm, scene)?)),
+            _ => None,
+        })
+    }
+
     /// The simulation. Fails for a decomposition that cannot be made, an insertion that cannot
     /// place its particles, a restored state that cannot be stepped, or a failed first force
     /// evaluation.
@@ -103,31 +102,37 @@ impl SimulationBuilder {
             scene,
             comm,
             restore,
-            evaluate_forces,
             precision,
         } = self;
-        let parallel = match comm {
-            Some(comm) if comm.size() > 1 => Some(Box::new(Parallel::new(comm, &scene)?)),
-            _ => None,
-        };
-        match (restore, evaluate_forces) {
-            (Some(state), _) => Simulation::empty(scene, parallel, precision)?.restored(state),
-            (None, true) => Simulation::started(scene, parallel, precision),
-            (None, false) if parallel.is_some() => {
-                let mut sim = Simulation::empty(scene, parallel, precision)?;
+        let parallel = Self::parallel(comm, &scene)?;
+        match restore {
+            Some(state) => Simulation::empty(scene, parallel, precision)?.restored(state),
+            None => Simulation::started(scene, parallel, precision),
+        }
+    }
+
+    /// The state a backend that evaluates the first forces itself starts from (a new GPU run
+    /// through [`crate::backend::Engine::new`]): the particles of count insertions placed (in a
+    /// decomposed run sent to their owners, with the ghosts chosen), or the checkpoint's state
+    /// with its stored forces. Fails as [`build`](Self::build) does, but for the forces.
+    pub fn state(self) -> Result<RunState, SimulationError> {
+        let SimulationBuilder {
+            scene,
+            comm,
+            restore,
+            precision: _,
+        } = self;
+        let parallel = Self::parallel(comm, &scene)?;
+        let mut state = RunState::empty(scene, parallel)?;
+        match restore {
+            Some(restored) => state.restore(restored)?,
+            None => {
                 // Every rank takes part in the first exchange's rebuild.
-                sim.dirty = true;
-                sim.exchange()?;
-                sim.reset_guard();
-                Ok(sim)
-            }
-            (None, false) => {
-                let mut sim = Simulation::empty(scene, None, precision)?;
-                sim.exchange()?;
-                sim.reset_guard();
-                Ok(sim)
+                state.exchange(true, |_, _| true)?;
+                state.reset_guard();
             }
         }
+        Ok(state)
     }
 }
 
@@ -139,9 +144,45 @@ impl Simulation {
             scene,
             comm: None,
             restore: None,
-            evaluate_forces: true,
             precision: Precision::Double,
         }
+    }
+
+    /// The CPU pipeline on `state`, with a fresh workspace: the pair list is built at the next
+    /// force evaluation. A state's results do not depend on when its list was built (the
+    /// contacts are keyed by global ids and reduced in partner-id order), so a state moved
+    /// between backends continues bitwise.
+    pub fn from_state(state: RunState, pair_precision: Precision) -> Self {
+        let n_mat = state.scene.materials.len();
+        let damping = (0..n_mat * n_mat)
+            .map(|k| {
+                let e = state
+                    .scene
+                    .pairs
+                    .try_get(k / n_mat, k % n_mat)
+                    .map_or(1.0, |p| p.restitution);
+                hunt_crossley_alpha(e)
+            })
+            .collect();
+        let radius = state.radii();
+        Simulation {
+            state,
+            work: Workspace {
+                pairs: PairList::default(),
+                separating_axes: Vec::new(),
+                radius,
+                damping,
+                dirty: true,
+                too_deep: None,
+                pair_outcomes: Vec::new(),
+                pair_precision,
+            },
+        }
+    }
+
+    /// The run's state, the workspace dropped (for another backend).
+    pub fn into_state(self) -> RunState {
+        self.state
     }
 
     /// A simulation at t = 0: particles of count insertions placed, forces evaluated.
@@ -150,62 +191,10 @@ impl Simulation {
         parallel: Option<Box<Parallel>>,
         pair_precision: Precision,
     ) -> Result<Self, SimulationError> {
-        let n_mat = scene.materials.len();
-        let damping = (0..n_mat * n_mat)
-            .map(|k| {
-                let e = scene
-                    .pairs
-                    .try_get(k / n_mat, k % n_mat)
-                    .map_or(1.0, |p| p.restitution);
-                hunt_crossley_alpha(e)
-            })
-            .collect();
-        let bounds = Bounds {
-            min: scene.domain.min,
-            max: scene.domain.max,
-            periodic: scene.domain.periodic,
-        };
-        let dt = scene.time_step();
-        let inserter = Inserter::new(&scene);
-        let n_walls = scene.walls.len();
-        let mut sim = Simulation {
-            scene,
-            particles: Particles::default(),
-            history: ContactHistory::default(),
-            // Meshed for this rank by `restrict_walls` below.
-            walls: Vec::new(),
-            time: 0.0,
-            step: 0,
-            dt,
-            next_id: 0,
-            inserter,
-            timers: StageTimers::default(),
-            stats: StepStats::default(),
-            wall_forces: vec![Vector3::zeros(); n_walls],
-            sums: crate::exact_sum::DiagnosticSums::new(n_walls),
-            parallel,
-            pairs: PairList::default(),
-            separating_axes: Vec::new(),
-            bounds,
-            radius: Vec::new(),
-            damping,
-            dirty: true,
-            guard: StabilityGuard {
-                enabled: false,
-                max_speed: f64::INFINITY,
-                max_overlap: f64::INFINITY,
-                speed_scale: 0.0,
-            },
-            too_deep: None,
-            pair_outcomes: Vec::new(),
-            pair_precision,
-        };
-        sim.restrict_walls();
-        sim.exchange()?;
-        sim.reset_guard();
-        sim.forces(sim.dt)?;
+        let mut sim = Simulation::from_state(RunState::started(scene, parallel)?, pair_precision);
+        sim.forces(sim.state.dt)?;
         // Again with the initial contacts' elastic energy, which a compressed start releases.
-        sim.reset_guard();
+        sim.state.reset_guard();
         Ok(sim)
     }
 
@@ -218,14 +207,43 @@ impl Simulation {
         let mut s = scene.clone();
         s.insertions.clear();
         let mut sim = Simulation::started(s, parallel, pair_precision)?;
-        sim.scene = scene;
-        sim.inserter = Inserter::new(&sim.scene);
+        sim.state.inserter = Inserter::new(&scene);
+        sim.state.scene = scene;
         Ok(sim)
     }
 
     /// `self` (without particles) holding a checkpoint's state, its stored forces kept
     /// ([`SimulationBuilder::restore`]).
     fn restored(mut self, state: RestoredState) -> Result<Self, SimulationError> {
+        self.state.restore(state)?;
+        self.work.dirty = true;
+        self.refresh_radii();
+        Ok(self)
+    }
+}
+
+impl RunState {
+    /// The state of `scene` at t = 0 with the particles of count insertions placed (in a
+    /// decomposed run sent to their owners) and the guard's bounds set; no forces evaluated.
+    fn started(scene: Scene, parallel: Option<Box<Parallel>>) -> Result<Self, SimulationError> {
+        let mut state = RunState::new(scene, parallel);
+        state.exchange(true, |_, _| true)?;
+        state.reset_guard();
+        Ok(state)
+    }
+
+    /// The state of `scene` with no particle placed yet (its insertions still to come).
+    fn empty(scene: Scene, parallel: Option<Box<Parallel>>) -> Result<Self, SimulationError> {
+        let mut s = scene.clone();
+        s.insertions.clear();
+        let mut state = RunState::started(s, parallel)?;
+        state.inserter = Inserter::new(&scene);
+        state.scene = scene;
+        Ok(state)
+    }
+
+    /// `self` (without particles) holding a checkpoint's state, its stored forces kept.
+    fn restore(&mut self, state: RestoredState) -> Result<(), SimulationError> {
         let RestoredState {
             particles,
             history,
@@ -244,9 +262,7 @@ impl Simulation {
         self.inserter = inserter;
         self.time = time;
         self.next_id = next_id;
-        self.dirty = true;
-        self.refresh_radii();
         self.reset_guard();
-        Ok(self)
+        Ok(())
     }
 }

@@ -10,17 +10,25 @@ impl Simulation {
     /// advances by one step.
     pub(super) fn half_kick_and_drift(&mut self) {
         let t0 = Instant::now();
-        half_kick(&mut self.particles, &self.scene.gravity, self.dt);
-        drift(&mut self.particles, self.dt);
-        self.time += self.dt;
-        self.step += 1;
-        self.timers.integrate += t0.elapsed().as_secs_f64();
+        half_kick(
+            &mut self.state.particles,
+            &self.state.scene.gravity,
+            self.state.dt,
+        );
+        drift(&mut self.state.particles, self.state.dt);
+        self.state.time += self.state.dt;
+        self.state.step += 1;
+        self.state.timers.integrate += t0.elapsed().as_secs_f64();
     }
 
     /// Stage 9b: the second half kick, with this step's forces.
     pub(super) fn second_half_kick(&mut self) {
         let t0 = Instant::now();
-        half_kick(&mut self.particles, &self.scene.gravity, self.dt);
-        self.timers.integrate += t0.elapsed().as_secs_f64();
+        half_kick(
+            &mut self.state.particles,
+            &self.state.scene.gravity,
+            self.state.dt,
+        );
+        self.state.timers.integrate += t0.elapsed().as_secs_f64();
     }
 }

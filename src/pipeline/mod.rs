@@ -21,7 +21,6 @@
 //! [`SimulationBuilder`] ([`Simulation::builder`]).
 
 mod builder;
-mod error;
 mod exchange;
 mod guard;
 mod integration;
@@ -30,67 +29,40 @@ mod pairs;
 mod reduction;
 mod walls;
 
-pub use crate::state::StepStats;
-pub use builder::{RestoredState, SimulationBuilder};
-pub use error::{
-    FailureKey, SimulationError, StageTimers, first_failure_position, pair_failure_key,
+pub use crate::run_state::{
+    FailureKey, RunState, SimulationError, StageTimers, StepStats, first_failure_position,
+    pair_failure_key,
 };
+pub use builder::{RestoredState, SimulationBuilder};
 
-use crate::contact::{ContactHistory, WallMesh};
-use crate::domain::Parallel;
-use crate::domain::collect::RankState;
-use crate::neighbor::{Bounds, PairList};
-use crate::scene::{Inserter, Scene};
-use crate::stability::StabilityGuard;
-use crate::state::Particles;
+use crate::neighbor::PairList;
 use nalgebra::Vector3;
-use rayon::prelude::*;
 use std::time::Instant;
 
-/// A running simulation on the CPU backend.
+/// A running simulation on the CPU backend: the run's state and the pipeline's workspace.
 pub struct Simulation {
-    /// The scene it runs.
-    pub scene: Scene,
-    /// Particle state.
-    pub particles: Particles,
-    /// Live contacts' history.
-    pub history: ContactHistory,
-    /// Wall meshes in their t = 0 frames.
-    pub walls: Vec<WallMesh>,
-    /// Simulated time (s).
-    pub time: f64,
-    /// Steps done.
-    pub step: u64,
-    /// Time step (s).
-    pub dt: f64,
-    /// Next global id to give.
-    pub next_id: u64,
-    /// Places particles.
-    pub inserter: Inserter,
-    /// Stage timers.
-    pub timers: StageTimers,
-    /// Observables of the last force evaluation.
-    pub stats: StepStats,
-    /// Force on each wall from the last force evaluation (this rank's particles' share in a
-    /// decomposed run).
-    pub wall_forces: Vec<Vector3<f64>>,
-    /// The last evaluation's elastic energy and wall forces as exact sums, which the ranks of a
-    /// decomposed run merge into the whole run's (`crate::exact_sum`).
-    pub sums: crate::exact_sum::DiagnosticSums,
-    /// This rank's part of a decomposed run (`None`: one rank, the whole domain).
-    pub parallel: Option<Box<Parallel>>,
+    /// What the run is (scene, particles, history, clock, decomposition, guard, observables),
+    /// as either backend holds it.
+    pub state: RunState,
+    work: Workspace,
+}
+
+/// What the CPU pipeline keeps between steps besides the run's state: the candidate pair
+/// list and what is indexed by it, the particles' bounding radii, the contact law's damping
+/// table, and the last evaluation's deepest contact.
+struct Workspace {
     pairs: PairList,
     /// Per pair of `pairs`, the axis that separated it at the last evaluation (zero: none
     /// known), tried before GJK ([`crate::geometry::pair::axis_separates`]); cleared when
     /// the list is rebuilt.
     separating_axes: Vec<Vector3<f64>>,
-    bounds: Bounds,
+    /// Each particle's circumscribed radius, in the order of the particle arrays (with a
+    /// decomposed run's ghosts appended during a force evaluation).
     radius: Vec<f64>,
     /// Hunt–Crossley `ᾱ(e)` per material pair (`a * materials + b`).
     damping: Vec<f64>,
+    /// The pair list must be rebuilt at the next evaluation.
     dirty: bool,
-    /// The stability guard's bounds (`crate::stability`), set when particles are placed.
-    pub guard: StabilityGuard,
     /// The contact of the last force evaluation past the guard's overlap bound, if any:
     /// (particle index, what it overlaps, overlap volume, the smaller particle volume).
     too_deep: Option<(usize, String, f64, f64)>,
@@ -108,16 +80,18 @@ impl Simulation {
     ///
     /// The guard's checks run twice: after the drift (speed, finiteness, a particle leaving
     /// through a closed face), and at the end (overlaps, finiteness). In a decomposed run the
-    /// ranks agree on each outcome ([`Self::agree`]), so that all stop after the same step.
+    /// ranks agree on each outcome ([`RunState::agree`]), so that all stop after the same step.
     pub fn step(&mut self) -> Result<(), SimulationError> {
         self.half_kick_and_drift(); // 9a
-        let moved = self.check_motion().and_then(|()| self.check_inside());
-        self.agree(moved)?;
+        let moved = self.check_motion().and_then(|()| self.state.check_inside());
+        self.state.agree(moved)?;
         self.exchange()?; // 1
-        self.forces(self.dt)?; // 2–8
+        self.forces(self.state.dt)?; // 2–8
         self.second_half_kick(); // 9b
-        let end = self.check_overlaps().and_then(|()| self.check_finite());
-        self.agree(end)
+        let end = self
+            .check_overlaps()
+            .and_then(|()| self.state.check_finite());
+        self.state.agree(end)
     }
 
     /// Stages 2–8 at the current state, advancing the contact history by `dt` (zero: the
@@ -129,8 +103,8 @@ impl Simulation {
         let pair_outcomes = self.pair_stage(dt, owned)?; // 3–7 (ghosts dropped again)
         let wall_outcomes = self.wall_stage(dt)?; // 6
         self.reduce(owned, &pair_outcomes, &wall_outcomes); // 8
-        self.pair_outcomes = pair_outcomes;
-        if let Some(par) = self.parallel.as_deref_mut() {
+        self.work.pair_outcomes = pair_outcomes;
+        if let Some(par) = self.state.parallel.as_deref_mut() {
             par.cost += t_forces.elapsed().as_secs_f64();
         }
         Ok(())
@@ -139,80 +113,49 @@ impl Simulation {
     /// Re-evaluates forces after the particle state was edited directly (tests, set-up
     /// tools): neighbour lists and radii are rebuilt, the contact history is kept as is.
     pub fn refresh(&mut self) -> Result<(), SimulationError> {
-        self.dirty = true;
+        self.work.dirty = true;
         self.refresh_radii();
-        self.reset_guard();
-        if self.parallel.is_some() {
+        self.state.reset_guard();
+        if self.state.parallel.is_some() {
             self.parallel_exchange()?;
         }
-        let saved = self.history.clone();
+        let saved = self.state.history.clone();
         self.forces(0.0)?;
-        self.history = saved;
-        self.reset_guard();
+        self.state.history = saved;
+        self.state.reset_guard();
         Ok(())
     }
 
     /// Scales a fully periodic box and every particle centre about the box's lower corner by
-    /// `factor` (below 1 compresses), then re-evaluates the forces as [`Simulation::refresh`]
-    /// does: the affine step of a compression packing (`polydem pack`, [`crate::run::pack`]).
-    /// Velocities and the contact history are the caller's. Refused for a box that is not
-    /// periodic on every axis, a scene with walls, or a decomposed run, where a uniform
-    /// rescaling would move particles through walls or across ranks.
+    /// `factor` ([`RunState::rescale_periodic_box`]), then re-evaluates the forces as
+    /// [`Simulation::refresh`] does.
     pub fn rescale_periodic_box(&mut self, factor: f64) -> Result<(), SimulationError> {
-        let step = self.step;
-        let refuse = |message: String| Err(SimulationError::Domain { step, message });
-        if !(factor > 0.0 && factor.is_finite()) {
-            return refuse(format!("box scale factor must be positive, got {factor}"));
-        }
-        if self.bounds.periodic != [true; 3] || !self.scene.walls.is_empty() {
-            return refuse(
-                "only a box periodic on every axis and without walls can be rescaled".into(),
-            );
-        }
-        if self.parallel.is_some() {
-            return refuse("a decomposed run cannot be rescaled".into());
-        }
-        let min = self.bounds.min;
-        let max = min + (self.bounds.max - min) * factor;
-        // As scene validation requires: no particle may touch two images of another.
-        let least = self.scene.least_periodic_extent();
-        if let Some(k) = (0..3).find(|&k| max[k] - min[k] < least) {
-            return refuse(format!(
-                "the box would be {:.6e} m along axis {k}, less than twice the reach of a \
-                 contact ({:.6e} m): a particle could touch two images of another",
-                max[k] - min[k],
-                least
-            ));
-        }
-        for x in self.particles.position.iter_mut() {
-            *x = min + (*x - min) * factor;
-        }
-        self.bounds.max = max;
-        self.scene.domain.max = max;
+        self.state.rescale_periodic_box(factor)?;
         self.refresh()
     }
 
     /// The arithmetic of the polyhedral pair geometry ([`SimulationBuilder::pair_precision`]).
     pub fn pair_precision(&self) -> crate::geometry::pair::Precision {
-        self.pair_precision
+        self.work.pair_precision
     }
 
     /// Sets the arithmetic of the polyhedral pair geometry from the next force evaluation on
     /// (a checkpoint does not record it: a restart chooses again).
     pub fn set_pair_precision(&mut self, precision: crate::geometry::pair::Precision) {
-        self.pair_precision = precision;
+        self.work.pair_precision = precision;
     }
 
     /// Pair lists built so far (the first one included).
     pub fn pair_list_builds(&self) -> u64 {
-        self.pairs.builds
+        self.work.pairs.builds
     }
 
     /// The candidate pair list of stage 2 as global-id pairs (lower id first), sorted: what the
     /// GPU's list must equal after a build from the same positions.
     pub fn candidate_pair_ids(&self) -> Vec<(u64, u64)> {
-        let id = &self.particles.id;
+        let id = &self.state.particles.id;
         let mut v: Vec<(u64, u64)> = self
+            .work
             .pairs
             .pairs
             .iter()
@@ -223,69 +166,5 @@ impl Simulation {
             .collect();
         v.sort_unstable();
         v
-    }
-
-    /// Kinetic, gravitational and elastic energy together (J): what an elastic, frictionless
-    /// run conserves.
-    pub fn total_energy(&self) -> f64 {
-        let (kt, kr, pg) = self.energies();
-        kt + kr + pg + self.stats.elastic_energy
-    }
-
-    /// Kinetic energy (translational, rotational) and gravitational potential energy
-    /// (relative to the origin).
-    pub fn energies(&self) -> (f64, f64, f64) {
-        let [kt, kr, pg] = self.energy_sums();
-        (kt.value(), kr.value(), pg.value())
-    }
-
-    /// The energies of [`Simulation::energies`] as exact sums, which ranks merge.
-    pub fn energy_sums(&self) -> [crate::exact_sum::ExactSum; 3] {
-        let p = &self.particles;
-        let g = self.scene.gravity;
-        let terms: Vec<[f64; 3]> = (0..p.len())
-            .into_par_iter()
-            .with_min_len(crate::par::CHEAP)
-            .map(|i| {
-                let wb = p.orientation[i].inverse_transform_vector(&p.angular_velocity[i]);
-                [
-                    0.5 * p.mass[i] * p.velocity[i].norm_squared(),
-                    0.5 * wb.component_mul(&p.inertia[i]).dot(&wb),
-                    -p.mass[i] * g.dot(&p.position[i]),
-                ]
-            })
-            .collect();
-        // Exact sums: the same bits whatever the order of the particles, their grouping into
-        // threads or ranks, the backend or a restart.
-        let mut sums: [crate::exact_sum::ExactSum; 3] = Default::default();
-        for t in &terms {
-            for (s, x) in sums.iter_mut().zip(t) {
-                s.add(*x);
-            }
-        }
-        sums
-    }
-}
-
-/// The whole-run views of a decomposed run read a rank's state through this.
-impl RankState for Simulation {
-    fn owned_particles(&self) -> &Particles {
-        &self.particles
-    }
-
-    fn contact_history(&self) -> &ContactHistory {
-        &self.history
-    }
-
-    fn step_stats(&self) -> &StepStats {
-        &self.stats
-    }
-
-    fn energy_sums(&self) -> [crate::exact_sum::ExactSum; 3] {
-        Simulation::energy_sums(self)
-    }
-
-    fn diagnostic_sums(&self) -> &crate::exact_sum::DiagnosticSums {
-        &self.sums
     }
 }

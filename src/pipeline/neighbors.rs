@@ -11,13 +11,13 @@ impl Simulation {
     /// owned particles, for the pair stages; returns how many particles are owned. The pair
     /// stage drops them again ([`Simulation::pair_stage`]).
     pub(super) fn join_ghosts(&mut self) -> usize {
-        let owned = self.particles.len();
-        if let Some(par) = self.parallel.as_deref() {
-            self.particles.extend_from(&par.ghosts.particles);
-            let types = &self.scene.particle_types;
-            let templates = &self.scene.templates;
+        let owned = self.state.particles.len();
+        if let Some(par) = self.state.parallel.as_deref() {
+            self.state.particles.extend_from(&par.ghosts.particles);
+            let types = &self.state.scene.particle_types;
+            let templates = &self.state.scene.templates;
             let g = &par.ghosts.particles;
-            self.radius.extend((0..g.len()).map(|i| {
+            self.work.radius.extend((0..g.len()).map(|i| {
                 templates[types[g.kind[i] as usize].template].circumscribed_radius * g.scale[i]
             }));
         }
@@ -28,44 +28,45 @@ impl Simulation {
     /// the previous list), with the first `owned` particles owned and the rest ghosts.
     pub(super) fn neighbor_list(&mut self, owned: usize) {
         let t0 = Instant::now();
-        let skin = self.scene.simulation.neighbor.skin;
-        let rebuild = match self.parallel {
+        let skin = self.state.scene.simulation.neighbor.skin;
+        let rebuild = match self.state.parallel {
             // Decided by all ranks together in the exchange.
-            Some(_) => self.dirty,
+            Some(_) => self.work.dirty,
             None => {
-                self.dirty
+                self.work.dirty
                     || self
+                        .work
                         .pairs
-                        .needs_rebuild(&self.particles.position, &self.bounds)
+                        .needs_rebuild(&self.state.particles.position, &self.state.bounds)
             }
         };
         if rebuild {
-            match self.parallel.as_deref() {
+            match self.state.parallel.as_deref() {
                 Some(par) => {
-                    let mut bins = self.particles.position[..owned].to_vec();
+                    let mut bins = self.state.particles.position[..owned].to_vec();
                     bins.extend(par.ghost_bins());
-                    self.pairs.build_in(
-                        &self.particles.position,
+                    self.work.pairs.build_in(
+                        &self.state.particles.position,
                         &bins,
-                        &self.radius,
-                        &self.particles.id,
+                        &self.work.radius,
+                        &self.state.particles.id,
                         owned,
-                        &self.bounds,
+                        &self.state.bounds,
                         &par.search_region(),
                         skin,
                     );
                 }
-                None => self.pairs.build(
-                    &self.particles.position,
-                    &self.radius,
-                    &self.particles.id,
-                    &self.bounds,
+                None => self.work.pairs.build(
+                    &self.state.particles.position,
+                    &self.work.radius,
+                    &self.state.particles.id,
+                    &self.state.bounds,
                     skin,
                 ),
             }
-            self.separating_axes = vec![Vector3::zeros(); self.pairs.pairs.len()];
-            self.dirty = false;
+            self.work.separating_axes = vec![Vector3::zeros(); self.work.pairs.pairs.len()];
+            self.work.dirty = false;
         }
-        self.timers.neighbor += t0.elapsed().as_secs_f64();
+        self.state.timers.neighbor += t0.elapsed().as_secs_f64();
     }
 }

@@ -3,7 +3,6 @@
 //! law, one rayon job per candidate pair; and what the pair and wall stages share (contact
 //! parameters, the effective mass, the per-thread workspace).
 
-use super::error::{FirstFailure, pair_failure_key};
 use super::{Simulation, SimulationError};
 use crate::contact::{
     ContactForces, ContactKey, ContactKinematics, ContactParameters, ContactState, contact_forces,
@@ -14,6 +13,7 @@ use crate::geometry::pair::{
     PairWorkspace, Precision, axis_separates, overlap_pair, overlap_pair_mixed_with,
 };
 use crate::geometry::sphere::sphere_lens;
+use crate::run_state::{FirstFailure, pair_failure_key};
 use crate::state::Particles;
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
@@ -31,16 +31,6 @@ pub(super) struct PairOutcome {
 }
 
 impl Simulation {
-    /// The volume of particle `i`, as `(4π/3) R³` of its volume-equivalent radius (the
-    /// stability guard's measure, computed alike on the GPU).
-    pub(super) fn equivalent_volume(&self, i: usize) -> f64 {
-        let s = &self.scene;
-        let p = &self.particles;
-        let r = s.templates[s.particle_types[p.kind[i] as usize].template].equivalent_radius
-            * p.scale[i];
-        crate::stability::ball_volume(r)
-    }
-
     /// The contact law's parameters of particle `i` against particle `other`, or against a wall
     /// of material `wall_material` when `other` is `None`.
     pub(super) fn contact_parameters(
@@ -49,8 +39,8 @@ impl Simulation {
         other: Option<usize>,
         wall_material: usize,
     ) -> ContactParameters {
-        let s = &self.scene;
-        let p = &self.particles;
+        let s = &self.state.scene;
+        let p = &self.state.particles;
         let side = |k: usize| {
             let ty = &s.particle_types[p.kind[k] as usize];
             let m = &s.materials[ty.material];
@@ -73,7 +63,7 @@ impl Simulation {
             tangential_stiffness: ct_a + ct_b,
             restitution: pair.restitution,
             friction: pair.friction,
-            damping: self.damping[ma * s.materials.len() + mb],
+            damping: self.work.damping[ma * s.materials.len() + mb],
             rocking: !s.templates[s.particle_types[p.kind[i] as usize].template].sphere,
             face_window: s.simulation.face_window,
         }
@@ -88,74 +78,21 @@ impl Simulation {
         owned: usize,
     ) -> Result<Vec<PairOutcome>, SimulationError> {
         let t0 = Instant::now();
-        let mut outcomes = std::mem::take(&mut self.pair_outcomes);
+        let mut outcomes = std::mem::take(&mut self.work.pair_outcomes);
         let done = self.pair_contacts(dt, &mut outcomes);
-        self.particles.truncate(owned);
-        self.radius.truncate(owned);
+        self.state.particles.truncate(owned);
+        self.work.radius.truncate(owned);
         done?;
-        for (axis, o) in self.separating_axes.iter_mut().zip(&outcomes) {
+        for (axis, o) in self.work.separating_axes.iter_mut().zip(&outcomes) {
             *axis = o.separating_axis;
         }
-        self.timers.pairs += t0.elapsed().as_secs_f64();
+        self.state.timers.pairs += t0.elapsed().as_secs_f64();
         Ok(outcomes)
-    }
-
-    /// The deepest overlap of owned particle `i` with any other owned particle, evaluated
-    /// now in f64 by the narrow phase of stages 4–5 (`pair_contacts`) over every particle within
-    /// reach (no list): (the partner's id, its overlap volume over the smaller particle's
-    /// volume, as the stability guard measures it). For the GPU guard's report, which names
-    /// no partner; `None` when no particle overlaps it.
-    pub fn deepest_particle_overlap(&self, i: usize) -> Option<(u64, f64)> {
-        let p = &self.particles;
-        let s = &self.scene;
-        if i >= p.len() {
-            return None;
-        }
-        // Bounding radii from the templates: a GPU run's host copy need not hold them.
-        let template = |k: usize| &s.templates[s.particle_types[p.kind[k] as usize].template];
-        let radius = |k: usize| template(k).circumscribed_radius * p.scale[k];
-        let periodic = self.bounds.periodic.iter().any(|&k| k);
-        let xa = p.position[i];
-        let ta = template(i);
-        let pose_a = Isometry3::from_parts(xa.into(), p.orientation[i]);
-        (0..p.len())
-            .into_par_iter()
-            .filter(|&j| j != i)
-            .filter_map(|j| {
-                let xb = if periodic {
-                    xa + self.bounds.displacement(&xa, &p.position[j])
-                } else {
-                    p.position[j]
-                };
-                let reach = radius(i) + radius(j);
-                if (xb - xa).norm_squared() >= reach * reach {
-                    return None;
-                }
-                let volume = if s.spheres_only() {
-                    sphere_lens(radius(i), radius(j), &(xb - xa)).volume
-                } else {
-                    let tb = template(j);
-                    let pose_b = Isometry3::from_parts(xb.into(), p.orientation[j]);
-                    let g = with_workspace(|ws| {
-                        overlap_pair(ws, (ta, p.scale[i], &pose_a), (tb, p.scale[j], &pose_b))
-                    })
-                    .ok()?;
-                    if !g.intersects {
-                        return None;
-                    }
-                    g.overlap.volume
-                };
-                (volume > 0.0).then(|| {
-                    let size = self.equivalent_volume(i).min(self.equivalent_volume(j));
-                    (p.id[j], volume / size)
-                })
-            })
-            .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
     }
 
     /// Stages 3–7 for every candidate pair of the list, in list order (ghosts joined after the
     /// owned particles): the outcome per pair, or the failed pair of the smallest ids
-    /// ([`FailureKey`](super::error::FailureKey)).
+    /// ([`FailureKey`](crate::run_state::FailureKey)).
     pub(super) fn pair_contacts(
         &self,
         dt: f64,
@@ -164,10 +101,11 @@ impl Simulation {
         let failure = FirstFailure::default();
         // Mixed precision's LP in f64 unless POLYDEM_MIXED_LP=f32 (on trial; the GPU's too).
         let wide_lp = !crate::tuning::Tuning::get().mixed_lp_f32;
-        self.pairs
+        self.work
+            .pairs
             .pairs
             .par_iter()
-            .zip(self.separating_axes.par_iter())
+            .zip(self.work.separating_axes.par_iter())
             .with_min_len(crate::par::CONTACT)
             .map(|(pair, axis)| {
                 let (a, b) = (pair[0] as usize, pair[1] as usize);
@@ -190,10 +128,10 @@ impl Simulation {
     /// arithmetic (not the build's shift: a particle wrapped across a periodic face since the
     /// build keeps its contacts); B's centre without periodic axes.
     fn partner_image(&self, a: usize, b: usize) -> Vector3<f64> {
-        let p = &self.particles;
-        if self.bounds.periodic.iter().any(|&k| k) {
+        let p = &self.state.particles;
+        if self.state.bounds.periodic.iter().any(|&k| k) {
             let (xa, xb) = (p.position[a], p.position[b]);
-            xb + (self.bounds.displacement(&xa, &xb) - (xb - xa))
+            xb + (self.state.bounds.displacement(&xa, &xb) - (xb - xa))
         } else {
             p.position[b]
         }
@@ -212,24 +150,25 @@ impl Simulation {
         wide_lp: bool,
         failure: &FirstFailure,
     ) -> Result<Overlap<f64>, Vector3<f64>> {
-        let p = &self.particles;
-        let s = &self.scene;
+        let p = &self.state.particles;
+        let s = &self.state.scene;
         let d = xb - p.position[a];
-        let reach = self.radius[a] + self.radius[b];
+        let reach = self.work.radius[a] + self.work.radius[b];
         // Stage 3: bounding spheres.
         if d.norm_squared() >= reach * reach {
             return Err(Vector3::zeros());
         }
         if s.spheres_only() {
             // Stages 4–5 for spheres: the lens in closed form.
-            let o = sphere_lens(self.radius[a], self.radius[b], &d).to_world(&p.position[a]);
+            let o =
+                sphere_lens(self.work.radius[a], self.work.radius[b], &d).to_world(&p.position[a]);
             return if o.volume <= 0.0 {
                 Err(Vector3::zeros())
             } else {
                 Ok(o)
             };
         }
-        let mixed = self.pair_precision == Precision::Mixed;
+        let mixed = self.work.pair_precision == Precision::Mixed;
         let ta = &s.templates[s.particle_types[p.kind[a] as usize].template];
         let tb = &s.templates[s.particle_types[p.kind[b] as usize].template];
         let pose_a = Isometry3::from_parts(p.position[a].into(), p.orientation[a]);
@@ -250,7 +189,7 @@ impl Simulation {
             Ok(g) => g,
             Err(e) => {
                 let error = SimulationError::Geometry {
-                    step: self.step,
+                    step: self.state.step,
                     what: format!("particles {} and {}", p.id[a], p.id[b]),
                     message: format!(
                         "{e}; to reproduce with `polydem probe overlap{}`: A {}, B {}",
@@ -279,11 +218,11 @@ impl Simulation {
         overlap: &Overlap<f64>,
         dt: f64,
     ) -> PairOutcome {
-        let p = &self.particles;
-        let spheres = self.scene.spheres_only();
+        let p = &self.state.particles;
+        let spheres = self.state.scene.spheres_only();
         let params = self.contact_parameters(a, Some(b), 0);
         let key = ContactKey::particles(p.id[a], p.id[b]);
-        let mut state = self.history.get(&key).copied().unwrap_or_default();
+        let mut state = self.state.history.get(&key).copied().unwrap_or_default();
         let (split_a, split_b) = (mass_share(p.contacts[a]), mass_share(p.contacts[b]));
         // A lens's centroid is on the line of centres: no rotational term.
         let (effective_mass, dashpot_mass) = if spheres {
@@ -309,8 +248,8 @@ impl Simulation {
             q_b: p.orientation[b],
             inverse_inertia_a: p.inertia[a].map(|x| 1.0 / x),
             inverse_inertia_b: p.inertia[b].map(|x| 1.0 / x),
-            sphere_radius_a: if spheres { self.radius[a] } else { 0.0 },
-            sphere_radius_b: if spheres { self.radius[b] } else { 0.0 },
+            sphere_radius_a: if spheres { self.work.radius[a] } else { 0.0 },
+            sphere_radius_b: if spheres { self.work.radius[b] } else { 0.0 },
             split_a,
             split_b,
         };
@@ -319,7 +258,11 @@ impl Simulation {
             separating_axis: Vector3::zeros(),
             forces,
             state: Some((key, state)),
-            penetration: overlap.volume / self.equivalent_volume(a).min(self.equivalent_volume(b)),
+            penetration: overlap.volume
+                / self
+                    .state
+                    .equivalent_volume(a)
+                    .min(self.state.equivalent_volume(b)),
         }
     }
 }

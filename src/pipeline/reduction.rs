@@ -25,15 +25,15 @@ impl Simulation {
         self.reduce_forces(outcomes, wall_outcomes);
         self.reduce_contacts(owned, outcomes, wall_outcomes);
         self.find_too_deep(owned, outcomes, wall_outcomes);
-        self.timers.reduce += t0.elapsed().as_secs_f64();
+        self.state.timers.reduce += t0.elapsed().as_secs_f64();
     }
 
     /// Each particle's force and torque: its pairs in the list's per-particle order (by
     /// partner id), then its walls; and its contacts, pairs and walls, which the next
     /// evaluation's dashpot caps split its mass among.
     fn reduce_forces(&mut self, outcomes: &[PairOutcome], wall_outcomes: &[WallOutcome]) {
-        let pairs = &self.pairs;
-        let p = &mut self.particles;
+        let pairs = &self.work.pairs;
+        let p = &mut self.state.particles;
         p.force
             .par_iter_mut()
             .zip(p.torque.par_iter_mut())
@@ -74,7 +74,7 @@ impl Simulation {
         outcomes: &[PairOutcome],
         wall_outcomes: &[WallOutcome],
     ) {
-        let pairs = &self.pairs;
+        let pairs = &self.work.pairs;
         // The history's entries in key order as far as the loop below can give it: each owned
         // particle in id order, its pairs as the lower-id member by partner id, then its walls
         // (a wall's key sorts after every particle's). Only pairs whose lower-id member is a
@@ -83,7 +83,7 @@ impl Simulation {
         let mut entries: Vec<(ContactKey, ContactState)> = Vec::with_capacity(outcomes.len());
         // A pair across two ranks is evaluated on both; it counts where its lower-id member
         // (the pair's first) is owned, so that sums over ranks count it once.
-        let counted = |k: usize| self.pairs.pairs[k][0] < owned as u32;
+        let counted = |k: usize| self.work.pairs.pairs[k][0] < owned as u32;
         // The history in global id order, each particle's pairs by partner id (the order of
         // the force reduction above), then each particle's walls; the elastic energy and the
         // walls' forces as exact sums (crate::exact_sum), which no order, backend, restart or
@@ -91,10 +91,10 @@ impl Simulation {
         // (The ghosts are dropped: the particles are the owned ones, `wall_outcomes` has one
         // per particle or none.)
         let listed = owned.min(pairs.offsets.len().saturating_sub(1));
-        let n = self.particles.len();
-        let order = self.particles.id_order(n);
+        let n = self.state.particles.len();
+        let order = self.state.particles.id_order(n);
         let at = |j: usize| order.as_ref().map_or(j, |o| o[j]);
-        let mut sums = crate::exact_sum::DiagnosticSums::new(self.walls.len());
+        let mut sums = crate::exact_sum::DiagnosticSums::new(self.state.walls.len());
         for j in 0..n {
             let i = at(j);
             // A particle past the listed ones has no pairs, but its walls count.
@@ -130,16 +130,16 @@ impl Simulation {
                 sums.add_wall_force(*k, f);
             }
         }
-        self.stats.contacts = outcomes
+        self.state.stats.contacts = outcomes
             .iter()
             .enumerate()
             .filter(|(k, o)| o.state.is_some() && counted(*k))
             .count() as u64;
-        self.stats.wall_contacts = wall_contacts;
-        self.stats.elastic_energy = sums.elastic.value();
-        self.wall_forces = sums.wall_force_values();
-        self.sums = sums;
-        self.history = ContactHistory::from_entries(entries);
+        self.state.stats.wall_contacts = wall_contacts;
+        self.state.stats.elastic_energy = sums.elastic.value();
+        self.state.wall_forces = sums.wall_force_values();
+        self.state.sums = sums;
+        self.state.history = ContactHistory::from_entries(entries);
     }
 
     /// The contact past the stability guard's overlap bound, if any, for
@@ -152,17 +152,18 @@ impl Simulation {
     ) {
         // The guard's overlap bound: the first pair past it, else the first particle with a
         // wall contact past it (deterministic, whatever the thread count).
-        let limit = self.guard.max_overlap;
-        self.too_deep = None;
+        let limit = self.state.guard.max_overlap;
+        self.work.too_deep = None;
         if limit.is_finite() {
             // Id and volume ((4π/3) R³ of the volume-equivalent radius) of an owned particle
             // or a ghost.
             let member = |x: usize| {
-                let s = &self.scene;
+                let s = &self.state.scene;
                 let p = if x < owned {
-                    (&self.particles, x)
+                    (&self.state.particles, x)
                 } else {
                     let par = self
+                        .state
                         .parallel
                         .as_deref()
                         .expect("ghosts only in a decomposed run");
@@ -177,11 +178,11 @@ impl Simulation {
             };
             let volume = |i: usize| member(i).1;
             if let Some(k) = outcomes.iter().position(|o| o.penetration > limit) {
-                let [a, b] = self.pairs.pairs[k].map(|x| x as usize);
+                let [a, b] = self.work.pairs.pairs[k].map(|x| x as usize);
                 // The owned member is named (a ghost's id is still the partner's).
                 let (i, j) = if a < owned { (a, b) } else { (b, a) };
                 let size = volume(i).min(volume(j));
-                self.too_deep = Some((
+                self.work.too_deep = Some((
                     i,
                     format!("particle {}", member(j).0),
                     outcomes[k].penetration * size,
@@ -190,9 +191,9 @@ impl Simulation {
             } else if let Some(i) = wall_outcomes.iter().position(|w| w.penetration.0 > limit) {
                 let (depth, k) = wall_outcomes[i].penetration;
                 let size = volume(i);
-                self.too_deep = Some((
+                self.work.too_deep = Some((
                     i,
-                    format!("wall \"{}\"", self.scene.walls[k].name),
+                    format!("wall \"{}\"", self.state.scene.walls[k].name),
                     depth * size,
                     size,
                 ));

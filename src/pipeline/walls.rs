@@ -1,13 +1,13 @@
 //! Stage 6: per particle, the facet contacts with every wall near it and the contact law, one
 //! rayon job per particle, in the wall's own frame.
 
-use super::error::FirstFailure;
 use super::pairs::{normal_effective_mass, with_workspace};
 use super::{Simulation, SimulationError};
 use crate::contact::{
     ContactForces, ContactKey, ContactKinematics, ContactState, contact_forces, mass_share,
 };
 use crate::geometry::{Overlap, PairWorkspace, PosedPolytope};
+use crate::run_state::FirstFailure;
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -33,28 +33,29 @@ impl Simulation {
     pub(super) fn wall_stage(&mut self, dt: f64) -> Result<Vec<WallOutcome>, SimulationError> {
         let t0 = Instant::now();
         let wall_outcomes = self.wall_contacts(dt)?;
-        self.timers.walls += t0.elapsed().as_secs_f64();
+        self.state.timers.walls += t0.elapsed().as_secs_f64();
         Ok(wall_outcomes)
     }
 
     /// The facets stage 6 clips: (particle–facet items within each owned particle's bounding
     /// radius, over every wall at its current pose; particles with at least one).
     pub fn wall_candidates(&self) -> (u64, u64) {
-        let p = &self.particles;
+        let p = &self.state.particles;
         let poses: Vec<Isometry3<f64>> = self
+            .state
             .scene
             .walls
             .iter()
-            .map(|w| w.motion.transform(self.time))
+            .map(|w| w.motion.transform(self.state.time))
             .collect();
         (0..p.len())
             .into_par_iter()
             .map_init(Vec::new, |facets, i| {
                 let pose = Isometry3::from_parts(p.position[i].into(), p.orientation[i]);
                 let mut items = 0u64;
-                for (mesh, wall_pose) in self.walls.iter().zip(&poses) {
+                for (mesh, wall_pose) in self.state.walls.iter().zip(&poses) {
                     let local = wall_pose.inverse() * pose;
-                    mesh.facets_near(&local.translation.vector, self.radius[i], facets);
+                    mesh.facets_near(&local.translation.vector, self.work.radius[i], facets);
                     items += facets.len() as u64;
                 }
                 (items, u64::from(items > 0))
@@ -64,14 +65,14 @@ impl Simulation {
 
     /// Stage 6 for every owned particle, in index order: its contacts with the walls, or the
     /// failed contact of the smallest particle id and wall
-    /// ([`FailureKey`](super::error::FailureKey)). No walls, no work.
+    /// ([`FailureKey`](crate::run_state::FailureKey)). No walls, no work.
     pub(super) fn wall_contacts(&self, dt: f64) -> Result<Vec<WallOutcome>, SimulationError> {
-        if self.walls.is_empty() {
+        if self.state.walls.is_empty() {
             return Ok(Vec::new());
         }
-        let p = &self.particles;
-        let s = &self.scene;
-        let t = self.time;
+        let p = &self.state.particles;
+        let s = &self.state.scene;
+        let t = self.state.time;
         let poses: Vec<Isometry3<f64>> = s.walls.iter().map(|w| w.motion.transform(t)).collect();
         let failure = FirstFailure::default();
         let outcomes = (0..p.len())
@@ -85,7 +86,7 @@ impl Simulation {
                             continue;
                         };
                         let (f, key, state) = self.wall_law(i, k, &world, dt);
-                        let depth = world.volume / self.equivalent_volume(i);
+                        let depth = world.volume / self.state.equivalent_volume(i);
                         if depth > out.penetration.0 {
                             out.penetration = (depth, k);
                         }
@@ -118,26 +119,26 @@ impl Simulation {
         k: usize,
         wall_pose: &Isometry3<f64>,
     ) -> Result<Option<Overlap<f64>>, WallFailure> {
-        let p = &self.particles;
-        let s = &self.scene;
-        let mesh = &self.walls[k];
+        let p = &self.state.particles;
+        let s = &self.state.scene;
+        let mesh = &self.state.walls[k];
         let tmpl = &s.templates[s.particle_types[p.kind[i] as usize].template];
         let pose = Isometry3::from_parts(p.position[i].into(), p.orientation[i]);
         // Work in the wall's own frame, where its facets are binned.
         let local = wall_pose.inverse() * pose;
-        mesh.facets_near(&local.translation.vector, self.radius[i], facets);
+        mesh.facets_near(&local.translation.vector, self.work.radius[i], facets);
         if facets.is_empty() {
             return Ok(None);
         }
         let o = if tmpl.sphere {
-            mesh.sphere_contact(&local.translation.vector, self.radius[i], facets)
+            mesh.sphere_contact(&local.translation.vector, self.work.radius[i], facets)
         } else {
             let body: &mut PosedPolytope<f64> = &mut ws.a;
             body.place(tmpl, p.scale[i], &local, &Vector3::zeros());
             mesh.contact(&mut ws.overlap, body, (tmpl, p.scale[i], &local), facets)
                 .map_err(|e| {
                     let error = SimulationError::Geometry {
-                        step: self.step,
+                        step: self.state.step,
                         what: format!("particle {} and wall {}", p.id[i], s.walls[k].name),
                         message: e.to_string(),
                     };
@@ -167,13 +168,13 @@ impl Simulation {
         world: &Overlap<f64>,
         dt: f64,
     ) -> (ContactForces, ContactKey, ContactState) {
-        let p = &self.particles;
-        let s = &self.scene;
-        let t = self.time;
+        let p = &self.state.particles;
+        let s = &self.state.scene;
+        let t = self.state.time;
         let sphere = s.templates[s.particle_types[p.kind[i] as usize].template].sphere;
         let params = self.contact_parameters(i, None, s.walls[k].material);
         let key = ContactKey::wall(p.id[i], k);
-        let mut state = self.history.get(&key).copied().unwrap_or_default();
+        let mut state = self.state.history.get(&key).copied().unwrap_or_default();
         let c = world.centroid;
         let (effective_mass, dashpot_mass) = normal_effective_mass(p, &[(i, p.position[i])], world);
         let kin = ContactKinematics {
@@ -191,7 +192,7 @@ impl Simulation {
             q_b: nalgebra::UnitQuaternion::identity(),
             inverse_inertia_a: p.inertia[i].map(|x| 1.0 / x),
             inverse_inertia_b: Vector3::zeros(),
-            sphere_radius_a: if sphere { self.radius[i] } else { 0.0 },
+            sphere_radius_a: if sphere { self.work.radius[i] } else { 0.0 },
             sphere_radius_b: 0.0,
             split_a: mass_share(p.contacts[i]),
             split_b: 1.0,

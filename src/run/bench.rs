@@ -53,12 +53,12 @@ pub fn bench_on(opts: &BenchOptions, comm: Arc<dyn Comm>) -> Result<serde_json::
     for _ in 0..opts.warmup {
         engine.step()?;
     }
-    let timers_before = engine.host().timers;
-    if let Some(par) = engine.host_mut().parallel.as_deref_mut() {
+    let timers_before = engine.state().timers;
+    if let Some(par) = engine.state_mut().parallel.as_deref_mut() {
         // The per-rank decomposition timers of the report cover the timed steps only.
         par.timers = Default::default();
     }
-    let n = comm.sum_u64(&[engine.host().particles.len() as u64])[0] as usize;
+    let n = comm.sum_u64(&[engine.state().particles.len() as u64])[0] as usize;
     comm.barrier();
     let start = Instant::now();
     for _ in 0..opts.steps {
@@ -66,7 +66,7 @@ pub fn bench_on(opts: &BenchOptions, comm: Arc<dyn Comm>) -> Result<serde_json::
     }
     comm.barrier();
     let wall = start.elapsed().as_secs_f64();
-    let t = engine.host().timers;
+    let t = engine.state().timers;
     let stages = json!({
         "integrate": t.integrate - timers_before.integrate,
         "exchange": t.exchange - timers_before.exchange,

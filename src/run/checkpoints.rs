@@ -7,7 +7,8 @@ use crate::domain::Comm;
 use crate::domain::collect::gather_state;
 use crate::io::checkpoint::fnv1a64;
 use crate::io::{Checkpoint, read_checkpoint, write_checkpoint};
-use crate::pipeline::{Simulation, SimulationError};
+use crate::pipeline::SimulationError;
+use crate::run_state::RunState;
 use crate::scene::Scene;
 use crate::scene::restart::{SECTIONS_RECORD, SceneFingerprint, check_against_scene};
 use anyhow::{Context, Result, anyhow, bail};
@@ -35,7 +36,7 @@ impl SceneId {
 /// in a decomposed run the whole run's state gathered on rank 0 (`None` on the other ranks).
 pub(super) fn checkpoint_of(
     comm: &dyn Comm,
-    sim: &Simulation,
+    sim: &RunState,
     id: &SceneId,
 ) -> Result<Option<Checkpoint>> {
     let inserter = serde_json::to_vec(&sim.inserter.state())?;
@@ -145,7 +146,7 @@ pub(super) fn stopped_unstable(
 /// its path.
 pub(super) fn save_checkpoint(
     comm: &dyn Comm,
-    sim: &Simulation,
+    sim: &RunState,
     dir: &Path,
     id: &SceneId,
 ) -> Result<PathBuf> {

@@ -24,6 +24,7 @@ use crate::backend::{BackendChoice, Device, Engine, Start, select_device};
 use crate::domain::{Comm, SerialComm};
 use crate::io::{remove_temporary_files, write_atomic};
 use crate::pipeline::{RestoredState, Simulation};
+use crate::run_state::RunState;
 use crate::scene::{Inserter, InserterState, load_scene};
 use anyhow::{Context, Result};
 use checkpoints::{KeptCheckpoints, SceneId, read_restart, save_checkpoint, stopped_unstable};
@@ -110,7 +111,7 @@ pub fn run_on(opts: &RunOptions, comm: Arc<dyn Comm>) -> Result<RunSummary> {
     // In place of a barrier: every rank learns whether rank 0 could prepare the folder.
     agreed(&*comm, prepared)?;
     let (mut engine, resumed) = start_or_restore(opts, scene, &comm, device, &id)?;
-    let mut out = Outputs::open(engine.host(), &dir, comm.clone(), resumed)?;
+    let mut out = Outputs::open(engine.state(), &dir, comm.clone(), resumed)?;
     if !resumed {
         out.frame(engine.synced()?)?;
         out.series(engine.synced()?)?;
@@ -185,12 +186,12 @@ fn start_or_restore(
         })
         .build()?;
     // The removal count is the whole run's; rank 0 carries it.
-    sim.stats.removed = if comm.rank() == 0 { header.removed } else { 0 };
+    sim.state.stats.removed = if comm.rank() == 0 { header.removed } else { 0 };
     tracing::info!(
         "restarted from {} at step {} (t = {} s) on {} rank(s)",
         path.display(),
-        sim.step,
-        sim.time,
+        sim.state.step,
+        sim.state.time,
         comm.size()
     );
     Ok((Engine::new(sim, device)?, true))
@@ -219,7 +220,7 @@ struct Scheduled {
 }
 
 impl Scheduled {
-    fn new(sim: &Simulation, dir: &std::path::Path) -> Self {
+    fn new(sim: &RunState, dir: &std::path::Path) -> Self {
         let o = &sim.scene.output;
         Scheduled {
             frame_at: Schedule::new(o.frame_interval, sim.time, sim.dt),
@@ -231,7 +232,7 @@ impl Scheduled {
 
     /// Writes what is due after the step just taken.
     fn write_due(&mut self, engine: &mut Engine, out: &mut Outputs, id: &SceneId) -> Result<()> {
-        let (t, dt) = (engine.host().time, engine.host().dt);
+        let (t, dt) = (engine.state().time, engine.state().dt);
         if self.frame_at.due(t, dt) {
             out.frame(engine.synced()?)?;
         }
@@ -256,7 +257,7 @@ struct Progress {
 }
 
 impl Progress {
-    fn new(sim: &Simulation, rank: usize) -> Self {
+    fn new(sim: &RunState, rank: usize) -> Self {
         let s = &sim.scene;
         let total_steps = ((s.simulation.end_time - sim.time) / sim.dt)
             .ceil()
@@ -281,7 +282,7 @@ impl Progress {
 
     /// Shows `done` steps since the loop began. Whole-run counts are summed at deterministic
     /// steps only, where every rank joins the sums.
-    fn show(&self, comm: &dyn Comm, sim: &Simulation, done: u64) {
+    fn show(&self, comm: &dyn Comm, sim: &RunState, done: u64) {
         let (n_all, contacts_all, removed_all) =
             if done.is_multiple_of(100) || done.is_multiple_of(self.log_every) {
                 whole_run_counts(comm, sim)
@@ -355,17 +356,17 @@ fn step_loop(
     let comm = out.comm.clone();
     let rank = comm.rank();
     let dir = out.dir.clone();
-    let mut scheduled = Scheduled::new(engine.host(), &dir);
-    let end_time = engine.host().scene.simulation.end_time;
+    let mut scheduled = Scheduled::new(engine.state(), &dir);
+    let end_time = engine.state().scene.simulation.end_time;
     let signals = crate::interrupt::StopSignals::install().map_err(anyhow::Error::msg)?;
-    let progress = Progress::new(engine.host(), rank);
-    let (step0, mut particle_steps) = (engine.host().step, 0u64);
+    let progress = Progress::new(engine.state(), rank);
+    let (step0, mut particle_steps) = (engine.state().step, 0u64);
     let mut stopped_by: Option<(i32, &str)> = None;
     let mut max_steps_reached = false;
-    while engine.host().time + 0.5 * engine.host().dt < end_time {
+    while engine.state().time + 0.5 * engine.state().dt < end_time {
         if opts
             .max_steps
-            .is_some_and(|m| engine.host().step - step0 >= m)
+            .is_some_and(|m| engine.state().step - step0 >= m)
         {
             max_steps_reached = true;
             break;
@@ -374,14 +375,14 @@ fn step_loop(
             return Err(stopped_unstable(e, &*comm, engine, &dir, id));
         }
         particle_steps += engine.particle_count() as u64;
-        if crate::tuning::Tuning::get().panic_at == Some((rank, engine.host().step)) {
+        if crate::tuning::Tuning::get().panic_at == Some((rank, engine.state().step)) {
             panic!(
                 "POLYDEM_PANIC_AT: rank {rank} panics after step {} as asked",
-                engine.host().step
+                engine.state().step
             );
         }
         scheduled.write_due(engine, out, id)?;
-        progress.show(&*comm, engine.host(), engine.host().step - step0);
+        progress.show(&*comm, engine.state(), engine.state().step - step0);
         if let Some(signal) = agreed_signal(&*comm, &signals) {
             let path = save_checkpoint(&*comm, engine.synced()?, &dir, id)?;
             if rank == 0 {
@@ -389,7 +390,7 @@ fn step_loop(
                     "interrupted by {} after step {}: checkpoint written to {}; resume with \
                      --restart {}",
                     signal.1,
-                    engine.host().step,
+                    engine.state().step,
                     path.display(),
                     path.display()
                 );

@@ -4,7 +4,7 @@ use super::summary::whole_run;
 use crate::domain::Comm;
 use crate::domain::collect::global_stats;
 use crate::io::{FrameView, FrameWriter, SeriesRow, SeriesWriter, WallView, write_particle_csv};
-use crate::pipeline::Simulation;
+use crate::run_state::RunState;
 use anyhow::{Context, Result, bail};
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
@@ -201,7 +201,7 @@ impl Outputs {
     /// The writers of `sim`'s run into `dir`: new collections and series, or for a resumed run
     /// (`resumed`) the existing ones continued from the checkpoint's time and step.
     pub(super) fn open(
-        sim: &Simulation,
+        sim: &RunState,
         dir: &Path,
         comm: Arc<dyn Comm>,
         resumed: bool,
@@ -238,7 +238,7 @@ impl Outputs {
         })
     }
 
-    pub(super) fn frame(&mut self, sim: &Simulation) -> Result<()> {
+    pub(super) fn frame(&mut self, sim: &RunState) -> Result<()> {
         let s = &sim.scene;
         let rank = self.comm.rank();
         let ranks = self.comm.size();
@@ -297,7 +297,7 @@ impl Outputs {
 
     /// Appends the series row of the current step, once: the closing row of a run that
     /// ends on a series event is that event's row.
-    pub(super) fn series(&mut self, sim: &Simulation) -> Result<()> {
+    pub(super) fn series(&mut self, sim: &RunState) -> Result<()> {
         if self.series_step == Some(sim.step) {
             return Ok(());
         }

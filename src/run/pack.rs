@@ -6,7 +6,7 @@
 //! `dt_fraction = 0.05`):
 //!
 //! 1. the box and every centre are scaled about the box's corner by `1 − s`
-//!    ([`Simulation::rescale_periodic_box`]);
+//!    ([`crate::run_state::RunState::rescale_periodic_box`]);
 //! 2. the particles move under their contact forces for one cycle;
 //! 3. every velocity is set to zero (a quench): the kinetic energy the compression fed in is
 //!    taken out, so the packing follows a sequence of nearly static states.
@@ -22,7 +22,7 @@ use crate::Precision;
 use crate::backend::{BackendChoice, Engine, Start, select_device};
 use crate::domain::SerialComm;
 use crate::io::{PackedParticle, Packing};
-use crate::pipeline::Simulation;
+use crate::run_state::RunState;
 use crate::scene::{Scene, load_scene};
 use anyhow::{Context, Result, bail};
 use nalgebra::Vector3;
@@ -81,7 +81,7 @@ fn check_scene(scene: &Scene, path: &std::path::Path) -> Result<()> {
 }
 
 /// Solid fraction of the periodic box.
-fn solid_fraction(sim: &Simulation) -> f64 {
+fn solid_fraction(sim: &RunState) -> f64 {
     let scene = &sim.scene;
     let solid: f64 = (0..sim.particles.len())
         .map(|i| {
@@ -102,14 +102,18 @@ fn cycle(engine: &mut Engine, steps: u64, factor: Option<f64>) -> Result<f64> {
     let (contacts, _) = engine.contact_counts()?;
     let z = 2.0 * contacts as f64 / engine.particle_count().max(1) as f64;
     let mut rescaled = Ok(());
-    engine.edit(|sim| {
-        sim.particles.velocity.fill(Vector3::zeros());
-        sim.particles.angular_velocity.fill(Vector3::zeros());
+    engine.edit(|state| {
+        state.particles.velocity.fill(Vector3::zeros());
+        state.particles.angular_velocity.fill(Vector3::zeros());
         if let Some(f) = factor {
-            rescaled = sim.rescale_periodic_box(f);
+            rescaled = state.rescale_periodic_box(f);
         }
     })?;
     rescaled?;
+    if factor.is_some() {
+        // The next step's kick needs the forces of the rescaled positions.
+        engine.refresh()?;
+    }
     Ok(z)
 }
 
@@ -141,7 +145,7 @@ pub fn pack(opts: &PackOptions) -> Result<serde_json::Value> {
     )
     .with_context(|| format!("{}: placing the particles", opts.scene.display()))?;
     let n = engine.particle_count();
-    let phi0 = solid_fraction(engine.host());
+    let phi0 = solid_fraction(engine.state());
     let target = opts.contacts;
     let mut cycles = 0u32;
     let mut z = cycle(&mut engine, steps, None)?;
@@ -152,7 +156,7 @@ pub fn pack(opts: &PackOptions) -> Result<serde_json::Value> {
                 "{}: Z = {z:.2} contacts per particle after {MAX_CYCLES} compression cycles \
                  (solid fraction {:.3}), short of {target}; lower --contacts or the friction",
                 opts.scene.display(),
-                solid_fraction(engine.host())
+                solid_fraction(engine.state())
             );
         }
         if z >= target {
@@ -162,7 +166,7 @@ pub fn pack(opts: &PackOptions) -> Result<serde_json::Value> {
             tracing::info!(
                 cycles,
                 z,
-                phi = solid_fraction(engine.host()),
+                phi = solid_fraction(engine.state()),
                 "relaxed at the target"
             );
             if z >= target {
@@ -181,7 +185,7 @@ pub fn pack(opts: &PackOptions) -> Result<serde_json::Value> {
             tracing::info!(
                 cycles,
                 z,
-                phi = solid_fraction(engine.host()),
+                phi = solid_fraction(engine.state()),
                 "compressing"
             );
         }

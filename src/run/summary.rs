@@ -2,7 +2,7 @@
 //! the series and `summary.json`.
 use crate::domain::Comm;
 use crate::domain::collect::{GlobalStats, global_stats};
-use crate::pipeline::Simulation;
+use crate::run_state::RunState;
 use serde::Serialize;
 use serde_json::json;
 
@@ -81,7 +81,7 @@ pub struct SummaryEnergies {
 /// The whole run's particles, contacts (with walls) and removed particles, for the progress
 /// line: counts only, without [`whole_run`]'s energies, which sum every particle in id order
 /// and would cost a sort of the GPU's host copy every hundred steps.
-pub(super) fn whole_run_counts(comm: &dyn Comm, sim: &Simulation) -> (u64, u64, u64) {
+pub(super) fn whole_run_counts(comm: &dyn Comm, sim: &RunState) -> (u64, u64, u64) {
     let s = &sim.stats;
     let local = [
         sim.particles.len() as u64,
@@ -96,7 +96,7 @@ pub(super) fn whole_run_counts(comm: &dyn Comm, sim: &Simulation) -> (u64, u64, 
     }
 }
 
-pub(super) fn whole_run(comm: &dyn Comm, sim: &Simulation) -> GlobalStats {
+pub(super) fn whole_run(comm: &dyn Comm, sim: &RunState) -> GlobalStats {
     if comm.size() > 1 {
         return global_stats(comm, sim);
     }
@@ -110,7 +110,7 @@ pub(super) fn whole_run(comm: &dyn Comm, sim: &Simulation) -> GlobalStats {
 
 /// Per-rank particle counts, stage seconds and the decomposition's own timers, gathered from
 /// every rank (a collective call; `null` on one rank).
-pub(super) fn parallel_report(comm: &dyn Comm, sim: &Simulation) -> serde_json::Value {
+pub(super) fn parallel_report(comm: &dyn Comm, sim: &RunState) -> serde_json::Value {
     let Some(par) = sim.parallel.as_deref() else {
         return serde_json::Value::Null;
     };

@@ -1,9 +1,10 @@
-//! The CPU backend: the [`Simulation`] of [`crate::pipeline`] steps itself on rayon's threads,
-//! so its host copy is always current.
+//! The CPU backend: the [`Simulation`] of [`crate::pipeline`] steps its [`RunState`] on
+//! rayon's threads, so the host state is always current.
 
 use super::Backend;
 use crate::neighbor::{Builder, NeighborReport};
 use crate::pipeline::Simulation;
+use crate::run_state::RunState;
 use anyhow::Result;
 
 impl Backend for Simulation {
@@ -12,25 +13,29 @@ impl Backend for Simulation {
         Simulation::step(self).map_err(anyhow::Error::new)
     }
 
-    fn host(&self) -> &Simulation {
-        self
+    fn state(&self) -> &RunState {
+        &self.state
     }
 
-    fn host_mut(&mut self) -> &mut Simulation {
-        self
+    fn state_mut(&mut self) -> &mut RunState {
+        &mut self.state
     }
 
-    fn sync(&mut self) -> Result<&Simulation> {
-        Ok(self)
+    fn sync(&mut self) -> Result<&RunState> {
+        Ok(&self.state)
     }
 
-    fn edit(&mut self, f: &mut dyn FnMut(&mut Simulation)) -> Result<()> {
-        f(self);
+    fn edit(&mut self, f: &mut dyn FnMut(&mut RunState)) -> Result<()> {
+        f(&mut self.state);
         Ok(())
     }
 
+    fn refresh(&mut self) -> Result<()> {
+        Simulation::refresh(self).map_err(anyhow::Error::new)
+    }
+
     fn contact_counts(&mut self) -> Result<(u64, u64)> {
-        Ok((self.stats.contacts, self.stats.wall_contacts))
+        Ok((self.state.stats.contacts, self.state.stats.wall_contacts))
     }
 
     fn device_bytes(&self) -> Option<usize> {
@@ -48,7 +53,7 @@ impl Backend for Simulation {
     fn neighbor_report(&self) -> NeighborReport {
         // The CPU backend builds every list itself, whatever the mode asks of a GPU run.
         NeighborReport {
-            mode: self.scene.simulation.neighbor.mode.name().into(),
+            mode: self.state.scene.simulation.neighbor.mode.name().into(),
             builder: Builder::Cpu.name().into(),
             host_builds: self.pair_list_builds(),
             ..NeighborReport::default()

@@ -3,7 +3,7 @@
 use super::{CudaError, CudaSimulation};
 use crate::backend::Backend;
 use crate::neighbor::NeighborReport;
-use crate::pipeline::Simulation;
+use crate::run_state::RunState;
 use anyhow::Result;
 
 /// A simulation error keeps its own type (not wrapped in [`CudaError`]), so that the run can
@@ -20,24 +20,28 @@ impl Backend for CudaSimulation {
         CudaSimulation::step(self).map_err(unwrapped)
     }
 
-    fn host(&self) -> &Simulation {
-        &self.host
+    fn state(&self) -> &RunState {
+        &self.state
     }
 
     fn particle_count(&self) -> usize {
         CudaSimulation::particle_count(self)
     }
 
-    fn host_mut(&mut self) -> &mut Simulation {
-        &mut self.host
+    fn state_mut(&mut self) -> &mut RunState {
+        &mut self.state
     }
 
-    fn sync(&mut self) -> Result<&Simulation> {
+    fn sync(&mut self) -> Result<&RunState> {
         self.sync_host().map_err(unwrapped)
     }
 
-    fn edit(&mut self, f: &mut dyn FnMut(&mut Simulation)) -> Result<()> {
+    fn edit(&mut self, f: &mut dyn FnMut(&mut RunState)) -> Result<()> {
         self.edit_host(f).map_err(unwrapped)
+    }
+
+    fn refresh(&mut self) -> Result<()> {
+        CudaSimulation::refresh(self).map_err(unwrapped)
     }
 
     fn contact_counts(&mut self) -> Result<(u64, u64)> {

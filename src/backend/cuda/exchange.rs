@@ -1,11 +1,10 @@
 //! A decomposed run's rebuild on the device (docs/design.md §6): migration and the choice of
 //! ghosts without the rank's state going through the host.
 //!
-//! At a neighbour-list rebuild a GPU rank used to copy its whole state down (particles, the
-//! pair list's outcomes gathered into the contact history), run the CPU backend's exchange on
-//! it and upload everything again: about 100 ms a rebuild for 1.25e5 spheres a rank against
-//! 3.5 ms of stepping per list (docs/performance.md). Here only what the decisions and the
-//! neighbours need crosses the bus:
+//! The host round trip (the whole state down, the CPU backend's exchange, everything up again)
+//! costs about 100 ms a rebuild for 1.25e5 spheres a rank against 3.5 ms of stepping per list
+//! (docs/performance.md). Here only what the decisions and the neighbours need crosses the bus
+//! (the copies down of steps 1–3 are in [`super::rebuild_records`]):
 //!
 //! 1. down: every slot's ghost flag, global id and centroid (36 bytes a particle), from which
 //!    the host balances, picks the particles that leave ([`crate::domain::migration::leaving`])
@@ -17,8 +16,6 @@
 //!    exchanged as [`build_ghosts`] does;
 //! 4. up: the arrivals and the ghosts, appended on the device to the particles that stay,
 //!    gathered there ([`DeviceParticles::assemble`]).
-//!
-//! The copies down of steps 1–3 are in [`super::rebuild_records`].
 //!
 //! The contact history never comes down whole: the next list build looks each new pair up in
 //! the list before the rebuild (through each particle's slot before it) and then among the
@@ -212,7 +209,7 @@ impl CudaSimulation {
     /// history from. A collective: every rank calls it at every rebuild and all get the same
     /// answer, even if the setting reached some ranks and not others.
     pub(super) fn rebuild_stays_on_device(&self, pending: bool, outside: bool) -> bool {
-        let par = self.host.parallel.as_deref().expect("a decomposed run");
+        let par = self.state.part();
         let asked = crate::tuning::Tuning::get()
             .gpu_exchange_on_device
             .unwrap_or(ON_DEVICE_BY_DEFAULT);
@@ -243,7 +240,7 @@ impl CudaSimulation {
         } = migration;
         let n_arrivals = arrivals.len();
         let mut tail = arrivals;
-        let par = self.host.parallel.as_deref().expect("a decomposed run");
+        let par = self.state.part();
         tail.extend_from(&par.ghosts.particles);
         let particles = self.assemble_after_rebuild(&kept, &tail, n_arrivals)?;
         let n_new = particles.n;
@@ -255,7 +252,7 @@ impl CudaSimulation {
         let history = self.exchange_history(&received, particles, layout.old_slot)?;
         if redrawn {
             // The walls this rank keeps follow its new box.
-            self.host.restrict_walls();
+            self.state.restrict_walls();
             self.upload_walls()?;
         }
         let st = self.gpu.stream.clone();
@@ -266,7 +263,7 @@ impl CudaSimulation {
             .reset(HistorySource::Exchanged(Box::new(history)));
         self.halo.reset();
         self.host_current = false;
-        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
+        let par = self.state.part_mut();
         par.timers.device_download += download;
         par.timers.device_upload += t_up.elapsed().as_secs_f64();
         Ok(())
@@ -284,7 +281,7 @@ impl CudaSimulation {
             .filter(|&i| ghost[i as usize] == 0)
             .collect();
         let owned_x: Vec<Vector3<f64>> = owned.iter().map(|&s| position[s as usize]).collect();
-        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
+        let par = self.state.part_mut();
         let t0 = Instant::now();
         let redrawn = par
             .rebalance_if_needed(&owned_x)
@@ -313,7 +310,7 @@ impl CudaSimulation {
                 }
             })
             .collect();
-        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
+        let par = self.state.part_mut();
         let received = par.comm.all_to_all(&sends);
         let mut arrivals = Particles::default();
         let mut brought = Vec::new();
@@ -341,7 +338,7 @@ impl CudaSimulation {
         position: &[Vector3<f64>],
         arrivals: &Particles,
     ) -> Result<f64, CudaError> {
-        let step = self.host.step;
+        let step = self.state.step;
         let ghosts_error =
             |message: String| SimulationError::from(ExchangeError::Ghosts { step, message });
         let t0 = Instant::now();
@@ -350,7 +347,7 @@ impl CudaSimulation {
             .map(|&s| position[s as usize])
             .chain(arrivals.position.iter().copied())
             .collect();
-        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
+        let par = self.state.part_mut();
         par.plan = HaloPlan::new(&par.subdomains, par.rank(), &new_x);
         let (compact, sent) = par.plan.compact();
         let n_kept = kept.len();
@@ -368,8 +365,9 @@ impl CudaSimulation {
             .map(|&m| m as usize - n_kept)
             .collect();
         source.extend_from(&arrivals.select(&arrived));
-        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
-        par.ghosts = build_ghosts(&*par.comm, &compact, &source, &self.host.scene);
+        let (scene, parallel) = (&self.state.scene, &mut self.state.parallel);
+        let par = parallel.as_deref_mut().expect("a decomposed run");
+        par.ghosts = build_ghosts(&*par.comm, &compact, &source, scene);
         par.timers.rebuilds += 1;
         par.timers.device_rebuilds += 1;
         let owned_ids: Vec<u64> = kept
@@ -399,7 +397,7 @@ impl CudaSimulation {
             st,
             &self.particles,
             (&kept_slots, n_kept),
-            host_arrays(&self.host.scene, tail, n_arrivals),
+            host_arrays(&self.state.scene, tail, n_arrivals),
             n_tail,
         )
         .map_err(|e| {
@@ -513,7 +511,7 @@ impl CudaSimulation {
     /// its error and the others stop with it ([`SimulationError::Stopped`]), rather than wait
     /// in a collective that rank will not join.
     fn agree_device<T>(&self, local: Result<T, CudaError>) -> Result<T, CudaError> {
-        match (self.host.stopped_by(local.is_err()), local) {
+        match (self.state.stopped_by(local.is_err()), local) {
             (Some(stopped), Ok(_)) => Err(stopped.into()),
             (_, local) => local,
         }

@@ -14,8 +14,8 @@ impl CudaSimulation {
     /// Stage 2: the pair list built (the particle arrays reordered), and a decomposed run's
     /// halo set up for the new order.
     pub(super) fn build_pairs(&mut self) -> Result<(), CudaError> {
-        let decomposed = self.host.parallel.is_some();
-        self.list_builder.begin_build(self.host.step);
+        let decomposed = self.state.parallel.is_some();
+        self.list_builder.begin_build(self.state.step);
         let t0 = Instant::now();
         let host_list =
             self.list_builder
@@ -38,7 +38,7 @@ impl CudaSimulation {
         if host_list.is_none() {
             self.list_builder.after_build(&self.gpu, &self.particles)?;
         }
-        if let Some(par) = self.host.parallel.as_deref() {
+        if let Some(par) = self.state.parallel.as_deref() {
             self.halo.setup(&self.gpu, self.particles.n, par, &order)?;
         }
         Ok(())
@@ -53,14 +53,14 @@ impl CudaSimulation {
             // The build waits for the device (its counts come back to size the list).
             self.build_pairs()?;
         }
-        self.host.timers.neighbor += t0.elapsed().as_secs_f64();
+        self.state.timers.neighbor += t0.elapsed().as_secs_f64();
         let st = self.gpu.stream.clone();
         // From here to the error word the host queues work without waiting; the device's
         // stage times come from events (`StageClock`).
         self.gpu.clock.mark(0, &st)?;
         let view = self.particles.view(&st);
-        let n_mat = self.host.scene.materials.len() as i32;
-        let max_overlap = self.host.guard.max_overlap;
+        let n_mat = self.state.scene.materials.len() as i32;
+        let max_overlap = self.state.guard.max_overlap;
         // A decomposed run between rebuilds: the ghosts' motion is in flight while the pairs of
         // two owned particles are evaluated; the pairs with a ghost follow its arrival.
         let overlap = std::mem::take(&mut self.halo.due);
@@ -83,13 +83,13 @@ impl CudaSimulation {
         }
         self.pairs.launch(&self.gpu, 0, n_interior, &args)?;
         if overlap {
-            if let Some(par) = self.host.parallel.as_deref_mut() {
+            if let Some(par) = self.state.parallel.as_deref_mut() {
                 self.halo.finish(&self.gpu, &mut self.particles, par)?;
             }
             wall_host += self.start_wall_overlaps(&view)?;
             self.pairs.launch(&self.gpu, n_interior, np, &args)?;
         }
-        let spheres_only = self.host.scene.spheres_only();
+        let spheres_only = self.state.scene.spheres_only();
         self.pairs.launch_deferred(&self.gpu, &args, spheres_only)?;
         self.gpu.clock.mark(1, &st)?;
         if super::kernels::phase_clocks() {
@@ -99,7 +99,7 @@ impl CudaSimulation {
             w.finish(&self.gpu, self.particles.n, &view, n_mat, dt, max_overlap)?;
         }
         self.gpu.clock.mark(2, &st)?;
-        let g = self.host.scene.gravity;
+        let g = self.state.scene.gravity;
         let pairs = self.pairs.list.as_mut().expect("built above");
         self.integrator.reduce_and_kick(
             &self.gpu,
@@ -121,9 +121,9 @@ impl CudaSimulation {
         // The pairs' span includes the host's wall work queued inside it (a wall list build
         // waits for its count); that is the walls' time.
         let [pairs, walls, reduce] = self.gpu.clock.spans()?;
-        self.host.timers.pairs += (pairs - wall_host).max(0.0);
-        self.host.timers.walls += walls + wall_host;
-        self.host.timers.reduce += reduce;
+        self.state.timers.pairs += (pairs - wall_host).max(0.0);
+        self.state.timers.walls += walls + wall_host;
+        self.state.timers.reduce += reduce;
         // A geometry error fails the step; the fused kick has already applied this step's
         // forces to the velocities on the device (the run stops with the error: `engine.step()?`).
         if error[0] != 0 || error[1] != 0 {
@@ -138,21 +138,21 @@ impl CudaSimulation {
             Ok(())
         };
         // In a decomposed run every rank stops after this step if one does
-        // ([`Simulation::agree`]).
-        Ok(self.host.agree(overlaps)?)
+        // ([`RunState::agree`]).
+        Ok(self.state.agree(overlaps)?)
     }
 
     /// The guard's error for the device's report that a contact of slot `i` overlaps past the
     /// bound, from the synced host state.
     fn too_deep(&self, i: usize) -> SimulationError {
-        let step = self.host.step;
-        let n = self.host.particles.len();
+        let step = self.state.step;
+        let n = self.state.particles.len();
         if i >= n {
             // A pair is reported by its lower slot, and ghosts follow the owned particles, so
             // this is not expected; should it happen, the ghost is named by its global id and
             // its owner's contacts are that rank's.
             let ghosts = self
-                .host
+                .state
                 .parallel
                 .as_deref()
                 .map(|p| &p.ghosts.particles.id);
@@ -164,7 +164,7 @@ impl CudaSimulation {
                 problem: format!(
                     "a contact of this ghost overlaps more than {} of the smaller particle's \
                      volume (simulation.guard.max_overlap)",
-                    self.host.guard.max_overlap
+                    self.state.guard.max_overlap
                 ),
                 contacts: "on its owner's rank".into(),
             };
@@ -174,14 +174,14 @@ impl CudaSimulation {
         // fused kick changed only velocities), which tells a deep contact from a device
         // geometry that differs from f64.
         let host = self
-            .host
+            .state
             .deepest_particle_overlap(i)
             .map(|(id, x)| (format!("particle {id}"), x));
         let problem = crate::stability::Instability::DeepContact {
-            fraction: self.host.guard.max_overlap,
+            fraction: self.state.guard.max_overlap,
             host,
         };
-        self.host.unstable(i, Some(problem))
+        self.state.unstable(i, Some(problem))
     }
 
     /// Stage 6, first part ([`super::walls::WallStage::start_overlaps`]) at the current time;
@@ -198,8 +198,8 @@ impl CudaSimulation {
             &self.gpu,
             &self.particles,
             view,
-            &self.host.scene,
-            self.host.time,
+            &self.state.scene,
+            self.state.time,
         )?;
         Ok(t0.elapsed().as_secs_f64())
     }
@@ -213,7 +213,7 @@ impl CudaSimulation {
         let key = !(u64::from(error[0]) | (u64::from(error[1]) << 32));
         // The error word's own choice (smallest list slot), should the flags not be readable.
         let (source, index, status) = (key >> 40, (key >> 8) & 0xffff_ffff, key & 0xff);
-        let step = self.host.step;
+        let step = self.state.step;
         let st = &self.gpu.stream;
         let ids = st.clone_dtoh(&self.particles.id).unwrap_or_default();
         let id = |slot: usize| {
@@ -246,7 +246,7 @@ impl CudaSimulation {
                 None => (format!("pair slot {index}"), status),
             }
         } else {
-            let walls = self.host.scene.walls.len().max(1);
+            let walls = self.state.scene.walls.len().max(1);
             let flagged = self.walls.as_ref().and_then(|w| {
                 let flags = w.flags(st).ok()?;
                 // The CPU evaluates the walls of its owned particles only: a decomposed run's
@@ -266,7 +266,7 @@ impl CudaSimulation {
                 flagged.map_or((index, status), |(s, st)| (s as u64, u64::from(st)));
             let (i, k) = (slot as usize / walls, slot as usize % walls);
             let name = self
-                .host
+                .state
                 .scene
                 .walls
                 .get(k)

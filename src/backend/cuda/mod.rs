@@ -12,8 +12,8 @@
 //!
 //! The step on the GPU: [`CudaSimulation`] keeps the particle state, the pair list and the
 //! contact history resident on the device and launches the kernels of `cuda/` stage by stage in
-//! the order of docs/design.md §1, as [`Simulation::step`] runs them on the CPU (kick and drift,
-//! the ranks' agreement, the exchange, the forces). The host copy in [`CudaSimulation::host`]
+//! the order of docs/design.md §1, as [`Simulation::step`](crate::pipeline::Simulation::step) runs them on the CPU (kick and drift,
+//! the ranks' agreement, the exchange, the forces). The host copy in [`CudaSimulation::state`]
 //! is refreshed only when it is read (output, checkpoint) or changed (insertion, removal), so an
 //! ordinary step copies nothing back but its status flags and error word (28 bytes).
 
@@ -43,7 +43,7 @@ mod walls;
 pub use error::{CudaError, HaloError};
 pub use kernels::{CompileError, KernelConfig, Precision};
 
-use crate::pipeline::{Simulation, SimulationError};
+use crate::run_state::{RunState, SimulationError};
 use gpu::Gpu;
 use halo::HaloStage;
 use integrator::{DriftChecks, Integrator};
@@ -69,8 +69,9 @@ impl Drop for CudaSimulation {
 
 /// A simulation stepped on the GPU. See the module docs.
 pub struct CudaSimulation {
-    /// Host copy: scene, inserter, time, step, statistics, and (when synced) the state.
-    pub host: Simulation,
+    /// The run's state on the host: scene, inserter, time, step, statistics, and (when
+    /// synced) the particles and their contact history.
+    pub state: RunState,
     /// Device name.
     pub device: String,
     /// Arithmetic of the pair geometry.
@@ -94,19 +95,19 @@ pub struct CudaSimulation {
 }
 
 impl CudaSimulation {
-    /// Advances one time step: the stage order of [`Simulation::step`], in two passes over the
+    /// Advances one time step: the stage order of [`Simulation::step`](crate::pipeline::Simulation::step), in two passes over the
     /// particle state (`kick_drift` and, after the contacts, `reduce_and_kick` of
     /// cuda/integrate.cu).
     pub fn step(&mut self) -> Result<(), CudaError> {
-        let dt = self.host.dt;
+        let dt = self.state.dt;
         let flags = self.half_kick_and_drift()?; // 9a, with stage 1's wrap and the checks
         let t0 = Instant::now();
         let moved = self.check_motion(&flags)?;
         // In a decomposed run every rank stops after this step if one does
-        // ([`Simulation::agree`]).
-        self.host.agree(moved)?;
+        // ([`RunState::agree`]).
+        self.state.agree(moved)?;
         self.exchange(&flags)?; // 1
-        self.host.timers.exchange += t0.elapsed().as_secs_f64();
+        self.state.timers.exchange += t0.elapsed().as_secs_f64();
         // The contacts (2–8), then the reduction with the second half kick (9b).
         self.forces(dt, true)
     }
@@ -118,12 +119,12 @@ impl CudaSimulation {
         let t0 = Instant::now();
         // The device state changes from here on: the host copy is stale until synced again.
         self.host_current = false;
-        let g = self.host.scene.gravity;
-        let dt = self.host.dt;
+        let g = self.state.scene.gravity;
+        let dt = self.state.dt;
         // The checks need the list's reference positions; before the first build there are none.
         let checks = self.particles.n > 0 && self.pairs.list.is_some();
         let (wall_reference, wall_half_reach) = match &mut self.walls {
-            Some(w) if checks => w.check(&self.gpu, &self.host.scene, self.host.time + dt),
+            Some(w) if checks => w.check(&self.gpu, &self.state.scene, self.state.time + dt),
             _ => (0u64, 0.0),
         };
         let limits = DriftChecks {
@@ -132,7 +133,7 @@ impl CudaSimulation {
             snapshot_distance: self.list_builder.snapshot_distance(),
             wall_reference,
             wall_half_reach,
-            max_speed: self.host.guard.max_speed,
+            max_speed: self.state.guard.max_speed,
         };
         let wrap = self.gpu.config.periodic;
         let flags = self.integrator.kick_drift(
@@ -144,9 +145,9 @@ impl CudaSimulation {
             checks,
             limits,
         )?;
-        self.host.time += dt;
-        self.host.step += 1;
-        self.host.timers.integrate += t0.elapsed().as_secs_f64();
+        self.state.time += dt;
+        self.state.step += 1;
+        self.state.timers.integrate += t0.elapsed().as_secs_f64();
         Ok(flags)
     }
 
@@ -161,12 +162,12 @@ impl CudaSimulation {
         }
         self.sync_host()?;
         let i = flags.first_unstable();
-        Ok(Err(if i < self.host.particles.len() {
-            let problem = self.host.instability_of(i);
-            self.host.unstable(i, problem)
+        Ok(Err(if i < self.state.particles.len() {
+            let problem = self.state.instability_of(i);
+            self.state.unstable(i, problem)
         } else {
             SimulationError::NonFinite {
-                step: self.host.step,
+                step: self.state.step,
                 id: 0,
                 field: "position or velocity (of a ghost)",
             }
@@ -177,14 +178,14 @@ impl CudaSimulation {
     /// decomposed run's migration and ghosts at a rebuild (on the device where it can stay
     /// there, [`exchange`], else through the host), and the next list build scheduled.
     fn exchange(&mut self, flags: &StepFlags) -> Result<(), CudaError> {
-        if self.host.parallel.is_some() {
+        if self.state.parallel.is_some() {
             self.exchange_decomposed(flags)?;
         } else {
-            if flags.outside > 0 || self.host.inserter_pending() {
+            if flags.outside > 0 || self.state.inserter_pending() {
                 // Insertion or removal: the host does it on a synced copy, then everything
                 // goes back up (with the history) and the list is rebuilt.
                 self.sync_host()?;
-                self.host.exchange_on_host()?;
+                self.state.exchange(true, |_, _| true)?;
                 self.upload_from_host()?;
             }
             if flags.rebuild != 0 {
@@ -209,8 +210,8 @@ impl CudaSimulation {
     /// removes or has a particle that moved half the skin; between rebuilds the ghosts come
     /// through the halo.
     fn exchange_decomposed(&mut self, flags: &StepFlags) -> Result<(), CudaError> {
-        let pending = self.host.inserter_pending();
-        let par = self.host.parallel.as_deref_mut().expect("a decomposed run");
+        let pending = self.state.inserter_pending();
+        let par = self.state.part_mut();
         let local = flags.rebuild != 0 || flags.outside > 0 || self.pairs.rebuild;
         let t_wait = Instant::now();
         let rebuild = par.comm.any(local) || pending;
@@ -228,13 +229,13 @@ impl CudaSimulation {
             // A particle that left through a closed face stops every rank together, before
             // the exchange's collectives (on the CPU backend the step checks it after the
             // drift; here the host sees positions at rebuilds, which an exit forces).
-            let inside = self.host.check_inside();
-            self.host.agree(inside)?;
-            self.host.rebuild_exchange_on_host()?;
+            let inside = self.state.check_inside();
+            self.state.agree(inside)?;
+            self.state.exchange(true, |_, _| true)?;
             let t_upload = Instant::now();
             self.upload_walls()?;
             self.upload_from_host()?;
-            if let Some(par) = self.host.parallel.as_deref_mut() {
+            if let Some(par) = self.state.parallel.as_deref_mut() {
                 par.timers.device_download += download;
                 par.timers.device_upload += t_upload.elapsed().as_secs_f64();
             }

@@ -17,12 +17,13 @@ use super::walls::WallStage;
 use crate::contact::hunt_crossley_alpha;
 use crate::neighbor::Bounds;
 use crate::pipeline::Simulation;
+use crate::run_state::RunState;
 use cudarc::driver::CudaContext;
 
 /// The binning grid of `host`'s domain and a list builder on it. A rank of a decomposed run
 /// bins on the whole domain's grid (ghosts keep their true centroids), sized for the whole
 /// run's particles.
-fn domain_grid(host: &Simulation) -> (GridParams, ListBuilder) {
+fn domain_grid(host: &RunState) -> (GridParams, ListBuilder) {
     let s = &host.scene;
     let bounds = Bounds {
         min: s.domain.min,
@@ -40,11 +41,11 @@ fn domain_grid(host: &Simulation) -> (GridParams, ListBuilder) {
 
 impl CudaSimulation {
     /// Follows a change of the host's domain (a rescaled periodic box,
-    /// [`Simulation::rescale_periodic_box`]): the binning grid, the periodic wrap and the list
+    /// [`RunState::rescale_periodic_box`]): the binning grid, the periodic wrap and the list
     /// builder are made again for it (an `auto` neighbour mode starts its trials afresh); the
     /// next step rebuilds the pair list.
     pub(super) fn domain_changed(&mut self) {
-        let (grid, list_builder) = domain_grid(&self.host);
+        let (grid, list_builder) = domain_grid(&self.state);
         self.gpu.grid = grid;
         self.list_builder = list_builder;
         self.pairs.rebuild = true;
@@ -55,7 +56,7 @@ impl CudaSimulation {
     /// Moves `host` (freshly created or restored, forces evaluated or restored) onto GPU
     /// `ordinal`, compiling the kernels for it with the scene's configuration.
     pub(crate) fn new(
-        host: Simulation,
+        host: RunState,
         ordinal: usize,
         precision: Precision,
     ) -> Result<Self, CudaError> {
@@ -130,7 +131,7 @@ impl CudaSimulation {
             integrator: Integrator::new(&gpu).map_err(set_up)?,
             host_current: true,
             gpu,
-            host,
+            state: host,
         };
         sim.upload_templates().map_err(set_up)?;
         sim.upload_walls().map_err(|e| {
@@ -149,10 +150,7 @@ impl CudaSimulation {
         ordinal: usize,
         precision: Precision,
     ) -> Result<Self, CudaError> {
-        let host = Simulation::builder(scene)
-            .comm(comm)
-            .evaluate_forces(false)
-            .build()?;
+        let host = Simulation::builder(scene).comm(comm).state()?;
         let mut sim = CudaSimulation::new(host, ordinal, precision)?;
         sim.evaluate_first_forces()?;
         Ok(sim)
@@ -160,8 +158,8 @@ impl CudaSimulation {
 
     /// The first force evaluation of a new simulation (see [`CudaSimulation::from_scene`]).
     fn evaluate_first_forces(&mut self) -> Result<(), CudaError> {
-        let dt = self.host.dt;
-        let n = self.host.particles.len();
+        let dt = self.state.dt;
+        let n = self.state.particles.len();
         self.forces(dt, false).map_err(|e| {
             e.out_of_memory(
                 || format!("the first force evaluation of {n} particles"),
@@ -181,9 +179,9 @@ impl CudaSimulation {
     /// Particles this rank owns now: the host's count, or after a decomposed run's rebuild on
     /// the device (which leaves the host's copy stale) the device's slots less its ghosts.
     pub fn particle_count(&self) -> usize {
-        match self.host.parallel.as_deref() {
+        match self.state.parallel.as_deref() {
             Some(par) if !self.host_current => self.particles.n - par.ghosts.particles.len(),
-            _ => self.host.particles.len(),
+            _ => self.state.particles.len(),
         }
     }
 

@@ -1,4 +1,4 @@
-//! Copying the device state back into the host [`Simulation`] for output, checkpoints and
+//! Copying the device state back into the host [`RunState`] for output, checkpoints and
 //! host-side insertion: particles in the device's order, the contact history rebuilt from the
 //! pair slots and per-particle wall slots, and the step statistics.
 
@@ -6,25 +6,25 @@ use super::CudaSimulation;
 use super::error::CudaError;
 use super::history::gather_contacts;
 use super::layout::CONTACT_LIVE;
-use crate::pipeline::Simulation;
+use crate::run_state::RunState;
 
 impl CudaSimulation {
-    /// Copies the device state into [`CudaSimulation::host`] (particles in the device's
+    /// Copies the device state into [`CudaSimulation::state`] (particles in the device's
     /// current order, forces, contact history, statistics and wall forces), when it is stale.
-    pub fn sync_host(&mut self) -> Result<&Simulation, CudaError> {
+    pub fn sync_host(&mut self) -> Result<&RunState, CudaError> {
         if self.host_current {
-            return Ok(&self.host);
+            return Ok(&self.state);
         }
         let st = &self.gpu.stream;
         let n = self.particles.n;
-        let p = &mut self.host.particles;
+        let p = &mut self.state.particles;
         // The host's fields of the table, into `p`.
         let arrays = self.particles.download(st)?;
         arrays.copy_into(p, n);
         // History and statistics from the last evaluation.
         // A rank of a decomposed run holds ghosts too: they are left out of the host copy, and
         // a pair counts in the statistics where its lower-id member (the first) is owned.
-        let ghost: Vec<bool> = if self.host.parallel.is_some() {
+        let ghost: Vec<bool> = if self.state.parallel.is_some() {
             let mut g = st.clone_dtoh(&self.particles.ghost)?;
             g.truncate(n);
             g.iter().map(|&g| g != 0).collect()
@@ -47,15 +47,15 @@ impl CudaSimulation {
         // Until the first evaluation after an upload (a restart, an insertion) the device has
         // no contact outputs: the history and statistics are still the uploaded host ones.
         if self.pairs.list.is_some() {
-            self.host.history = gathered.history;
-            self.host.stats.contacts = gathered.contacts;
-            self.host.stats.wall_contacts = gathered.wall_contacts;
-            self.host.stats.elastic_energy = gathered.sums.elastic.value();
-            self.host.wall_forces = gathered.sums.wall_force_values();
-            self.host.sums = gathered.sums;
+            self.state.history = gathered.history;
+            self.state.stats.contacts = gathered.contacts;
+            self.state.stats.wall_contacts = gathered.wall_contacts;
+            self.state.stats.elastic_energy = gathered.sums.elastic.value();
+            self.state.wall_forces = gathered.sums.wall_force_values();
+            self.state.sums = gathered.sums;
         }
         self.host_current = true;
-        Ok(&self.host)
+        Ok(&self.state)
     }
 }
 
@@ -65,31 +65,31 @@ impl CudaSimulation {
     /// velocities, forces), only those arrays go back up, into the device's order; otherwise
     /// everything does, with the contact history. When `f` changed the domain (a rescaled
     /// periodic box), the grid and the list builder follow it.
-    pub fn edit_host(&mut self, f: impl FnOnce(&mut Simulation)) -> Result<(), CudaError> {
+    pub fn edit_host(&mut self, f: impl FnOnce(&mut RunState)) -> Result<(), CudaError> {
         self.sync_host()?;
         let before = (
-            self.host.particles.id.clone(),
-            self.host.particles.kind.clone(),
-            self.host.particles.scale.clone(),
-            self.host.particles.mass.clone(),
-            self.host.particles.inertia.clone(),
-            self.host.history.clone(),
+            self.state.particles.id.clone(),
+            self.state.particles.kind.clone(),
+            self.state.particles.scale.clone(),
+            self.state.particles.mass.clone(),
+            self.state.particles.inertia.clone(),
+            self.state.history.clone(),
         );
-        let domain = self.host.scene.domain;
-        f(&mut self.host);
-        if self.host.scene.domain != domain {
+        let domain = self.state.scene.domain;
+        f(&mut self.state);
+        if self.state.scene.domain != domain {
             self.domain_changed();
         }
-        let p = &self.host.particles;
+        let p = &self.state.particles;
         let motion_only = before.0 == p.id
             && before.1 == p.kind
             && before.2 == p.scale
             && before.3 == p.mass
             && before.4 == p.inertia
-            && before.5 == self.host.history;
+            && before.5 == self.state.history;
         // A decomposed run's device arrays interleave ghosts with the owned particles: it
         // always uploads whole (and rebuilds, with fresh ghosts, at the next step).
-        if !motion_only || self.particles.n == 0 || self.host.parallel.is_some() {
+        if !motion_only || self.particles.n == 0 || self.state.parallel.is_some() {
             return self.upload_from_host();
         }
         self.particles.upload_motion(&self.gpu.stream, p)?;
@@ -97,8 +97,30 @@ impl CudaSimulation {
         Ok(())
     }
 
+    /// Evaluates the forces again on the device at the current state without advancing the
+    /// contact history, as [`crate::pipeline::Simulation::refresh`] does on the CPU: the
+    /// forces of an edited state (a rescaled periodic box) before the next step's kick.
+    pub fn refresh(&mut self) -> Result<(), CudaError> {
+        self.sync_host()?;
+        let saved = self.state.history.clone();
+        self.state.reset_guard();
+        if self.state.parallel.is_some() {
+            // The decomposed part of stage 1 alone, as the CPU's refresh runs it (no
+            // insertion): the ghosts of the edited state chosen afresh, as at a rebuild.
+            self.state.exchange_decomposed(true)?;
+            self.upload_from_host()?;
+        }
+        self.pairs.rebuild = true;
+        self.forces(0.0, false)?;
+        self.host_current = false;
+        self.sync_host()?;
+        self.state.history = saved;
+        self.state.reset_guard();
+        self.upload_from_host()
+    }
+
     /// The candidate pair list as global-id pairs (lower id first), sorted (see
-    /// [`Simulation::candidate_pair_ids`]).
+    /// [`crate::pipeline::Simulation::candidate_pair_ids`]).
     pub fn candidate_pair_ids(&mut self) -> Result<Vec<(u64, u64)>, CudaError> {
         let Some(pairs) = &self.pairs.list else {
             return Ok(Vec::new());
@@ -120,10 +142,10 @@ impl CudaSimulation {
     /// Particle–particle and particle–wall contacts of the last force evaluation, from the
     /// contact flags alone (the rest of the state stays on the device).
     pub fn contact_counts(&mut self) -> Result<(u64, u64), CudaError> {
-        if self.host_current || self.host.parallel.is_some() {
+        if self.host_current || self.state.parallel.is_some() {
             // A decomposed run's flags include the ghosts: count from the synced copy.
             self.sync_host()?;
-            return Ok((self.host.stats.contacts, self.host.stats.wall_contacts));
+            return Ok((self.state.stats.contacts, self.state.stats.wall_contacts));
         }
         let st = &self.gpu.stream;
         let live = |flags: &[u32], n: usize| {

@@ -76,7 +76,7 @@ pub(super) fn host_arrays(scene: &Scene, p: &Particles, owned: usize) -> HostPar
 impl CudaSimulation {
     /// The scene's templates into `contact.cu`'s constant and global tables.
     pub(super) fn upload_templates(&mut self) -> Result<(), CudaError> {
-        let s = &self.host.scene;
+        let s = &self.state.scene;
         let config = &self.gpu.config;
         let (nt, mv, mf) = (config.templates, config.max_vertices, config.max_faces);
         let t = TemplateTables::new(&s.templates, nt, mv, mf);
@@ -115,12 +115,12 @@ impl CudaSimulation {
     /// of wall lists goes on.
     pub(super) fn upload_walls(&mut self) -> Result<(), CudaError> {
         let restricted = self
-            .host
+            .state
             .parallel
             .is_some()
-            .then_some(self.host.walls.as_slice());
+            .then_some(self.state.walls.as_slice());
         let list_builds = self.walls.as_ref().map_or(0, |w| w.list_builds);
-        let walls = WallStage::upload(&self.gpu, &self.host.scene, restricted, list_builds)?;
+        let walls = WallStage::upload(&self.gpu, &self.state.scene, restricted, list_builds)?;
         if walls.is_some() {
             self.walls = walls;
         }
@@ -130,7 +130,7 @@ impl CudaSimulation {
     /// Uploads the host state (particles, forces, contact history) and schedules a list build.
     pub(super) fn upload_from_host(&mut self) -> Result<(), CudaError> {
         let st = self.gpu.stream.clone();
-        let h = &self.host;
+        let h = &self.state;
         // A rank of a decomposed run uploads its ghosts after its owned particles.
         let combined;
         let (p, owned) = match h.parallel.as_deref() {

@@ -65,7 +65,7 @@ pub enum SimulationError {
 
 impl SimulationError {
     /// Whether every rank of a decomposed run left the same step with an error of this kind,
-    /// agreed through [`Simulation::agree`](super::Simulation::agree): a stability stop, a
+    /// agreed through [`RunState::agree`](super::RunState::agree): a stability stop, a
     /// non-finite value, a particle leaving through a closed face, or another rank's stop.
     /// The ranks can then still work together (write the stopped state, end MPI in order);
     /// after any other error the failing rank ends them all.
