@@ -66,8 +66,6 @@ def dodecahedra_cylinder_x10():
 gravity = [0.0, 0.0, -9.81]
 
 [simulation]
-dt_fraction = 0.05
-face_window = "secant"               # as docs/production.md's runs were made (the default is "trajectory")
 end_time = 10.0
 seed = 0
 
