@@ -299,6 +299,7 @@ fn main() {
 /// Runs the command; returns the process's exit status (non-zero only for a run stopped by a
 /// signal, `polydem::interrupt`).
 fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
+    use std::io::Write;
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     match cli.command {
@@ -333,7 +334,6 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                 comm,
             )?;
             if rank == 0 {
-                use std::io::Write;
                 writeln!(out, "{}", serde_json::to_string_pretty(&summary)?)?;
             }
             Ok(summary.exit_status)
@@ -352,36 +352,15 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
             cases,
         } => {
             if scene.as_os_str() == "accuracy" && !scene.is_file() {
-                use polydem::accuracy::{AccuracyOptions, FULL_FRACTIONS, SHORT_FRACTIONS};
-                let devices = polydem::accuracy::devices(backend, gpu_precision)?;
-                let fractions = fractions.unwrap_or_else(|| {
-                    if full {
-                        FULL_FRACTIONS.to_vec()
-                    } else {
-                        SHORT_FRACTIONS.to_vec()
-                    }
-                });
-                if let Some(bad) = fractions.iter().find(|f| !(**f > 0.0 && **f <= 1.0)) {
-                    anyhow::bail!("--fractions: each must be in (0, 1], got {bad}");
-                }
-                let rows = polydem::accuracy::run_accuracy(&AccuracyOptions {
-                    devices,
-                    fractions,
+                let accuracy = AccuracyCommand {
+                    backend,
+                    gpu_precision,
                     full,
-                    cases: cases.unwrap_or_default(),
-                    out: out_dir.clone(),
-                })?;
-                use std::io::Write;
-                writeln!(
-                    out,
-                    "{}",
-                    serde_json::to_string_pretty(&serde_json::json!({
-                        "csv": out_dir.join("accuracy.csv"),
-                        "plot": out_dir.join("accuracy.svg"),
-                        "rows": rows,
-                    }))?
-                )?;
-                return Ok(0);
+                    fractions,
+                    cases,
+                    out: out_dir,
+                };
+                return bench_accuracy(accuracy, &mut out).map(|()| 0);
             }
             let rank = comm.rank();
             let report = polydem::run::bench_on(
@@ -400,19 +379,16 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
                 comm,
             )?;
             if rank == 0 {
-                use std::io::Write;
                 writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
             }
             Ok(0)
         }
         Command::Analyze { what } => {
-            use std::io::Write;
             let report = polydem::analysis::analyze(what)?;
             writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
             Ok(0)
         }
         Command::Check { scene } => {
-            use std::io::Write;
             writeln!(
                 out,
                 "{}",
@@ -427,7 +403,6 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
             backend,
             gpu_precision,
         } => {
-            use std::io::Write;
             let report = polydem::run::pack(&polydem::run::PackOptions {
                 scene,
                 contacts,
@@ -439,7 +414,6 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
             Ok(0)
         }
         Command::Info => {
-            use std::io::Write;
             let info = polydem::backend::cuda_info();
             writeln!(out, "{}", serde_json::to_string_pretty(&info)?)?;
             Ok(0)
@@ -448,4 +422,45 @@ fn run(cli: Cli, comm: Arc<dyn Comm>) -> Result<i32> {
             action: ShapeAction::Info { shape, size },
         } => polydem::probe::shape_info(&shape, size, &mut out).map(|()| 0),
     }
+}
+
+/// The arguments of `polydem bench accuracy`.
+struct AccuracyCommand {
+    backend: polydem::backend::BackendChoice,
+    gpu_precision: Option<polydem::Precision>,
+    full: bool,
+    fractions: Option<Vec<f64>>,
+    cases: Option<Vec<String>>,
+    out: PathBuf,
+}
+
+/// `polydem bench accuracy`: restitution and energy against run time over step fractions
+/// (docs/accuracy.md); prints where the table and plot went and the rows.
+fn bench_accuracy(a: AccuracyCommand, out: &mut impl std::io::Write) -> Result<()> {
+    use polydem::accuracy::{AccuracyOptions, FULL_FRACTIONS, SHORT_FRACTIONS};
+    let devices = polydem::accuracy::devices(a.backend, a.gpu_precision)?;
+    let fractions = a.fractions.unwrap_or_else(|| {
+        if a.full {
+            FULL_FRACTIONS.to_vec()
+        } else {
+            SHORT_FRACTIONS.to_vec()
+        }
+    });
+    if let Some(bad) = fractions.iter().find(|f| !(**f > 0.0 && **f <= 1.0)) {
+        anyhow::bail!("--fractions: each must be in (0, 1], got {bad}");
+    }
+    let rows = polydem::accuracy::run_accuracy(&AccuracyOptions {
+        devices,
+        fractions,
+        full: a.full,
+        cases: a.cases.unwrap_or_default(),
+        out: a.out.clone(),
+    })?;
+    let report = serde_json::json!({
+        "csv": a.out.join("accuracy.csv"),
+        "plot": a.out.join("accuracy.svg"),
+        "rows": rows,
+    });
+    writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
+    Ok(())
 }
