@@ -6,7 +6,7 @@ use super::{
     load_state, radial_porosity, solids_in_cylinder,
 };
 use anyhow::{Context, Result, anyhow, bail};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The state an analysis reads and the vertical cylinder it looks in.
 #[derive(clap::Args)]
@@ -97,16 +97,18 @@ pub enum AnalyzeWhat {
     },
 }
 
+/// `v` when it is a positive length, else the error naming option `--name`.
+fn positive(name: &str, v: f64) -> Result<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(anyhow!("--{name} {v}: must be a positive length (m)"))
+    }
+}
+
 /// The observable `what` asks for, as JSON, with every argument checked first (a message that
 /// names the option and what is allowed).
 pub fn analyze(what: AnalyzeWhat) -> Result<serde_json::Value> {
-    let positive = |name: &str, v: f64| {
-        if v.is_finite() && v > 0.0 {
-            Ok(v)
-        } else {
-            Err(anyhow!("--{name} {v}: must be a positive length (m)"))
-        }
-    };
     // The state, placed as solids, and the cylinder's axis and radius.
     let open = |at: &AnalyzedCylinder| -> Result<(PackedSolids, [f64; 2], f64)> {
         if at.centre.len() != 2 {
@@ -186,63 +188,83 @@ pub fn analyze(what: AnalyzeWhat) -> Result<serde_json::Value> {
             from,
             cell,
             field,
-        } => {
-            let radius = positive("radius", radius)?;
-            let cell = positive("cell", cell.unwrap_or(radius / 30.0))?;
-            if centre.len() != 2 {
-                bail!("--centre {centre:?}: two numbers, x,z (m)");
-            }
-            let y = match y.as_deref() {
-                None => [f64::NEG_INFINITY, f64::INFINITY],
-                Some([a, b]) if b > a => [*a, *b],
-                Some(v) => {
-                    bail!("--y {v:?}: two numbers YMIN,YMAX (m), the second above the first")
-                }
-            };
-            let section = DrumSection {
-                centre: [centre[0], centre[1]],
-                radius,
-                y,
-            };
-            let mut samples = DrumSamples::new(section, cell);
-            let mut times = Vec::new();
-            for tables in frame_tables(&frames)? {
-                let mut rows = Vec::new();
-                for t in &tables {
-                    rows.extend(crate::io::read_particle_csv(t)?);
-                }
-                let Some(time) = rows.first().map(|r| r.time) else {
-                    continue;
-                };
-                if time < from {
-                    continue;
-                }
-                times.push(time);
-                samples.add_frame(rows.iter().map(|r| (&r.position, &r.velocity)));
-            }
-            if times.is_empty() {
-                bail!("{}: no frame at or after --from {from} s", frames.display());
-            }
-            let flow = samples.flow();
-            if let Some(path) = &field {
-                let mut csv = String::from("x,z,occupancy,vx,vz,samples\n");
-                for c in &flow.cells {
-                    csv.push_str(&format!(
-                        "{},{},{},{},{},{}\n",
-                        c.x, c.z, c.occupancy, c.vx, c.vz, c.samples
-                    ));
-                }
-                crate::io::write_atomic(path, csv.as_bytes())
-                    .with_context(|| format!("{}: cannot write the field", path.display()))?;
-            }
-            let mut v = serde_json::to_value(&flow)?;
-            if let Some(o) = v.as_object_mut() {
-                o.remove("cells");
-                o.insert("radius".into(), radius.into());
-                o.insert("first_time".into(), times[0].into());
-                o.insert("last_time".into(), times[times.len() - 1].into());
-            }
-            v
-        }
+        } => drum(
+            &frames,
+            radius,
+            &centre,
+            y.as_deref(),
+            from,
+            cell,
+            field.as_deref(),
+        )?,
     })
+}
+
+/// `polydem analyze drum`: the averaged flow of one drum's particles over the frames from
+/// `from` on (docs/production.md, `polydem analyze`), the field written to `field` as CSV.
+fn drum(
+    frames: &Path,
+    radius: f64,
+    centre: &[f64],
+    y: Option<&[f64]>,
+    from: f64,
+    cell: Option<f64>,
+    field: Option<&Path>,
+) -> Result<serde_json::Value> {
+    let radius = positive("radius", radius)?;
+    let cell = positive("cell", cell.unwrap_or(radius / 30.0))?;
+    if centre.len() != 2 {
+        bail!("--centre {centre:?}: two numbers, x,z (m)");
+    }
+    let y = match y {
+        None => [f64::NEG_INFINITY, f64::INFINITY],
+        Some([a, b]) if b > a => [*a, *b],
+        Some(v) => {
+            bail!("--y {v:?}: two numbers YMIN,YMAX (m), the second above the first")
+        }
+    };
+    let section = DrumSection {
+        centre: [centre[0], centre[1]],
+        radius,
+        y,
+    };
+    let mut samples = DrumSamples::new(section, cell);
+    let mut times = Vec::new();
+    for tables in frame_tables(frames)? {
+        let mut rows = Vec::new();
+        for t in &tables {
+            rows.extend(crate::io::read_particle_csv(t)?);
+        }
+        let Some(time) = rows.first().map(|r| r.time) else {
+            continue;
+        };
+        if time < from {
+            continue;
+        }
+        times.push(time);
+        samples.add_frame(rows.iter().map(|r| (&r.position, &r.velocity)));
+    }
+    if times.is_empty() {
+        bail!("{}: no frame at or after --from {from} s", frames.display());
+    }
+    let flow = samples.flow();
+    if let Some(path) = field {
+        let mut csv = String::from("x,z,occupancy,vx,vz,samples\n");
+        for c in &flow.cells {
+            csv.push_str(&format!(
+                "{},{},{},{},{},{}\n",
+                c.x, c.z, c.occupancy, c.vx, c.vz, c.samples
+            ));
+        }
+        crate::io::write_atomic(path, csv.as_bytes())
+            .with_context(|| format!("{}: cannot write the field", path.display()))?;
+    }
+    let mut v = serde_json::to_value(&flow)?;
+    if let Some(o) = v.as_object_mut() {
+        o.remove("cells");
+        o.insert("radius".into(), radius.into());
+        o.insert("first_time".into(), times[0].into());
+        o.insert("last_time".into(), times[times.len() - 1].into());
+    }
+    Ok(v)
 }
