@@ -4,6 +4,7 @@
 mod facet_grid;
 pub mod friction;
 pub mod history;
+pub mod inputs;
 pub mod law;
 pub mod potential;
 pub mod restitution;
