@@ -69,24 +69,31 @@ fn loose_spheres() -> String {
     )
 }
 
-/// The packing of [`loose_spheres`] at Z = 6 (made once) and `pack`'s report.
+/// [`loose_spheres`] compressed to Z = 6 on `backend` in double precision, in a fresh folder
+/// `dir`: the packing file and `pack`'s report.
+fn pack_loose_spheres(
+    dir: &str,
+    backend: polydem::backend::BackendChoice,
+) -> (PathBuf, serde_json::Value) {
+    let dir = temp_dir(dir);
+    let scene = dir.join("loose.toml");
+    std::fs::write(&scene, loose_spheres()).unwrap();
+    let out = dir.join("spheres.packing");
+    let report = pack(&PackOptions {
+        scene,
+        contacts: 6.0,
+        out: out.clone(),
+        backend,
+        precision: polydem::Precision::Double,
+    })
+    .expect("pack");
+    (out, report)
+}
+
+/// The packing of [`loose_spheres`] at Z = 6 on the CPU (made once) and `pack`'s report.
 fn packed() -> &'static (PathBuf, serde_json::Value) {
     static PACKED: OnceLock<(PathBuf, serde_json::Value)> = OnceLock::new();
-    PACKED.get_or_init(|| {
-        let dir = temp_dir("bench-packing");
-        let scene = dir.join("loose.toml");
-        std::fs::write(&scene, loose_spheres()).unwrap();
-        let out = dir.join("spheres.packing");
-        let report = pack(&PackOptions {
-            scene,
-            contacts: 6.0,
-            out: out.clone(),
-            backend: polydem::backend::BackendChoice::Cpu,
-            precision: polydem::Precision::Double,
-        })
-        .expect("pack");
-        (out, report)
-    })
+    PACKED.get_or_init(|| pack_loose_spheres("bench-packing", polydem::backend::BackendChoice::Cpu))
 }
 
 /// A scene tiling `packing` `tiles` times, μ = 0.5 (with `extra` lines added to the insertion).
@@ -135,18 +142,8 @@ fn frictionless_spheres_compress_to_random_close_packing() {
 #[ignore = "needs a CUDA GPU"]
 fn compression_on_the_gpu_is_the_cpus() {
     let (cpu_out, cpu_report) = packed();
-    let dir = temp_dir("bench-packing-gpu");
-    let scene = dir.join("loose.toml");
-    std::fs::write(&scene, loose_spheres()).unwrap();
-    let out = dir.join("spheres.packing");
-    let report = pack(&PackOptions {
-        scene,
-        contacts: 6.0,
-        out: out.clone(),
-        backend: polydem::backend::BackendChoice::Cuda,
-        precision: polydem::Precision::Double,
-    })
-    .expect("pack on the GPU");
+    let (out, report) =
+        pack_loose_spheres("bench-packing-gpu", polydem::backend::BackendChoice::Cuda);
     println!("CPU: {cpu_report}\nGPU: {report}");
     for key in ["cycles", "steps", "contacts_per_particle", "solid_fraction"] {
         assert_eq!(report[key], cpu_report[key], "{key}");

@@ -185,17 +185,23 @@ impl Simulation {
         self.state
     }
 
+    /// The CPU pipeline on `state` with its first forces evaluated (advancing the springs by
+    /// one step, as every evaluation does) and the guard set again with the initial contacts'
+    /// elastic energy, which a compressed start releases.
+    fn evaluated(state: RunState, pair_precision: Precision) -> Result<Self, SimulationError> {
+        let mut sim = Simulation::from_state(state, pair_precision);
+        sim.forces(sim.state.dt)?;
+        sim.state.reset_guard();
+        Ok(sim)
+    }
+
     /// A simulation at t = 0: particles of count insertions placed, forces evaluated.
     fn started(
         scene: Scene,
         parallel: Option<Box<Parallel>>,
         pair_precision: Precision,
     ) -> Result<Self, SimulationError> {
-        let mut sim = Simulation::from_state(RunState::started(scene, parallel)?, pair_precision);
-        sim.forces(sim.state.dt)?;
-        // Again with the initial contacts' elastic energy, which a compressed start releases.
-        sim.state.reset_guard();
-        Ok(sim)
+        Simulation::evaluated(RunState::started(scene, parallel)?, pair_precision)
     }
 
     /// A simulation of `scene` with no particle placed yet (its insertions still to come).
@@ -204,12 +210,7 @@ impl Simulation {
         parallel: Option<Box<Parallel>>,
         pair_precision: Precision,
     ) -> Result<Self, SimulationError> {
-        let mut s = scene.clone();
-        s.insertions.clear();
-        let mut sim = Simulation::started(s, parallel, pair_precision)?;
-        sim.state.inserter = Inserter::new(&scene);
-        sim.state.scene = scene;
-        Ok(sim)
+        Simulation::evaluated(RunState::empty(scene, parallel)?, pair_precision)
     }
 
     /// `self` (without particles) holding a checkpoint's state, its stored forces kept

@@ -126,14 +126,6 @@ impl Simulation {
         Ok(())
     }
 
-    /// Scales a fully periodic box and every particle centre about the box's lower corner by
-    /// `factor` ([`RunState::rescale_periodic_box`]), then re-evaluates the forces as
-    /// [`Simulation::refresh`] does.
-    pub fn rescale_periodic_box(&mut self, factor: f64) -> Result<(), SimulationError> {
-        self.state.rescale_periodic_box(factor)?;
-        self.refresh()
-    }
-
     /// The arithmetic of the polyhedral pair geometry ([`SimulationBuilder::pair_precision`]).
     pub fn pair_precision(&self) -> crate::geometry::pair::Precision {
         self.work.pair_precision
