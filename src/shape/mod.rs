@@ -10,6 +10,7 @@ mod generators;
 mod hull;
 mod import;
 mod mass;
+mod rounding;
 
 pub use generators::Generator;
 pub use generators::{
@@ -18,6 +19,7 @@ pub use generators::{
 pub use import::{ImportReport, MESH_EXTENSIONS};
 pub use import::{MeshFile, load_mesh};
 pub use mass::MassProperties;
+pub use rounding::{MAX_ROUNDING, rounded, tangent_planes};
 
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use std::path::{Path, PathBuf};

@@ -36,6 +36,9 @@ pub struct ParticleTypeSection {
     pub generator: Option<crate::shape::Generator>,
     /// A number (fixed scale) or a distribution table; parsed by the validator.
     pub scale: Option<toml::Value>,
+    /// Edges and corners rounded by this fraction of the circumscribed radius
+    /// ([`crate::shape::rounded`]).
+    pub rounding: Option<f64>,
 }
 /// `[[insertions]]`.
 #[derive(Debug, Deserialize)]

@@ -89,18 +89,30 @@ impl Validator<'_> {
                 );
             }
             let material = self.material_ref(&k("material"), &p.material, mats);
+            // A rounded template is another template: its own key, built from the sharp one.
+            let rounding = p
+                .rounding
+                .map(|f| format!(" rounded {f:?}"))
+                .unwrap_or_default();
+            let round = |t: ConvexTemplate| match p.rounding {
+                Some(f) => rounded(&t, f).map_err(|e| (k("rounding"), e)),
+                None => Ok(t),
+            };
             let (source, built) = match (&p.mesh, &p.generator) {
                 (Some(m), None) => {
                     let path = self.resolve(m);
-                    let key = format!("mesh:{}", path.display());
-                    let built = (!sources.contains_key(&key))
-                        .then(|| ConvexTemplate::from_file(&path).map_err(|e| (k("mesh"), e)));
+                    let key = format!("mesh:{}{rounding}", path.display());
+                    let built = (!sources.contains_key(&key)).then(|| {
+                        ConvexTemplate::from_file(&path)
+                            .map_err(|e| (k("mesh"), e))
+                            .and_then(round)
+                    });
                     (key, built)
                 }
                 (None, Some(g)) => {
-                    let key = format!("generator:{g:?}");
+                    let key = format!("generator:{g:?}{rounding}");
                     let built = (!sources.contains_key(&key))
-                        .then(|| g.build().map_err(|e| (k("generator"), e)));
+                        .then(|| g.build().map_err(|e| (k("generator"), e)).and_then(round));
                     (key, built)
                 }
                 _ => {

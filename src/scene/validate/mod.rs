@@ -14,7 +14,7 @@ use super::schema::{self, SceneFile, SpanIndex, Vec3};
 use super::walls::Wall;
 use super::*;
 use crate::io::Packing;
-use crate::shape::ConvexTemplate;
+use crate::shape::{ConvexTemplate, rounded};
 use nalgebra::Unit;
 use std::collections::HashMap;
 
