@@ -132,7 +132,7 @@ if [ ${#runs[@]} -ge 2 ] && [ -f "$porosity" ]; then
   # open outlets (9 and 10 d) set against it; and fitted to all.
   for fit in 0.16:plates inf:all; do
     python3 "$here/silo_discharge.py" "$out/silo_discharge_${fit#*:}.svg" "${runs[@]}" --grain-mass 8.546e-3 \
-      --bulk-density "$rho_b" --d 0.0187 --window 0.25,1e9 --fit-max "${fit%%:*}" \
+      --bulk-density "$rho_b" --d 0.0187 --window auto --fit-max "${fit%%:*}" \
       > "$out/silo_discharge_${fit#*:}.txt"
   done
 fi

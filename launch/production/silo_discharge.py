@@ -3,27 +3,42 @@
 against time and Beverloo's law.
 
   python3 launch/production/silo_discharge.py OUT.svg D0[@Z]:FRAMES ... --grain-mass M
-      --bulk-density RHO_B --d D [--window T0,T1] [--above Z] [--fit-max D0]
+      --bulk-density RHO_B --d D [--window auto | T0,T1] [--above Z] [--fit-max D0]
 
 Each FRAMES is a run's particle tables (`<output.dir>/particles`, step_<step>[_r<rank>].csv),
 the grains left at each frame being its rows whose centre lies above Z (default: every row; the
 orifice plate's height counts a grain out as it passes the hole, not when it falls out of the
-domain; `D0@Z` sets that run's own Z, for an outlet at another height), or a text file of "time grains" lines already counted (Z does not apply). The
-discharge rate W (kg/s) of each orifice D0 (m) is the least-squares slope of the mass left
-over the window (default 0.5 s to the last frame: the start-up transient left out); an orifice
-with no flow over it (jammed) is reported and left out of the fit, and so are those wider than
---fit-max (tabled against the law fitted to the others). Beverloo's law
+domain; `D0@Z` sets that run's own Z, for an outlet at another height), or a text file of "time
+grains" lines already counted (Z does not apply). Several runs of one D0 (starts from different
+beds) are several points of the fit and are also summarised together.
+
+The steady window of each run is found from its data (`--window auto`, the default): the flow
+out between frames is a series whose start-up is a transient, and the window starts where the
+Marginal Standard Error Rule puts the end of that transient (White, Simulation 69 (1997)
+323-334): at the frame d, among the first half, that minimises the squared standard error of the
+mean of the increments after it, sum((x_i - mean)^2) / (n - d)^2. `--window T0,T1` fixes it
+instead. The discharge rate W (kg/s) is the least-squares slope of the mass left over the window;
+its standard error is that of the mean flow per frame over the window (the frames' scatter, which
+carries the flow's bursts), and at least one grain over the window. An orifice with no flow
+(jammed) is reported and left out of the fit, and so are those wider than --fit-max (tabled
+against the law fitted to the others). Beverloo's law
 
   W = C rho_b sqrt(g) (D0 - k d)^(5/2)
 
-is fitted as the straight line W^(2/5) = (C rho_b sqrt(g))^(2/5) (D0 - k d): C from its slope
-and k from where it crosses zero. Prints the table and the fit, and plots the mass discharged
-against time and W against D0 with the fitted law.
+is fitted as the straight line W^(2/5) = (C rho_b sqrt(g))^(2/5) (D0 - k d), weighted by each
+rate's error: C from its slope and k from where it crosses zero, with 68 % and 95 % intervals
+from a parametric bootstrap (each W redrawn from its error, 20 000 times, fixed seed; the errors
+first scaled by the root of chi^2 per degree of freedom where the rates scatter about the law by
+more than they allow). d is the
+law's grain size as given (state which: the scenes use the volume-equivalent diameter). Prints
+the table and the fit, and plots the mass discharged against time and W against D0 with the
+fitted law.
 """
 import argparse
 import collections
 import math
 import os
+import random
 import sys
 
 G = 9.81
@@ -63,6 +78,77 @@ def slope(xs, ys):
     return sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx, my - mx * sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx
 
 
+def steady_start(series):
+    """Index of the first frame of the steady window of `series` ((time, grains) in time order):
+    the Marginal Standard Error Rule on the grains out between frames, over the first half."""
+    flow = [n0 - n1 for (_, n0), (_, n1) in zip(series, series[1:])]
+    best, start = math.inf, 0
+    for d in range(len(flow) // 2 + 1):
+        rest = flow[d:]
+        mean = sum(rest) / len(rest)
+        mser = sum((x - mean) ** 2 for x in rest) / len(rest) ** 2
+        if mser < best:
+            best, start = mser, d
+    return start
+
+
+def rate_error(win, grain_mass):
+    """Standard error (kg/s) of the rate over the frames `win` ((time, mass left) in order): that
+    of the mean flow per frame, and at least one grain over the window."""
+    flows = [(m0 - m1) / (t1 - t0) for (t0, m0), (t1, m1) in zip(win, win[1:])]
+    n = len(flows)
+    mean = sum(flows) / n
+    sd = math.sqrt(sum((f - mean) ** 2 for f in flows) / (n - 1)) if n > 1 else 0.0
+    return max(sd / math.sqrt(n), grain_mass / (win[-1][0] - win[0][0]))
+
+
+def weighted_line(xs, ys, sigmas):
+    """Weighted least-squares line y = s x + b: (s, b)."""
+    w = [1.0 / (e * e) for e in sigmas]
+    sw = sum(w)
+    mx = sum(wi * x for wi, x in zip(w, xs)) / sw
+    my = sum(wi * y for wi, y in zip(w, ys)) / sw
+    sxx = sum(wi * (x - mx) ** 2 for wi, x in zip(w, xs))
+    s = sum(wi * (x - mx) * (y - my) for wi, x, y in zip(w, xs, ys)) / sxx
+    return s, my - s * mx
+
+
+def beverloo_fit(rows, rho_b, d, draws=0):
+    """C and k of the rows' (d0, w, err) by the weighted line of W^(2/5) on D0; with `draws`,
+    also the bootstrap samples of (C, k), each W redrawn from its error (seeded)."""
+    def fit(ws):
+        xs = [r["d0"] for r in rows]
+        ys = [max(w, 0.0) ** 0.4 for w in ws]
+        es = [0.4 * max(w, 1e-12) ** -0.6 * r["err"] for w, r in zip(ws, rows)]
+        s, b = weighted_line(xs, ys, es)
+        if s <= 0:
+            return None
+        return s ** 2.5 / (rho_b * math.sqrt(G)), -b / s / d
+    c, k = fit([r["w"] for r in rows])
+    # Rates that scatter about the law by more than their errors say (chi^2 per degree of
+    # freedom above 1) have errors too small for the fit: they are scaled up by its root (the
+    # Birge ratio) before the bootstrap, so that the intervals carry the scatter too.
+    law = lambda d0: c * rho_b * math.sqrt(G) * max(d0 - k * d, 0.0) ** 2.5
+    chi2 = sum(((r["w"] ** 0.4 - law(r["d0"]) ** 0.4) / (0.4 * r["w"] ** -0.6 * r["err"])) ** 2
+               for r in rows)
+    dof = len(rows) - 2
+    birge = math.sqrt(chi2 / dof) if dof > 0 and chi2 > dof else 1.0
+    rng = random.Random(2024)
+    samples = []
+    for _ in range(draws):
+        one = fit([max(rng.gauss(r["w"], birge * r["err"]), 1e-9) for r in rows])
+        if one:
+            samples.append(one)
+    return c, k, samples, chi2, dof, birge
+
+
+def interval(values, level):
+    v = sorted(values)
+    lo = v[int((1 - level) / 2 * (len(v) - 1))]
+    hi = v[int((1 + level) / 2 * (len(v) - 1))]
+    return lo, hi
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("svg")
@@ -70,13 +156,16 @@ def main():
     ap.add_argument("--grain-mass", type=float, required=True)
     ap.add_argument("--bulk-density", type=float, required=True)
     ap.add_argument("--d", type=float, required=True, help="grain diameter of the law (m)")
-    ap.add_argument("--window", default="0.5,1e9")
+    ap.add_argument("--window", default="auto",
+                    help="auto (the steady window found from each run) or T0,T1 (s)")
     ap.add_argument("--above", type=float, default=-math.inf,
                     help="count a grain while its centre is above this height (m)")
     ap.add_argument("--fit-max", type=float, default=math.inf,
                     help="fit the law to the outlets up to this D0 (m) only")
     a = ap.parse_args()
-    t0, t1 = (float(x) for x in a.window.split(","))
+    auto = a.window == "auto"
+    if not auto:
+        t0, t1 = (float(x) for x in a.window.split(","))
     rows = []
     for spec in a.runs:
         d0, frames = spec.split(":", 1)
@@ -84,15 +173,38 @@ def main():
         series = counts(frames, float(z) if z else a.above)
         if not series:
             sys.exit(f"{frames}: no particle tables")
-        win = [(t, n * a.grain_mass) for t, n in series if t0 <= t <= t1]
+        if auto:
+            t0, t1 = series[steady_start(series)][0], math.inf
+        # Frame times are stored in f64 sums of steps (0.2499996 for 0.25): a frame within a
+        # thousandth of the frame interval of a bound is inside it.
+        tol = 1e-3 * min((b[0] - f[0] for f, b in zip(series, series[1:])), default=0.0)
+        win = [(t, n * a.grain_mass) for t, n in series if t0 - tol <= t <= t1 + tol]
         if len(win) < 3:
-            sys.exit(f"{frames}: fewer than 3 frames in the window {t0} … {t1} s")
-        w = -slope([t for t, _ in win], [m for _, m in win])[0]
-        rows.append(dict(d0=float(d0), w=w, series=series, fitted=w > 0 and float(d0) <= a.fit_max))
-    print("| D0 (m) | D0 / d | W (kg/s) |")
-    print("|---|---|---|")
+            print(f"D0 = {float(d0):.4f} m ({frames}): fewer than 3 frames in the window "
+                  f"{t0} … {t1} s, left out")
+            continue
+        w = -slope([t for t, _ in win], [m for _, m in win])[0] + 0.0  # no -0.000
+        out = round((win[0][1] - win[-1][1]) / a.grain_mass)
+        rows.append(dict(d0=float(d0), w=w, err=rate_error(win, a.grain_mass), start=win[0][0],
+                         grains=out, series=series, fitted=w > 0 and out > 0 and float(d0) <= a.fit_max))
+    if not rows:
+        sys.exit("no run has 3 frames in its window")
+    print(f"d = {a.d} m (the law's grain size), rho_b = {a.bulk_density} kg/m3, "
+          f"window {'found from each run (MSER)' if auto else a.window + ' s'}")
+    print("| D0 (m) | D0 / d | W (kg/s) | standard error | steady from (s) | grains out in the window |")
+    print("|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['d0']:.4f} | {r['d0'] / a.d:.2f} | {r['w']:.3f} |")
+        print(f"| {r['d0']:.4f} | {r['d0'] / a.d:.2f} | {r['w']:.3f} | {r['err']:.3f} | "
+              f"{r['start']:.3f} | {r['grains']} |")
+    # Several starts of one outlet: their mean and spread beside the standard errors.
+    by_d0 = collections.defaultdict(list)
+    for r in rows:
+        by_d0[round(r["d0"], 6)].append(r["w"])
+    for d0, ws in sorted(by_d0.items()):
+        if len(ws) > 1:
+            mean = sum(ws) / len(ws)
+            sd = math.sqrt(sum((w - mean) ** 2 for w in ws) / (len(ws) - 1))
+            print(f"D0 = {d0:.4f} m: {len(ws)} runs, W {mean:.3f} ± {sd:.3f} kg/s (standard deviation)")
     fit = None
     # An outlet that jammed (no grain out over the window) has no place on the law's line:
     # the fit takes the outlets that flow, and says which it left out.
@@ -103,11 +215,19 @@ def main():
         elif r["d0"] > a.fit_max:
             print(f"D0 = {r['d0']:.4f} m: wider than --fit-max, left out of the fit")
     if len(flowing) >= 2:
-        s, b = slope([r["d0"] for r in flowing], [r["w"] ** 0.4 for r in flowing])
-        c = s ** 2.5 / (a.bulk_density * math.sqrt(G))
-        k = -b / s / a.d
+        c, k, samples, chi2, dof, birge = beverloo_fit(flowing, a.bulk_density, a.d, draws=20000)
         fit = lambda d0: c * a.bulk_density * math.sqrt(G) * max(d0 - k * a.d, 0.0) ** 2.5
         print(f"Beverloo: C = {c:.3f}, k = {k:.2f} (d = {a.d} m, rho_b = {a.bulk_density} kg/m3)")
+        if len(flowing) > 2 or samples:
+            (c1, c2), (k1, k2) = (interval([x[0] for x in samples], 0.68),
+                                  interval([x[1] for x in samples], 0.68))
+            (c3, c4), (k3, k4) = (interval([x[0] for x in samples], 0.95),
+                                  interval([x[1] for x in samples], 0.95))
+            print(f"chi^2 = {chi2:.1f} over {dof} degrees of freedom: the rates' errors "
+                  f"{'scaled by ' + format(birge, '.2f') if birge > 1 else 'as measured'}")
+            print(f"intervals (bootstrap of the rates' errors, {len(samples)} fits): "
+                  f"C 68 % [{c1:.3f}, {c2:.3f}], 95 % [{c3:.3f}, {c4:.3f}]; "
+                  f"k 68 % [{k1:.2f}, {k2:.2f}], 95 % [{k3:.2f}, {k4:.2f}]")
         for r in rows:
             law = fit(r["d0"])
             if law > 0:
