@@ -25,52 +25,7 @@ impl Validator<'_> {
                     usize::MAX
                 });
             let region = self.region(&k("region"), &s.region, scene, particle_type);
-            let rate_only = [
-                ("start", s.start.is_some()),
-                ("end", s.end.is_some()),
-                ("total", s.total.is_some()),
-                ("interval", s.interval.is_some()),
-            ];
-            let mode = match (s.count, s.rate) {
-                (Some(n), None) => {
-                    if n == 0 {
-                        self.err(&k("count"), "must be at least 1");
-                    }
-                    for (name, set) in rate_only {
-                        if set {
-                            self.err(&k(name), "only allowed with rate (a count insertion places all at the start)");
-                        }
-                    }
-                    InsertionMode::Count(n)
-                }
-                (None, Some(r)) => {
-                    let per_second = self.positive(&k("rate"), r);
-                    let start = self.non_negative(&k("start"), s.start.unwrap_or(0.0));
-                    if let Some(e) = s.end.filter(|e| !(*e > start && e.is_finite())) {
-                        self.err(
-                            &k("end"),
-                            format!("must be finite and after start ({start}), got {e}"),
-                        );
-                    }
-                    if s.total == Some(0) {
-                        self.err(&k("total"), "must be at least 1");
-                    }
-                    InsertionMode::Rate {
-                        per_second,
-                        start,
-                        end: s.end,
-                        total: s.total,
-                        interval: s.interval.map(|x| self.positive(&k("interval"), x)),
-                    }
-                }
-                _ => {
-                    self.err(
-                        &k("count"),
-                        "give exactly one of count (all at the start) or rate (per second)",
-                    );
-                    InsertionMode::Count(0)
-                }
-            };
+            let mode = self.insertion_mode(i, s);
             let orientation = self.orientation(&k("orientation"), s.orientation.as_ref());
             let velocity = self.vector(&k("velocity"), s.velocity.unwrap_or_default());
             let angular_velocity = self.vector(
@@ -81,56 +36,7 @@ impl Validator<'_> {
             if max_attempts == 0 {
                 self.err(&k("max_attempts"), "must be at least 1");
             }
-            let lattice = s.lattice.map(|l| {
-                let v = self.vector(&k("lattice"), l);
-                if !(v.iter().all(|&x| x > 0.0 && x.is_finite())) {
-                    self.err(&k("lattice"), format!("spacings must be positive, got {v:?}"));
-                }
-                if !matches!(mode, InsertionMode::Count(_)) {
-                    self.err(&k("lattice"), "only allowed with count (a lattice is filled at the start)");
-                }
-                match (&region, &mode) {
-                    (Region::Box { min, max }, InsertionMode::Count(n)) => {
-                        let points: f64 = (0..3)
-                            .map(|a| ((max[a] - min[a]) / v[a] + 1e-9).floor().max(0.0))
-                            .product();
-                        if (*n as f64) > points {
-                            self.err(
-                                &k("count"),
-                                format!("{n} particles do not fit on the lattice: it has {points} points in the region"),
-                            );
-                        }
-                    }
-                    (
-                        Region::Cylinder {
-                            base,
-                            axis,
-                            radius,
-                            height,
-                        },
-                        InsertionMode::Count(n),
-                    ) if v.iter().all(|&x| x > 0.0 && x.is_finite()) => {
-                        // Bounded before it is counted: the sites are enumerated.
-                        let cells = (2.0 * radius / v.x) * (2.0 * radius / v.y) * (height / v.z);
-                        if cells > 1e9 {
-                            self.err(&k("lattice"), format!("{cells:.3e} lattice points around the cylinder: at most 1e9"));
-                        } else {
-                            let sites = crate::scene::insertion::cylinder_sites(
-                                base, axis, *radius, *height, &v,
-                            )
-                            .len();
-                            if *n as usize > sites {
-                                self.err(
-                                    &k("count"),
-                                    format!("{n} particles do not fit on the lattice: it has {sites} points in the cylinder"),
-                                );
-                            }
-                        }
-                    }
-                    _ => {}
-                }
-                v
-            });
+            let lattice = s.lattice.map(|l| self.lattice(i, l, &region, &mode));
             let packing = s
                 .packing
                 .as_deref()
@@ -154,6 +60,128 @@ impl Validator<'_> {
         }
         self.start_memory(&out);
         out
+    }
+
+    /// `insertions[i].count` or `.rate` with the keys that go with it: the insertion's mode.
+    fn insertion_mode(&mut self, i: usize, s: &schema::InsertionSection) -> InsertionMode {
+        let k = |f: &str| format!("insertions[{i}].{f}");
+        let rate_only = [
+            ("start", s.start.is_some()),
+            ("end", s.end.is_some()),
+            ("total", s.total.is_some()),
+            ("interval", s.interval.is_some()),
+        ];
+        match (s.count, s.rate) {
+            (Some(n), None) => {
+                if n == 0 {
+                    self.err(&k("count"), "must be at least 1");
+                }
+                for (name, set) in rate_only {
+                    if set {
+                        self.err(
+                            &k(name),
+                            "only allowed with rate (a count insertion places all at the start)",
+                        );
+                    }
+                }
+                InsertionMode::Count(n)
+            }
+            (None, Some(r)) => {
+                let per_second = self.positive(&k("rate"), r);
+                let start = self.non_negative(&k("start"), s.start.unwrap_or(0.0));
+                if let Some(e) = s.end.filter(|e| !(*e > start && e.is_finite())) {
+                    self.err(
+                        &k("end"),
+                        format!("must be finite and after start ({start}), got {e}"),
+                    );
+                }
+                if s.total == Some(0) {
+                    self.err(&k("total"), "must be at least 1");
+                }
+                InsertionMode::Rate {
+                    per_second,
+                    start,
+                    end: s.end,
+                    total: s.total,
+                    interval: s.interval.map(|x| self.positive(&k("interval"), x)),
+                }
+            }
+            _ => {
+                self.err(
+                    &k("count"),
+                    "give exactly one of count (all at the start) or rate (per second)",
+                );
+                InsertionMode::Count(0)
+            }
+        }
+    }
+
+    /// `insertions[i].lattice`: the spacings, checked against the mode and, for a count, the
+    /// sites the region holds.
+    fn lattice(
+        &mut self,
+        i: usize,
+        l: Vec3,
+        region: &Region,
+        mode: &InsertionMode,
+    ) -> Vector3<f64> {
+        let k = |f: &str| format!("insertions[{i}].{f}");
+        let v = self.vector(&k("lattice"), l);
+        if !(v.iter().all(|&x| x > 0.0 && x.is_finite())) {
+            self.err(
+                &k("lattice"),
+                format!("spacings must be positive, got {v:?}"),
+            );
+        }
+        if !matches!(mode, InsertionMode::Count(_)) {
+            self.err(
+                &k("lattice"),
+                "only allowed with count (a lattice is filled at the start)",
+            );
+        }
+        match (region, mode) {
+            (Region::Box { min, max }, InsertionMode::Count(n)) => {
+                let points: f64 = (0..3)
+                    .map(|a| ((max[a] - min[a]) / v[a] + 1e-9).floor().max(0.0))
+                    .product();
+                if (*n as f64) > points {
+                    self.err(
+                        &k("count"),
+                        format!("{n} particles do not fit on the lattice: it has {points} points in the region"),
+                    );
+                }
+            }
+            (
+                Region::Cylinder {
+                    base,
+                    axis,
+                    radius,
+                    height,
+                },
+                InsertionMode::Count(n),
+            ) if v.iter().all(|&x| x > 0.0 && x.is_finite()) => {
+                // Bounded before it is counted: the sites are enumerated.
+                let cells = (2.0 * radius / v.x) * (2.0 * radius / v.y) * (height / v.z);
+                if cells > 1e9 {
+                    self.err(
+                        &k("lattice"),
+                        format!("{cells:.3e} lattice points around the cylinder: at most 1e9"),
+                    );
+                } else {
+                    let sites =
+                        crate::scene::insertion::cylinder_sites(base, axis, *radius, *height, &v)
+                            .len();
+                    if *n as usize > sites {
+                        self.err(
+                            &k("count"),
+                            format!("{n} particles do not fit on the lattice: it has {sites} points in the cylinder"),
+                        );
+                    }
+                }
+            }
+            _ => {}
+        }
+        v
     }
 
     /// `insertions[i].packing`: the file read and checked, and the box region measured in
