@@ -44,6 +44,7 @@ nvidia-smi --query-gpu=name,memory.total --format=csv,noheader >> "$summary" 2>&
 # name|command: the GPU tests of the open work. The MPI tests start 2-3 ranks each.
 tests=(
   "gpu_pipeline|$T/gpu_pipeline --ignored --test-threads 3"
+  "gpu_rounded|$T/gpu_pipeline --ignored --exact rounded_grains_on_the_gpu_are_bitwise_the_cpu"
   "mpi_device_rebuild|$T/mpi_decomposition --ignored --exact gpu_rebuilds_on_the_device_are_the_host_round_trip"
   "mpi_gpu_ranks|$T/mpi_decomposition --ignored --exact gpu_ranks_match_one_gpu"
   "mpi_neighbor_modes|$T/mpi_decomposition --ignored --exact every_neighbor_mode_on_two_gpu_ranks_matches_one_gpu"
