@@ -91,7 +91,8 @@ fn rounded_grains_circumscribe_the_ball_swept_solid_at_the_same_volume() {
                     support + rho - o
                 );
             }
-            let polytope = oracle_intersection(&planes, 2.0 * r).volume;
+            let oracle = oracle_intersection(&planes, 2.0 * r);
+            let polytope = oracle.volume;
             let faces_only = oracle_intersection(&planes[..f], 2.0 * r).volume;
             let swept = steiner_volume(&t, rho);
             let kept = (polytope - swept) / (faces_only - swept);
@@ -126,13 +127,17 @@ fn rounded_grains_circumscribe_the_ball_swept_solid_at_the_same_volume() {
             // The same polytope, scaled: its volume ratio fixes the scale, and the oracle's
             // polytope scaled by it has the template's circumscribed radius.
             let s = (t.volume / polytope).cbrt();
-            let centroid = oracle_intersection(&planes, 2.0 * r).centroid;
             let far = g
                 .vertices
                 .iter()
                 .map(|x| x.coords.norm())
                 .fold(0.0, f64::max);
-            let corner_radius = planes_vertices_radius(&planes, &centroid, r) * s;
+            let corner_radius = oracle
+                .vertices
+                .iter()
+                .map(|x| (x - oracle.centroid).norm())
+                .fold(0.0, f64::max)
+                * s;
             // (The grain's merged strips move its hull by round-off of the merge, ~1e-8.)
             let tol = if t.name == "mineral_grain" {
                 1e-7
@@ -149,34 +154,6 @@ fn rounded_grains_circumscribe_the_ball_swept_solid_at_the_same_volume() {
             last_radius = g.circumscribed_radius;
         }
     }
-}
-
-/// Largest distance from `centre` to a vertex of `∩ {n·x ≤ o}`: each plane triple's point, kept
-/// where it satisfies every plane (the oracle's own vertex test, written out here).
-fn planes_vertices_radius(planes: &[(Vector3<f64>, f64)], centre: &Vector3<f64>, r: f64) -> f64 {
-    let mut far: f64 = 0.0;
-    let m = planes.len();
-    for i in 0..m {
-        for j in i + 1..m {
-            for k in j + 1..m {
-                let a = nalgebra::Matrix3::from_rows(&[
-                    planes[i].0.transpose(),
-                    planes[j].0.transpose(),
-                    planes[k].0.transpose(),
-                ]);
-                let Some(x) = a
-                    .try_inverse()
-                    .map(|inv| inv * Vector3::new(planes[i].1, planes[j].1, planes[k].1))
-                else {
-                    continue;
-                };
-                if planes.iter().all(|(n, o)| n.dot(&x) <= o + 1e-11 * r) {
-                    far = far.max((x - centre).norm());
-                }
-            }
-        }
-    }
-    far
 }
 
 fn refusal(t: &ConvexTemplate, fraction: f64) -> String {

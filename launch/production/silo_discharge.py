@@ -218,7 +218,7 @@ def main():
         c, k, samples, chi2, dof, birge = beverloo_fit(flowing, a.bulk_density, a.d, draws=20000)
         fit = lambda d0: c * a.bulk_density * math.sqrt(G) * max(d0 - k * a.d, 0.0) ** 2.5
         print(f"Beverloo: C = {c:.3f}, k = {k:.2f} (d = {a.d} m, rho_b = {a.bulk_density} kg/m3)")
-        if len(flowing) > 2 or samples:
+        if samples:
             (c1, c2), (k1, k2) = (interval([x[0] for x in samples], 0.68),
                                   interval([x[1] for x in samples], 0.68))
             (c3, c4), (k3, k4) = (interval([x[0] for x in samples], 0.95),

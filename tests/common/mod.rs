@@ -118,6 +118,8 @@ pub fn parry_pose(iso: &Isometry3<f64>) -> parry3d_f64::math::Pose {
 pub struct OracleOverlap {
     pub volume: f64,
     pub centroid: Vector3<f64>,
+    /// The intersection's vertices, each once.
+    pub vertices: Vec<Vector3<f64>>,
 }
 
 pub fn oracle_intersection(planes: &[(Vector3<f64>, f64)], scale: f64) -> OracleOverlap {
@@ -153,6 +155,7 @@ pub fn oracle_intersection(planes: &[(Vector3<f64>, f64)], scale: f64) -> Oracle
         return OracleOverlap {
             volume: 0.0,
             centroid: Vector3::zeros(),
+            vertices: pts,
         };
     }
     // Shift to the mean for a well-conditioned hull and tetrahedra.
@@ -188,11 +191,13 @@ pub fn oracle_intersection(planes: &[(Vector3<f64>, f64)], scale: f64) -> Oracle
         return OracleOverlap {
             volume: 0.0,
             centroid: mean,
+            vertices: pts,
         };
     }
     OracleOverlap {
         volume: vol.abs(),
         centroid: cen / vol + mean,
+        vertices: pts,
     }
 }
 
