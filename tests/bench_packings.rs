@@ -148,10 +148,43 @@ fn compression_on_the_gpu_is_the_cpus() {
     for key in ["cycles", "steps", "contacts_per_particle", "solid_fraction"] {
         assert_eq!(report[key], cpu_report[key], "{key}");
     }
-    assert!(
-        Packing::read(&out).unwrap() == Packing::read(cpu_out).unwrap(),
-        "the GPU's packing differs from the CPU's"
+    let (g, c) = (
+        Packing::read(&out).unwrap(),
+        Packing::read(cpu_out).unwrap(),
     );
+    if g != c {
+        // Say how: the cell, the order (the same grains in another order) or the grains.
+        let key = |p: &polydem::io::packing::PackedParticle| {
+            [p.position.x, p.position.y, p.position.z].map(f64::to_bits)
+        };
+        let (mut kg, mut kc): (Vec<_>, Vec<_>) = (
+            g.particles.iter().map(key).collect(),
+            c.particles.iter().map(key).collect(),
+        );
+        let in_order = g
+            .particles
+            .iter()
+            .zip(&c.particles)
+            .filter(|(a, b)| a != b)
+            .count();
+        let gap = g
+            .particles
+            .iter()
+            .zip(&c.particles)
+            .map(|(a, b)| (a.position - b.position).norm())
+            .fold(0.0, f64::max);
+        kg.sort();
+        kc.sort();
+        panic!(
+            "the GPU's packing differs from the CPU's: cells {:?} vs {:?}; {in_order} of {} \
+             particles differ in file order (positions by ≤ {gap:.3e} m); as sets of positions \
+             they are {}",
+            g.cell,
+            c.cell,
+            g.particles.len(),
+            if kg == kc { "the same" } else { "different" }
+        );
+    }
 }
 
 #[test]

@@ -352,22 +352,83 @@ fn assert_bitwise_equal(c: StateView, g: StateView, what: &str) {
         (g.0, g.1.to_bits()),
         "{what}: step and time"
     );
-    assert!(c.3 == g.3, "{what}: contact histories differ");
     let index: HashMap<u64, usize> = g.2.id.iter().enumerate().map(|(i, &x)| (x, i)).collect();
     let (a, b) = (c.2, g.2);
     assert_eq!(a.len(), b.len(), "{what}: particle counts");
+    // On a difference, say how many particles differ in which field and by how much at most,
+    // and how the contact histories differ, before failing: one failed device run then tells
+    // where to look.
+    let fields = [
+        "position",
+        "velocity",
+        "orientation",
+        "angular velocity",
+        "force",
+        "torque",
+    ];
+    let mut differing = [0usize; 6];
+    let mut largest = [0.0f64; 6];
+    let mut first = None;
     for i in 0..a.len() {
         let j = index[&a.id[i]];
-        assert!(
-            a.position[i] == b.position[j]
-                && a.velocity[i] == b.velocity[j]
-                && a.orientation[i] == b.orientation[j]
-                && a.angular_velocity[i] == b.angular_velocity[j]
-                && a.force[i] == b.force[j]
-                && a.torque[i] == b.torque[j],
-            "{what}: particle {} differs",
-            a.id[i]
+        let gaps = [
+            (
+                a.position[i] == b.position[j],
+                (a.position[i] - b.position[j]).norm(),
+            ),
+            (
+                a.velocity[i] == b.velocity[j],
+                (a.velocity[i] - b.velocity[j]).norm(),
+            ),
+            (
+                a.orientation[i] == b.orientation[j],
+                a.orientation[i].angle_to(&b.orientation[j]),
+            ),
+            (
+                a.angular_velocity[i] == b.angular_velocity[j],
+                (a.angular_velocity[i] - b.angular_velocity[j]).norm(),
+            ),
+            (a.force[i] == b.force[j], (a.force[i] - b.force[j]).norm()),
+            (
+                a.torque[i] == b.torque[j],
+                (a.torque[i] - b.torque[j]).norm(),
+            ),
+        ];
+        for (k, (same, gap)) in gaps.into_iter().enumerate() {
+            if !same {
+                differing[k] += 1;
+                largest[k] = largest[k].max(gap);
+                first.get_or_insert(a.id[i]);
+            }
+        }
+    }
+    let (hc, hg) = (c.3.entries(), g.3.entries());
+    let history_same = c.3 == g.3;
+    if !history_same || first.is_some() {
+        let keys_c: std::collections::HashSet<_> = hc.iter().map(|e| e.0).collect();
+        let keys_g: std::collections::HashSet<_> = hg.iter().map(|e| e.0).collect();
+        let by_key: HashMap<_, _> = hg.iter().map(|(k, s)| (*k, s)).collect();
+        let states_differ = hc
+            .iter()
+            .filter(|(k, s)| by_key.get(k).is_some_and(|sg| *sg != s))
+            .count();
+        let mut report = format!(
+            "{what}: contact histories {} ({} vs {} contacts, {} only on the CPU, {} only on the \
+             GPU, {} with different states); particles:",
+            if history_same { "equal" } else { "differ" },
+            hc.len(),
+            hg.len(),
+            keys_c.difference(&keys_g).count(),
+            keys_g.difference(&keys_c).count(),
+            states_differ,
         );
+        for k in 0..6 {
+            report += &format!(" {} {} (≤ {:.3e})", fields[k], differing[k], largest[k]);
+        }
+        if let Some(id) = first {
+            report += &format!("; first differing id {id}");
+        }
+        panic!("{report}");
     }
 }
 
@@ -624,6 +685,7 @@ fn settled_many_faced_grains_end_bitwise_equal_to_the_cpu() {
     let text = format!(
         "gravity = [0.0, 0.0, 0.0]\n\
          [simulation]\ndt_fraction = 0.025\nend_time = 1.0\nseed = 9\n\
+         [output]\ncheckpoint_interval = 1.0\n\
          [domain]\nmin = [0.0, 0.0, 0.0]\nmax = [{cell}, {cell}, {cell}]\n\
          periodic = [true, true, true]\n\
          [[materials]]\nname = \"grain\"\nyoungs_modulus = 1.0e7\npoisson_ratio = 0.3\n\

@@ -193,7 +193,12 @@ pub fn pack(opts: &PackOptions) -> Result<serde_json::Value> {
     let sim = engine.synced()?;
     let min = sim.scene.domain.min;
     let cell = sim.scene.domain.max - min;
-    let particles = (0..n)
+    // In id order: the backends keep their particles in different orders (the GPU's by its
+    // bins), and the file must not depend on which one compressed it.
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by_key(|&i| sim.particles.id[i]);
+    let particles = order
+        .into_iter()
         .map(|i| {
             let p = &sim.particles;
             // Centres relative to the corner, strictly inside the cell once written with 12
