@@ -23,12 +23,32 @@ pub struct Material {
 }
 
 /// Interaction parameters of two materials.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PairParameters {
     /// Coefficient of normal restitution e ∈ (0, 1].
     pub restitution: f64,
     /// Coulomb friction coefficient μ ≥ 0.
     pub friction: f64,
+    /// Rolling friction coefficient μ_r ≥ 0: the couple against the relative rolling of the
+    /// two bodies is at most `μ_r R_r F_n` ([`crate::contact::law`], docs/contact.md §5);
+    /// 0 (the default) adds none.
+    #[serde(default)]
+    pub rolling_friction: f64,
+}
+
+/// Printed as the derived form, with `rolling_friction` only where it is set: the restart
+/// fingerprint (`scene::restart`) prints the pair table, and a checkpoint written before the
+/// key existed must still restart the scene it came from.
+impl std::fmt::Debug for PairParameters {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut d = f.debug_struct("PairParameters");
+        d.field("restitution", &self.restitution)
+            .field("friction", &self.friction);
+        if self.rolling_friction != 0.0 {
+            d.field("rolling_friction", &self.rolling_friction);
+        }
+        d.finish()
+    }
 }
 
 /// A kind of particle: a template and a material.

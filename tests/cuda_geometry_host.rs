@@ -1345,6 +1345,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             tangential_stiffness: 8e7,
             restitution: e,
             friction: mu,
+            rolling_friction: 0.0,
             damping,
             rocking: !sphere,
             // A quarter of the cases along the trajectory (docs/contact.md §1): the face

@@ -406,6 +406,7 @@ fn a_body_wholly_inside_another_is_pushed_out_along_the_line_of_centres() {
             tangential_stiffness: 0.0,
             restitution: 1.0,
             friction: 0.0,
+            rolling_friction: 0.0,
             damping: 0.0,
             rocking: true,
             face_window: Default::default(),

@@ -247,6 +247,20 @@ fn packing_fraction_study() {
             ));
         }
     }
+    // Rolling friction (`[[material_pairs]] rolling_friction`, grain–grain and grain–wall): a
+    // couple of at most μ_r R_r F_n against the relative rolling, on top of what the faces
+    // give, three seeds each.
+    for mu_r in [0.1, 0.3] {
+        for seed in [6, 7, 8] {
+            cases.push((
+                format!("rolling friction {mu_r}, seed {seed}"),
+                text.replace("seed = 6", &format!("seed = {seed}")).replace(
+                    "friction = 0.5\n",
+                    &format!("friction = 0.5\nrolling_friction = {mu_r}\n"),
+                ),
+            ));
+        }
+    }
     // PD_STUDY="friction 1.0;fed at 500/s" runs only those cases (names hold commas).
     let only = std::env::var("PD_STUDY").ok();
     let mut measured = std::collections::HashMap::new();

@@ -16,6 +16,8 @@ pub struct ContactParameters {
     pub restitution: f64,
     /// Friction coefficient μ.
     pub friction: f64,
+    /// Rolling friction coefficient μ_r (0: no rolling couple).
+    pub rolling_friction: f64,
     /// Hunt–Crossley coefficient `ᾱ(e)` ([`super::restitution::hunt_crossley_alpha`]).
     pub damping: f64,
     /// Whether the contact area resists rocking (polyhedra). A sphere's contact has no face

@@ -442,6 +442,39 @@ fn rocking_couple(
     Some(w_perp * c_roll)
 }
 
+/// Rolling friction (docs/contact.md §5): a couple against the relative rolling `w_perp` of
+/// Coulomb's form, `μ_r R_r F_n` about `−ŵ⊥`, with the rolling radius `R_r = r_A r_B/(r_A +
+/// r_B)` from the bodies' centres to the contact point `r_e` (`r_A` against a wall), capped
+/// at the step's lock (friction.rs): one step's couple takes at most `share` of the relative
+/// rolling it opposes, so it never reverses the rolling and never does positive work. A body
+/// held by it creeps by at most one step's gain of rolling speed, which vanishes with the
+/// step. The couple it takes from B, `None` where there is none.
+fn rolling_couple(
+    params: &ContactParameters,
+    kin: &ContactKinematics,
+    normal: &NormalPart,
+    r_e: &Vector3<f64>,
+    w_perp: &Vector3<f64>,
+    dt: f64,
+) -> Option<Vector3<f64>> {
+    let rolling = w_perp.norm();
+    if !(params.rolling_friction > 0.0 && normal.f_normal > 0.0 && rolling > 0.0) {
+        return None;
+    }
+    let r_a = (r_e - kin.x_a).norm();
+    // A wall (no inverse mass) is flat: its radius is infinite and only A's term remains.
+    let radius = if kin.inverse_mass_b > 0.0 {
+        let r_b = (r_e - kin.x_b).norm();
+        r_a * r_b / (r_a + r_b)
+    } else {
+        r_a
+    };
+    let axis = w_perp / rolling;
+    let inverse = kin.weighted_inverse_inertia(&axis, normal.cap_a, normal.cap_b);
+    let lock = lock_coefficient(normal.share, inverse, dt) * rolling;
+    Some(axis * (params.rolling_friction * radius * normal.f_normal).min(lock))
+}
+
 /// Evaluates the contact law for an overlap, updating the contact's history `state` over `dt`
 /// (the module docs and docs/contact.md give every term).
 pub fn contact_forces(
@@ -511,6 +544,9 @@ pub fn contact_forces(
     let mut couple_b = n * m_tw;
     if let Some(rocking) = rocking_couple(params, kin, &normal, &w_perp, disk, dt) {
         couple_b -= rocking;
+    }
+    if let Some(rolling) = rolling_couple(params, kin, &normal, &r_e, &w_perp, dt) {
+        couple_b -= rolling;
     }
 
     // The elastic force and torque as the potential gives them; the damping and the friction

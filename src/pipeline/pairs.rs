@@ -63,6 +63,7 @@ impl Simulation {
             tangential_stiffness: ct_a + ct_b,
             restitution: pair.restitution,
             friction: pair.friction,
+            rolling_friction: pair.rolling_friction,
             damping: self.work.damping[ma * s.materials.len() + mb],
             rocking: !s.templates[s.particle_types[p.kind[i] as usize].template].sphere,
             face_window: s.simulation.face_window,

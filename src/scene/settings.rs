@@ -237,6 +237,15 @@ impl PairTable {
         }
     }
 
+    /// Whether some given pair has rolling friction (μ_r > 0), which the CUDA backend does
+    /// not evaluate yet.
+    pub fn any_rolling_friction(&self) -> bool {
+        self.entries
+            .iter()
+            .flatten()
+            .any(|p| p.rolling_friction > 0.0)
+    }
+
     /// Whether some given pair has friction (μ > 0): the tangential history is needed.
     pub fn any_friction(&self) -> bool {
         self.entries.iter().flatten().any(|p| p.friction > 0.0)
@@ -262,5 +271,6 @@ impl PairTable {
     pub const ABSENT: PairParameters = PairParameters {
         restitution: 1.0,
         friction: 0.0,
+        rolling_friction: 0.0,
     };
 }

@@ -23,6 +23,8 @@ pub struct PairSection {
     pub materials: [String; 2],
     pub restitution: f64,
     pub friction: f64,
+    /// Rolling friction coefficient μ_r (default 0: none).
+    pub rolling_friction: Option<f64>,
 }
 /// `[[particle_types]]`.
 #[derive(Debug, Deserialize)]

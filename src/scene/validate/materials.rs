@@ -181,6 +181,9 @@ impl Validator<'_> {
                 );
             }
             self.non_negative(&k("friction"), p.friction);
+            if let Some(r) = p.rolling_friction {
+                self.non_negative(&k("rolling_friction"), r);
+            }
             if mats.contains_key(&p.materials[0]) && mats.contains_key(&p.materials[1]) {
                 if table.try_get(a, b).is_some() {
                     self.err(
@@ -194,6 +197,7 @@ impl Validator<'_> {
                     PairParameters {
                         restitution: p.restitution,
                         friction: p.friction,
+                        rolling_friction: p.rolling_friction.unwrap_or(0.0),
                     },
                 );
             }
