@@ -19,16 +19,15 @@ const RADIUS: f64 = 0.005;
 const DENSITY: f64 = 2500.0;
 const G: f64 = 9.81;
 
-/// A sphere of radius [`RADIUS`] (E = 10 MPa, e = 0.5, μ = 0.5, rolling friction `mu_r`)
-/// resting on the floor plane, gravity tilted by `slope` about y (down the slope is +x), at
-/// rest after 0.05 s of settling.
-fn resting_sphere(mu_r: f64, slope: f64) -> Simulation {
+/// The scene of a sphere of radius [`RADIUS`] (E = 10 MPa, e = 0.5, μ = 0.5) on the floor
+/// plane at the default step, with `rolling_friction = rolling` (as written in TOML).
+fn ball_scene(rolling: &str) -> String {
     let types = format!(
         "[[particle_types]]\nname = \"ball\"\nmaterial = \"m\"\n\
          generator = {{ kind = \"sphere\", size = {:e} }}\n",
         2.0 * RADIUS
     );
-    let text = scene_text(&SceneSpec {
+    scene_text(&SceneSpec {
         e_modulus: 1e7,
         poisson: 0.3,
         density: DENSITY,
@@ -43,9 +42,14 @@ fn resting_sphere(mu_r: f64, slope: f64) -> Simulation {
     .replace("dt = 1e0\n", "")
     .replace(
         "friction = 0.5\n",
-        &format!("friction = 0.5\nrolling_friction = {mu_r:e}\n"),
+        &format!("friction = 0.5\nrolling_friction = {rolling}\n"),
     )
-    .replacen(
+}
+
+/// [`ball_scene`] with rolling friction `mu_r`, gravity tilted by `slope` about y (down the
+/// slope is +x), the sphere at rest on the floor after 0.05 s of settling.
+fn resting_sphere(mu_r: f64, slope: f64) -> Simulation {
+    let text = ball_scene(&format!("{mu_r:e}")).replacen(
         &format!("gravity = [0.0, 0.0, {:e}]", -G),
         &format!(
             "gravity = [{:e}, 0.0, {:e}]",
@@ -158,25 +162,7 @@ fn on_a_slope_steeper_than_mu_r_a_sphere_rolls_at_the_closed_form() {
 /// scene that sets one, before it touches a GPU, and says what to do.
 #[test]
 fn rolling_friction_is_checked_and_refused_where_not_evaluated() {
-    let text = |value: &str| {
-        scene_text(&SceneSpec {
-            e_modulus: 1e7,
-            poisson: 0.3,
-            density: DENSITY,
-            restitution: 0.5,
-            friction: 0.5,
-            gravity: -G,
-            dt: 1e-5,
-            wall_scale: Some(1.0),
-            wall_motion: None,
-            types: "[[particle_types]]\nname = \"ball\"\nmaterial = \"m\"\n\
-                    generator = { kind = \"sphere\", size = 0.01 }\n",
-        })
-        .replace(
-            "friction = 0.5\n",
-            &format!("friction = 0.5\nrolling_friction = {value}\n"),
-        )
-    };
+    let text = ball_scene;
     for bad in ["-0.1", "nan", "inf"] {
         let e = parse_scene(&text(bad), &repo_root(), "rolling.toml").unwrap_err();
         let msg = format!("{e:#}");
