@@ -157,6 +157,7 @@ PD_DEVICE void pair_contact_law(const PairArgs& q, size_t k, int a, int b, const
     params.tangential_stiffness = p.ct[a] + p.ct[b];
     params.restitution = pm.restitution;
     params.friction = pm.friction;
+    params.rolling_friction = pm.rolling_friction;
     params.damping = pm.damping;
     params.rocking = !PD_SPHERES;
     params.trajectory = PD_FACE_TRAJECTORY;

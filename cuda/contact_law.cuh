@@ -7,6 +7,12 @@
 #include "overlap.cuh"
 #include "layout.cuh"
 
+// Rolling friction compiled in: the kernels of a scene with some [[material_pairs]]
+// rolling_friction > 0 (KernelConfig), and the host parity harness.
+#ifndef PD_ROLLING_FRICTION
+#define PD_ROLLING_FRICTION 1
+#endif
+
 namespace pd {
 
 // Parameters of one contact (law.rs `ContactParameters`).
@@ -15,6 +21,7 @@ struct ContactParameters {
     double tangential_stiffness; // E1/(2(1+ν1)R1) + E2/(2(1+ν2)R2) (Pa/m)
     double restitution;
     double friction;
+    double rolling_friction; // μ_r (0: no rolling couple)
     double damping; // ᾱ(e)
     bool rocking;   // the contact area resists rocking (polyhedra, not spheres)
     bool trajectory; // face_window = "trajectory" (law.rs `FaceWindow`; PD_FACE_TRAJECTORY)
@@ -557,6 +564,23 @@ PD_HD ContactForces contact_forces(const ContactParameters& params, const PairMa
         }
         couple_b -= w_perp * c_roll;
     }
+#if PD_ROLLING_FRICTION
+    // Rolling friction (law.rs `rolling_couple`): Coulomb's couple μ_r R_r F_n against the
+    // relative rolling, R_r = r_A r_B/(r_A + r_B) from the centres to r_e (r_A on a wall),
+    // capped at the step's lock so that it never reverses the rolling.
+    if (params.rolling_friction > 0.0 && f_normal > 0.0 && rocking > 0.0) {
+        double r_a = norm(r_e - kin.x_a);
+        double radius = r_a;
+        if (kin.inverse_mass_b > 0.0) {
+            double r_b = norm(r_e - kin.x_b);
+            radius = r_a * r_b / (r_a + r_b);
+        }
+        V3<double> axis = w_perp / rocking;
+        double inverse = weighted_inverse_inertia(kin, axis, cap_a, cap_b);
+        double lock = lock_coefficient(share, inverse, dt) * rocking;
+        couple_b -= axis * min_(params.rolling_friction * radius * f_normal, lock);
+    }
+#endif
 
     V3<double> f_line = n * (f_normal - f_elastic) + tangential;
     ContactForces out;

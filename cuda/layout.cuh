@@ -50,6 +50,7 @@ struct PairMaterial {
     double damping;         // Hunt–Crossley ᾱ(e), computed on the host
     double log_restitution; // ln e, computed on the host
     double log_norm;        // sqrt((ln e)² + π²), computed on the host
+    double rolling_friction; // μ_r (0: no rolling couple)
 };
 #ifdef PD_SIZEOF_PAIR_MATERIAL
 PD_CHECK_SIZE(PairMaterial, PAIR_MATERIAL);
@@ -58,6 +59,7 @@ PD_CHECK_OFFSET(PairMaterial, friction, PAIR_MATERIAL);
 PD_CHECK_OFFSET(PairMaterial, damping, PAIR_MATERIAL);
 PD_CHECK_OFFSET(PairMaterial, log_restitution, PAIR_MATERIAL);
 PD_CHECK_OFFSET(PairMaterial, log_norm, PAIR_MATERIAL);
+PD_CHECK_OFFSET(PairMaterial, rolling_friction, PAIR_MATERIAL);
 #endif
 
 #if defined(__CUDACC_RTC__) || defined(__CUDACC__)

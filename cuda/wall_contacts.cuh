@@ -354,6 +354,7 @@ extern "C" __global__ void wall_contacts(WallContactsParams args) {
         params.tangential_stiffness = p.ct[i] + 0.0;
         params.restitution = pm.restitution;
         params.friction = pm.friction;
+        params.rolling_friction = pm.rolling_friction;
         params.damping = pm.damping;
         params.rocking = !PD_SPHERES;
         params.trajectory = PD_FACE_TRAJECTORY;

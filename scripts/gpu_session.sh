@@ -45,6 +45,7 @@ nvidia-smi --query-gpu=name,memory.total --format=csv,noheader >> "$summary" 2>&
 tests=(
   "gpu_pipeline|$T/gpu_pipeline --ignored --test-threads 3"
   "gpu_rounded|$T/gpu_pipeline --ignored --exact rounded_grains_on_the_gpu_are_bitwise_the_cpu"
+  "gpu_rolling|$T/gpu_pipeline --ignored --exact rolling_friction_on_the_gpu_is_bitwise_the_cpu"
   "gpu_quickstart|$T/gpu_pipeline --ignored --exact the_quickstart_on_the_gpu_ends_bitwise_equal_to_the_cpu"
   "mpi_device_rebuild|$T/mpi_decomposition --ignored --exact gpu_rebuilds_on_the_device_are_the_host_round_trip"
   "mpi_gpu_ranks|$T/mpi_decomposition --ignored --exact gpu_ranks_match_one_gpu"

@@ -18,7 +18,8 @@ use polydem::backend::cuda::probe::PROBE_FILE;
 ///   path), double, periodic, without walls, with the 16-bit hull index and 3 templates, and
 ///   mixed with the enumeration taking up to 16 planes (`PD_ENUM_MAX_PLANES`, the wider
 ///   staging and vertex workspace of `POLYDEM_ENUM_PLANES`).
-///   Spheres: double with walls, mixed, periodic, without walls.
+///   Spheres: double with walls, mixed, periodic, without walls. `PD_ROLLING_FRICTION`: on
+///   for mixed polyhedra with walls and for spheres with walls, off elsewhere.
 /// - `integrate.cu`: `PD_GHOSTS`, `PD_WALLS`; `neighbor.cu`: `PD_GHOSTS`: both values of each.
 /// - `probe.cu`: only the template sizes, so the hull index type ([`probe_configs`]).
 /// - `scan.cu`, `halo.cu`: nothing of the scene.
@@ -30,6 +31,7 @@ fn configs() -> Vec<KernelConfig> {
         precision: Precision::Double,
         walls: true,
         friction: true,
+        rolling_friction: false,
         periodic: false,
         spheres: false,
         templates: 1,
@@ -43,11 +45,12 @@ fn configs() -> Vec<KernelConfig> {
     vec![
         base.clone(),
         // A rank of a decomposed run (ghost flags in the pair search), mixed precision, face
-        // contacts along their trajectory.
+        // contacts along their trajectory, rolling friction.
         KernelConfig {
             precision: Precision::Mixed,
             ghosts: true,
             face_trajectory: true,
+            rolling_friction: true,
             ..base.clone()
         },
         // Periodic, no walls, several large templates: 128 faces need the 16-bit hull index.
@@ -62,9 +65,10 @@ fn configs() -> Vec<KernelConfig> {
             ghosts: true,
             ..base.clone()
         },
-        // The sphere fast path, with and without walls.
+        // The sphere fast path, with (and rolling friction) and without walls.
         KernelConfig {
             spheres: true,
+            rolling_friction: true,
             max_vertices: 42,
             max_faces: 80,
             ..base.clone()

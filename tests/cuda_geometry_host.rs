@@ -1266,7 +1266,8 @@ fn rand3(rng: &mut Rng, lo: f64, hi: f64) -> Vector3<f64> {
 /// `geometry::real`, bit for bit. The law's cases cover every branch: first touch with the
 /// kick window open and carrying the missed share, the slope at V, a body wholly inside the
 /// other (|S| ≈ 0), spheres on walls and on spheres, sticking and sliding springs, twisting
-/// friction within and at its Coulomb cap, rocking damping at its one-step bound, μ = 0, e = 1,
+/// friction within and at its Coulomb cap, rocking damping at its one-step bound, rolling
+/// friction at its Coulomb value and at the step's lock, μ = 0, e = 1,
 /// dt = 0 (the first force evaluation), and face contacts sampled along their trajectory
 /// (`face_window = "trajectory"`), first touches among them.
 #[test]
@@ -1325,8 +1326,9 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
     }
     writeln!(text, "law {n}").unwrap();
     // window, first-touch share, inside, sliding, twist cap, sphere, exit, split caps,
-    // trajectory, trajectory at first touch
-    let mut branches = [0usize; 11];
+    // trajectory, trajectory at first touch, deep face off the trajectory, rolling couple,
+    // rolling couple at the step's lock
+    let mut branches = [0usize; 13];
     for i in 0..n {
         let sphere = i % 4 == 3;
         let e = if i % 5 == 0 {
@@ -1345,7 +1347,13 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             tangential_stiffness: 8e7,
             restitution: e,
             friction: mu,
-            rolling_friction: 0.0,
+            // Rolling friction on a third of the cases, from a couple far below the step's
+            // lock to one far above it.
+            rolling_friction: if i % 3 == 1 {
+                10f64.powf(rng.range(-4.0, 0.0))
+            } else {
+                0.0
+            },
             damping,
             rocking: !sphere,
             // A quarter of the cases along the trajectory (docs/contact.md §1): the face
@@ -1477,6 +1485,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
             } else {
                 0.0
             },
+            params.rolling_friction,
             volume,
         ] {
             hex(&mut text, x);
@@ -1569,6 +1578,21 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
                 || f_whole.torque_a != f.torque_a
                 || f_whole.torque_b != f.torque_b,
         );
+        // The rolling couple acted (the torques differ without it), at its Coulomb value or at
+        // the step's lock (which μ_r does not change: doubling μ_r leaves the torques).
+        if params.rolling_friction > 0.0 {
+            let with = |rolling_friction| {
+                let p = ContactParameters {
+                    rolling_friction,
+                    ..params.clone()
+                };
+                contact_forces(&p, &overlap, &kin, &mut state.clone(), dt)
+            };
+            let (none, twice) = (with(0.0), with(2.0 * params.rolling_friction));
+            let rolled = none.torque_b != f.torque_b;
+            branches[11] += usize::from(rolled);
+            branches[12] += usize::from(rolled && twice.torque_b == f.torque_b);
+        }
         let mut l = format!("W {i}");
         hex3(&mut l, &f.force_b);
         hex3(&mut l, &f.torque_a);
@@ -1584,7 +1608,7 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         "{} cases ({n} sin/cos, {n} cbrt, {n} ln/exp/pow, {n} law; law branches: window {}, \
          first-touch share {}, inside {}, sliding {}, twist capped {}, spheres {}, exit {}, \
          split caps {}, trajectory {}, trajectory at first touch {}, deep face off the \
-         trajectory {}), {} differ",
+         trajectory {}, rolling couple {}, rolling couple at its lock {}), {} differ",
         want.len(),
         branches[0],
         branches[1],
@@ -1597,6 +1621,8 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         branches[8],
         branches[9],
         branches[10],
+        branches[11],
+        branches[12],
         mismatches.len()
     );
     for (k, what) in [
@@ -1611,6 +1637,8 @@ fn cuda_contact_law_and_math_match_the_rust_reference_bitwise() {
         "trajectory",
         "trajectory at first touch",
         "deep face off the trajectory",
+        "rolling couple",
+        "rolling couple at its lock",
     ]
     .iter()
     .enumerate()

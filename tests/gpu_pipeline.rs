@@ -270,6 +270,55 @@ fn six_thousand_steps_of_a_sphere_pour_match_the_cpu() {
     );
 }
 
+/// Rolling friction (`[[material_pairs]] rolling_friction`, docs/contact.md §5) on the GPU is
+/// the CPU's bit for bit: the dense pour of dodecahedra in double and in mixed precision (against
+/// its CPU twin) and of spheres, 10 000 steps each, with the couple on pair and wall contacts.
+#[test]
+#[ignore = "needs a CUDA GPU"]
+fn rolling_friction_on_the_gpu_is_bitwise_the_cpu() {
+    let dir = temp_dir("gpu-rolling");
+    for (kind, precision) in [
+        ("dodecahedron", "double"),
+        ("dodecahedron", "mixed"),
+        ("sphere", "double"),
+    ] {
+        let text = rolling_pour_text(kind);
+        let scene = dir.join(format!("rolling_{kind}.toml"));
+        std::fs::write(&scene, text).unwrap();
+        let tag = format!("rolling-{kind}-{precision}");
+        let last = run_on_both_in(precision, &scene, Some(10_000), &[], &tag);
+        assert_eq!(last[0].step, 10_000);
+        assert!(
+            last[0].history.len() > 100,
+            "{tag}: {} contacts",
+            last[0].history.len()
+        );
+        assert_bitwise_equal(
+            checkpoint_view(&last[0]),
+            checkpoint_view(&last[1]),
+            &format!("rolling friction, {kind}, GPU {precision}"),
+        );
+    }
+}
+
+/// The dense pour of `kind` with rolling friction 0.1 between grains and 0.05 on the walls, and
+/// a checkpoint at its end.
+fn rolling_pour_text(kind: &str) -> String {
+    let text = scene_text(kind)
+        .replace(
+            "friction = 0.5\n",
+            "friction = 0.5\nrolling_friction = 0.1\n",
+        )
+        .replace(
+            "friction = 0.4\n",
+            "friction = 0.4\nrolling_friction = 0.05\n",
+        )
+        .replace("[output]\n", "[output]\ncheckpoint_interval = 1.0\n");
+    assert_eq!(text.matches("rolling_friction").count(), 2);
+    assert!(text.contains("checkpoint_interval"));
+    text
+}
+
 /// Runs `scene` with `polydem run` on the CPU and on the GPU (double precision), with
 /// `--max-steps` when given and with the environment `env` on the GPU run, and returns the
 /// final checkpoints (CPU first).

@@ -251,6 +251,7 @@ int run_law(const char* path) {
         pm.log_norm = read_f64();
         params.rocking = read_f64() != 0.0;
         params.trajectory = read_f64() != 0.0;
+        pm.rolling_friction = params.rolling_friction = read_f64();
         pd::Overlap<double> o;
         o.volume = read_f64();
         o.centroid = read_v3();

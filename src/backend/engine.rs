@@ -30,17 +30,6 @@ impl From<Simulation> for Start {
     }
 }
 
-/// What of `scene` the CUDA backend does not evaluate yet, said with the key that sets it and
-/// what to do; `None` where it runs all of it. Rolling friction (`[[material_pairs]]
-/// rolling_friction`) is on the CPU backend only so far.
-pub fn not_on_the_gpu(scene: &Scene) -> Option<String> {
-    scene.pairs.any_rolling_friction().then(|| {
-        "[[material_pairs]] rolling_friction > 0 is evaluated by the CPU backend only so far: \
-         run with --backend cpu, or set it to 0 for the GPU"
-            .to_string()
-    })
-}
-
 /// A simulation on the backend of its [`Device`]: the only way to make a backend.
 pub struct Engine {
     backend: Box<dyn Backend>,
@@ -51,15 +40,6 @@ impl Engine {
     /// Starts `start` on `device`.
     pub fn new(start: impl Into<Start>, device: Device) -> Result<Self> {
         let start = start.into();
-        if let Device::Cuda { .. } = device {
-            let scene = match &start {
-                Start::State(sim) => &sim.state.scene,
-                Start::Scene { scene, .. } => scene,
-            };
-            if let Some(why) = not_on_the_gpu(scene) {
-                anyhow::bail!("{why}");
-            }
-        }
         let backend: Box<dyn Backend> = match (start, device) {
             (Start::State(mut sim), Device::Cpu | Device::CpuMixed) => {
                 sim.set_pair_precision(device.pair_precision());

@@ -12,7 +12,7 @@ mod detect;
 mod engine;
 
 pub use detect::{CudaInfo, GpuInfo, cuda_info};
-pub use engine::{Engine, Start, not_on_the_gpu};
+pub use engine::{Engine, Start};
 
 use crate::domain::Comm;
 use crate::neighbor::NeighborReport;

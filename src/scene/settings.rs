@@ -237,8 +237,8 @@ impl PairTable {
         }
     }
 
-    /// Whether some given pair has rolling friction (μ_r > 0), which the CUDA backend does
-    /// not evaluate yet.
+    /// Whether some given pair has rolling friction (μ_r > 0): the CUDA kernels compile the
+    /// rolling couple in (`PD_ROLLING_FRICTION`).
     pub fn any_rolling_friction(&self) -> bool {
         self.entries
             .iter()

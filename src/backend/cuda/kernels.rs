@@ -59,6 +59,8 @@ pub struct KernelConfig {
     pub walls: bool,
     /// Some material pair has friction (tangential history compiled in).
     pub friction: bool,
+    /// Some material pair has rolling friction (the rolling couple compiled in).
+    pub rolling_friction: bool,
     /// Some axis is periodic (minimum-image displacements in the pair kernels).
     pub periodic: bool,
     /// Every particle is a sphere: stages 4–5 and the wall overlaps are the sphere formulas
@@ -90,6 +92,7 @@ impl KernelConfig {
             precision,
             walls: !scene.walls.is_empty(),
             friction: scene.pairs.any_friction(),
+            rolling_friction: scene.pairs.any_rolling_friction(),
             periodic: scene.domain.periodic.iter().any(|&p| p),
             spheres: scene.spheres_only(),
             templates: scene.templates.len().max(1),
@@ -122,6 +125,7 @@ impl KernelConfig {
             ),
             format!("-DPD_WALLS={}", flag(self.walls)),
             format!("-DPD_FRICTION={}", flag(self.friction)),
+            format!("-DPD_ROLLING_FRICTION={}", flag(self.rolling_friction)),
             format!("-DPD_PERIODIC={}", flag(self.periodic)),
             format!("-DPD_SPHERES={}", flag(self.spheres)),
             format!("-DPD_TEMPLATES={}", self.templates),

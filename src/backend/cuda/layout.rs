@@ -72,10 +72,10 @@ pub fn history_state(record: &[f64]) -> crate::contact::ContactState {
     }
 }
 
-/// Contact parameters of one pair of materials (`cuda/contact_law.cuh: PairMaterial`): the
+/// Contact parameters of one pair of materials (`cuda/layout.cuh: PairMaterial`): the
 /// restitution, friction and the Hunt–Crossley coefficient ᾱ(e), with ln e and sqrt((ln e)² + π²) of the
 /// tangential dashpot (`contact::law`), computed here so that the kernels take no logarithm per
-/// contact and round as the CPU backend does.
+/// contact and round as the CPU backend does, and the rolling friction μ_r.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PairMaterial {
@@ -84,12 +84,14 @@ pub struct PairMaterial {
     pub damping: f64,
     pub log_restitution: f64,
     pub log_norm: f64,
+    pub rolling_friction: f64,
 }
 
 impl PairMaterial {
-    /// The parameters of a pair with restitution `e`, friction coefficient `friction` and
-    /// damping coefficient `damping` = ᾱ(e) (as `SimulationBuilder::build` computes it).
-    pub fn new(restitution: f64, friction: f64, damping: f64) -> Self {
+    /// The parameters of a pair with restitution `e`, friction coefficient `friction`, rolling
+    /// friction `rolling_friction` and damping coefficient `damping` = ᾱ(e) (as
+    /// `SimulationBuilder::build` computes it).
+    pub fn new(restitution: f64, friction: f64, rolling_friction: f64, damping: f64) -> Self {
         // The same expressions as contact::law (`e.ln()`, `powi(2)`), for the same bits.
         let log_restitution = restitution.ln();
         let log_norm = (log_restitution.powi(2) + std::f64::consts::PI.powi(2)).sqrt();
@@ -99,6 +101,7 @@ impl PairMaterial {
             damping,
             log_restitution,
             log_norm,
+            rolling_friction,
         }
     }
 }
@@ -441,7 +444,7 @@ macro_rules! checked_layouts {
 
 checked_layouts! {
     GridParams => "GRID_PARAMS" { min, max, size, dims, periodic }
-    PairMaterial => "PAIR_MATERIAL" { restitution, friction, damping, log_restitution, log_norm }
+    PairMaterial => "PAIR_MATERIAL" { restitution, friction, damping, log_restitution, log_norm, rolling_friction }
     StepFlags => "STEP_FLAGS" {
         rebuild, outside, unstable, first_unstable, wall_rebuild, snapshot,
     }

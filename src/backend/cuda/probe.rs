@@ -152,6 +152,7 @@ impl GeometryProbe {
             precision: Precision::Double,
             walls: false,
             friction: false,
+            rolling_friction: false,
             periodic: false,
             spheres: false,
             templates: 1,

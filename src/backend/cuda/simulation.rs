@@ -87,7 +87,8 @@ impl CudaSimulation {
         let k = Kernels::load(&ctx, &config, arch).map_err(set_up)?;
         let device = ctx.name().unwrap_or_else(|_| format!("GPU {ordinal}"));
         let s = &host.scene;
-        // Materials: restitution, friction and damping coefficient per pair (as `SimulationBuilder::build` does).
+        // Materials: restitution, friction, rolling friction and damping coefficient per pair
+        // (as `SimulationBuilder::build` does).
         let n_mat = s.materials.len();
         let mut materials = Vec::with_capacity(n_mat * n_mat);
         for a in 0..n_mat {
@@ -97,6 +98,7 @@ impl CudaSimulation {
                 materials.push(PairMaterial::new(
                     pp.restitution,
                     pp.friction,
+                    pp.rolling_friction,
                     hunt_crossley_alpha(e),
                 ));
             }
