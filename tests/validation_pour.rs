@@ -306,7 +306,8 @@ fn pour(scene: polydem::scene::Scene, count: usize, half_width: f64, box_height:
 /// ones); restitution, stiffness, the feed rate, rounded edges, rolling friction and the shape
 /// (cubes and spheres of the same volume) are measured beside it. About 30 minutes on 2 cores
 /// for all but the shapes (the rounded grains, 62 faces, about two thirds of it), and 20 more on
-/// one thread for the nine shape cases (cubes 280 s, dodecahedra 135 s, spheres 12 s each).
+/// one thread for the nine shape cases at μ 0.5 (cubes 280 s, dodecahedra 135 s, spheres 12 s
+/// each) and 20 more for the twelve at μ 0.1 and 1.0.
 #[test]
 #[ignore = "study: cargo test --release --test validation_pour -- --ignored packing_fraction_study"]
 fn packing_fraction_study() {
@@ -432,6 +433,23 @@ fn packing_fraction_study() {
         cases.push((
             format!("dodecahedra from 20 cm, seed {seed}"),
             seeded(&tall),
+        ));
+        // The shapes' order at another friction: spheres at μ 0.1 and 1.0, cubes and
+        // dodecahedra from the tall cloud at 1.0.
+        let rough = |t: &str, mu: f64| t.replace("friction = 0.5", &format!("friction = {mu}"));
+        for mu in [0.1, 1.0] {
+            cases.push((
+                format!("spheres, friction {mu:?}, seed {seed}"),
+                seeded(&rough(&with_generator(&text, &sphere), mu)),
+            ));
+        }
+        cases.push((
+            format!("cubes from 20 cm, friction 1.0, seed {seed}"),
+            seeded(&rough(&with_generator(&tall, &cube), 1.0)),
+        ));
+        cases.push((
+            format!("dodecahedra from 20 cm, friction 1.0, seed {seed}"),
+            seeded(&rough(&tall, 1.0)),
         ));
     }
     // PD_STUDY="friction 1.0;fed at 500/s" runs only those cases (names hold commas).
