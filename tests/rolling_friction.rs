@@ -159,7 +159,7 @@ fn on_a_slope_steeper_than_mu_r_a_sphere_rolls_at_the_closed_form() {
 }
 
 /// A negative or non-finite coefficient is refused with its key; a valid one reaches the pair
-/// table.
+/// table and compiles the CUDA kernels' couple in (`PD_ROLLING_FRICTION`).
 #[test]
 fn rolling_friction_is_checked() {
     let text = ball_scene;
@@ -176,6 +176,15 @@ fn rolling_friction_is_checked() {
     assert!(scene.pairs.any_rolling_friction());
     let zero = parse_scene(&text("0.0"), &repo_root(), "rolling.toml").unwrap();
     assert!(!zero.pairs.any_rolling_friction());
+    // The CUDA kernels compile the couple in for the first scene only.
+    use polydem::backend::cuda::KernelConfig;
+    for (scene, flag) in [(&scene, "1"), (&zero, "0")] {
+        for precision in [polydem::Precision::Double, polydem::Precision::Mixed] {
+            let defines = KernelConfig::for_scene(scene, precision).defines();
+            let want = format!("-DPD_ROLLING_FRICTION={flag}");
+            assert!(defines.contains(&want), "{want} not in {defines:?}");
+        }
+    }
 }
 
 /// A scene that does not set the key prints its pair table as before the key existed, so the
