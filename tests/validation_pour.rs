@@ -307,7 +307,8 @@ fn pour(scene: polydem::scene::Scene, count: usize, half_width: f64, box_height:
 /// (cubes and spheres of the same volume) are measured beside it. About 30 minutes on 2 cores
 /// for all but the shapes (the rounded grains, 62 faces, about two thirds of it), and 20 more on
 /// one thread for the nine shape cases at μ 0.5 (cubes 280 s, dodecahedra 135 s, spheres 12 s
-/// each) and 20 more for the twelve at μ 0.1 and 1.0.
+/// each), 20 more for the twelve at μ 0.1 and 1.0, and 40 more for the six at 2 MPa (the
+/// dodecahedra 12 minutes each).
 #[test]
 #[ignore = "study: cargo test --release --test validation_pour -- --ignored packing_fraction_study"]
 fn packing_fraction_study() {
@@ -450,6 +451,17 @@ fn packing_fraction_study() {
         cases.push((
             format!("dodecahedra from 20 cm, friction 1.0, seed {seed}"),
             seeded(&rough(&tall, 1.0)),
+        ));
+        // And at ten times the stiffness (the shipped cloud): whether the softening sets the
+        // order of spheres and dodecahedra.
+        let stiff = |t: &str| t.replace("youngs_modulus = 2.0e5", "youngs_modulus = 2.0e6");
+        cases.push((
+            format!("spheres, grain E 2 MPa, seed {seed}"),
+            seeded(&stiff(&with_generator(&text, &sphere))),
+        ));
+        cases.push((
+            format!("dodecahedra, grain E 2 MPa, seed {seed}"),
+            seeded(&stiff(&text)),
         ));
     }
     // PD_STUDY="friction 1.0;fed at 500/s" runs only those cases (names hold commas).
