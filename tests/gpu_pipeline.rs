@@ -286,18 +286,8 @@ fn rolling_friction_on_the_gpu_is_bitwise_the_cpu() {
         let scene = dir.join(format!("rolling_{kind}.toml"));
         std::fs::write(&scene, text).unwrap();
         let tag = format!("rolling-{kind}-{precision}");
-        let last = run_on_both_in(precision, &scene, Some(10_000), &[], &tag);
-        assert_eq!(last[0].step, 10_000);
-        assert!(
-            last[0].history.len() > 100,
-            "{tag}: {} contacts",
-            last[0].history.len()
-        );
-        assert_bitwise_equal(
-            checkpoint_view(&last[0]),
-            checkpoint_view(&last[1]),
-            &format!("rolling friction, {kind}, GPU {precision}"),
-        );
+        let what = format!("rolling friction, {kind}, GPU {precision}");
+        both_end_bitwise_equal(precision, &scene, 10_000, &[], 100, &tag, &what);
     }
 }
 
@@ -374,6 +364,28 @@ fn run_on_both_with(
         last.push(read_checkpoint(&out.join("checkpoints/latest.ckpt")).unwrap());
     }
     last
+}
+
+/// Runs `scene` for `steps` on both backends in `precision` (with `env` on both) and requires
+/// both to reach the step, the CPU's end to hold more than `contacts` contacts, and the two
+/// final states to be bitwise equal (`what` names the comparison).
+fn both_end_bitwise_equal(
+    precision: &str,
+    scene: &std::path::Path,
+    steps: u64,
+    env: &[(&str, &str)],
+    contacts: usize,
+    tag: &str,
+    what: &str,
+) {
+    let last = run_on_both_with(precision, scene, Some(steps), env, &[], tag);
+    assert_eq!(last[0].step, steps, "{tag}");
+    assert!(
+        last[0].history.len() > contacts,
+        "{tag}: {} contacts",
+        last[0].history.len()
+    );
+    assert_bitwise_equal(checkpoint_view(&last[0]), checkpoint_view(&last[1]), what);
 }
 
 /// A state to compare: step, time, particles, contact history.
@@ -757,18 +769,8 @@ fn settled_many_faced_grains_end_bitwise_equal_to_the_cpu() {
         for precision in ["double", "mixed"] {
             let tag = format!("minerals-{planes}-{precision}");
             let env = [("POLYDEM_ENUM_PLANES", planes)];
-            let last = run_on_both_with(precision, &scene, Some(60), &env, &[], &tag);
-            assert_eq!(last[0].step, 60);
-            assert!(
-                last[0].history.len() > 13_000,
-                "{} contacts",
-                last[0].history.len()
-            );
-            assert_bitwise_equal(
-                checkpoint_view(&last[0]),
-                checkpoint_view(&last[1]),
-                &format!("GPU {precision}, enumeration up to {planes} planes"),
-            );
+            let what = format!("GPU {precision}, enumeration up to {planes} planes");
+            both_end_bitwise_equal(precision, &scene, 60, &env, 13_000, &tag, &what);
         }
     }
 }
@@ -791,23 +793,8 @@ fn rounded_grains_on_the_gpu_are_bitwise_the_cpu() {
     let scene = dir.join("rounded_pour.toml");
     std::fs::write(&scene, text).unwrap();
     for precision in ["double", "mixed"] {
-        let last = run_on_both_in(
-            precision,
-            &scene,
-            Some(10_000),
-            &[],
-            &format!("rounded-{precision}"),
-        );
-        assert_eq!(last[0].step, 10_000);
-        assert!(
-            last[0].history.len() > 500,
-            "{} contacts",
-            last[0].history.len()
-        );
-        assert_bitwise_equal(
-            checkpoint_view(&last[0]),
-            checkpoint_view(&last[1]),
-            &format!("rounded grains, GPU {precision}"),
-        );
+        let tag = format!("rounded-{precision}");
+        let what = format!("rounded grains, GPU {precision}");
+        both_end_bitwise_equal(precision, &scene, 10_000, &[], 500, &tag, &what);
     }
 }

@@ -406,7 +406,8 @@ fn packing_fraction_study() {
     let cube_edge = dodecahedron.cbrt();
     let sphere_diameter = (6.0 * dodecahedron / std::f64::consts::PI).cbrt();
     let line_start = text.find("mesh = \"").expect("the dodecahedra's mesh line");
-    let line_end = text[line_start..].find("scale = 0.004\n").unwrap() + line_start + 14;
+    let scale = "scale = 0.004\n";
+    let line_end = text[line_start..].find(scale).unwrap() + line_start + scale.len();
     let with_generator = |t: &str, generator: &str| {
         let mut t = t.to_string();
         t.replace_range(line_start..line_end, generator);
