@@ -734,8 +734,8 @@ fn moving_walls_on_the_gpu_match_the_cpu() {
 /// Many-faced grains, where most contacts keep 9–16 planes: 60 steps of the committed settled
 /// cell of 4000 mineral grains (32 triangles; periodic, 14 058 contacts) by `polydem run` on both
 /// backends, in double and in mixed precision, with the vertex enumeration taking up to 8
-/// planes (the default: the GPU's deferred pass hulls the rest) and up to 16
-/// (`POLYDEM_ENUM_PLANES=16` on both: the lean passes stage them). Double ends bitwise equal to
+/// planes (`POLYDEM_ENUM_PLANES=8` on both: the GPU's deferred pass hulls the rest) and up to
+/// 16 (the default of this many-faced scene, set explicitly: the lean passes stage them). Double ends bitwise equal to
 /// the CPU at both settings; mixed, whose CPU twin evaluates the pair geometry as the GPU does,
 /// too (the f32 geometry is the headers', bit for bit on the host, tests/cuda_geometry_host.rs).
 #[test]

@@ -402,3 +402,123 @@ fn nearly_coincident_planes_keep_the_volume_continuous() {
         theta *= 1.7;
     }
 }
+
+/// The enumeration's limit is the scene's (`Scene::enum_planes`): 16 where a polyhedral
+/// template has more than 12 faces (the shipped mineral grain, 32 triangles; the catalyst
+/// cylinder, 26 faces), 8 for the dodecahedra and spheres, on both backends (the GPU kernels'
+/// `PD_ENUM_MAX_PLANES`); and a CPU run takes it. 5 steps of the
+/// committed settled cell of 4000 mineral grains by `polydem run` on the CPU end bitwise where
+/// `POLYDEM_ENUM_PLANES=16` ends and elsewhere than `POLYDEM_ENUM_PLANES=8` (the 10 226 of its
+/// contacts that keep 9–16 planes change their faces' path, and the results their last bits).
+#[test]
+fn many_faced_scenes_take_the_enumeration_to_sixteen_planes() {
+    use polydem::io::read_checkpoint;
+    let root = repo_root();
+    if let Ok(v) = std::env::var("POLYDEM_ENUM_PLANES") {
+        eprintln!("POLYDEM_ENUM_PLANES={v} is set: the scene defaults are not what it checks");
+        return;
+    }
+    let settled = root.join("launch/bench/settled");
+    for (scene, planes) in [
+        ("mineral_grains_1e5", 16),
+        ("cylinders_1e5", 16),
+        ("dodecahedra_1e5", 8),
+        ("spheres_1e5", 8),
+    ] {
+        let s = polydem::scene::load_scene(&settled.join(format!("{scene}.toml"))).unwrap();
+        assert_eq!(s.enum_planes(), planes, "{scene}");
+        // The GPU's kernels are compiled for the same limit.
+        let config = polydem::backend::cuda::KernelConfig::for_scene(&s, polydem::Precision::Mixed);
+        let want = format!("-DPD_ENUM_MAX_PLANES={planes}");
+        assert!(
+            config.defines().contains(&want),
+            "{scene}: {want} not in the defines"
+        );
+    }
+    let cell = 1.9347371379318832e-2;
+    let text = format!(
+        "gravity = [0.0, 0.0, 0.0]\n\
+         [simulation]\ndt_fraction = 0.025\nend_time = 1.0\nseed = 9\n\
+         [output]\ncheckpoint_interval = 1.0\n\
+         [domain]\nmin = [0.0, 0.0, 0.0]\nmax = [{cell}, {cell}, {cell}]\n\
+         periodic = [true, true, true]\n\
+         [[materials]]\nname = \"grain\"\nyoungs_modulus = 1.0e7\npoisson_ratio = 0.3\n\
+         density = 2500.0\n\
+         [[material_pairs]]\nmaterials = [\"grain\", \"grain\"]\nrestitution = 0.5\n\
+         friction = 0.5\n\
+         [[particle_types]]\nname = \"mineral_grain\"\nmaterial = \"grain\"\n\
+         mesh = \"{}\"\nscale = 1.0\n\
+         [[insertions]]\ntype = \"mineral_grain\"\n\
+         region = {{ kind = \"box\", min = [0.0, 0.0, 0.0], max = [{cell}, {cell}, {cell}] }}\n\
+         count = 4000\npacking = \"{}\"\n",
+        root.join("meshes/particles/mineral_grain.stl").display(),
+        root.join("launch/bench/packings/mineral_grains.packing")
+            .display(),
+    );
+    let dir = temp_dir("enum-planes-default");
+    let scene = dir.join("mineral_cell.toml");
+    std::fs::write(&scene, text).unwrap();
+    let run = |setting: Option<&str>| {
+        let out = dir.join(setting.unwrap_or("default"));
+        let mut cmd = std::process::Command::new(polydem_bin());
+        cmd.env_remove("POLYDEM_ENUM_PLANES");
+        if let Some(n) = setting {
+            cmd.env("POLYDEM_ENUM_PLANES", n);
+        }
+        cmd.args([
+            "run",
+            scene.to_str().unwrap(),
+            "--backend",
+            "cpu",
+            "--max-steps",
+            "5",
+        ]);
+        let done = cmd.arg("--out").arg(&out).output().unwrap();
+        assert!(
+            done.status.success(),
+            "{setting:?}: {}",
+            String::from_utf8_lossy(&done.stderr)
+        );
+        read_checkpoint(&out.join("checkpoints/latest.ckpt")).unwrap()
+    };
+    let (default, sixteen, eight) = (run(None), run(Some("16")), run(Some("8")));
+    let same = |a: &polydem::io::Checkpoint, b: &polydem::io::Checkpoint| {
+        let (p, q) = (&a.particles, &b.particles);
+        a.step == b.step
+            && p.id == q.id
+            && p.position == q.position
+            && p.velocity == q.velocity
+            && p.orientation == q.orientation
+            && p.angular_velocity == q.angular_velocity
+            && p.force == q.force
+            && p.torque == q.torque
+            && a.history == b.history
+    };
+    assert_eq!(default.step, 5);
+    assert!(default.history.len() > 13_000, "{}", default.history.len());
+    assert!(
+        same(&default, &sixteen),
+        "the default is not the 16-plane run"
+    );
+    assert!(
+        !same(&default, &eight),
+        "the 8-plane run is the same: the limit did nothing"
+    );
+    // The two limits differ by round-off only: the same contacts, forces within 1e-9 of the
+    // largest.
+    assert_eq!(default.history.len(), eight.history.len());
+    let scale = default
+        .particles
+        .force
+        .iter()
+        .map(|f| f.norm())
+        .fold(0.0, f64::max);
+    let gap = default
+        .particles
+        .force
+        .iter()
+        .zip(&eight.particles.force)
+        .map(|(a, b)| (a - b).norm())
+        .fold(0.0, f64::max);
+    assert!(gap <= 1e-9 * scale, "forces differ by {gap:e} of {scale:e}");
+}

@@ -333,13 +333,8 @@ pub fn prism_overlap_culled<T: Real>(
             .iter()
             .all(|p| p.distance(&centre.point) < -tol);
     let out = if proven {
-        overlap_about(
-            ws,
-            body.planes(),
-            kept,
-            centre.point,
-            super::vertex_enumeration::enum_planes(),
-        )
+        let enumerate_up_to = ws.enum_planes();
+        overlap_about(ws, body.planes(), kept, centre.point, enumerate_up_to)
     } else {
         body.restore_aside();
         overlap_volume(ws, body.planes(), kept, start)

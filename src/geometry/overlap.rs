@@ -113,6 +113,9 @@ pub struct OverlapWorkspace<T: Real> {
     m: usize,
     /// The last evaluation's faces came from the dual hull (not the enumeration).
     by_hull: bool,
+    /// The most planes whose faces come from the vertex enumeration (the run's
+    /// `Scene::enum_planes`; [`enum_planes`] until set).
+    enum_planes: usize,
 }
 
 impl<T: Real> Default for OverlapWorkspace<T> {
@@ -131,6 +134,7 @@ impl<T: Real> Default for OverlapWorkspace<T> {
             x0: Vector3::zeros(),
             m: 0,
             by_hull: false,
+            enum_planes: enum_planes(),
         }
     }
 }
@@ -139,6 +143,22 @@ impl<T: Real> OverlapWorkspace<T> {
     /// A workspace on the heap (it is tens of kilobytes).
     pub fn boxed() -> Box<Self> {
         Box::default()
+    }
+
+    /// The most planes whose overlap faces come from the vertex enumeration rather than the
+    /// dual hull ([`overlap_volume`]).
+    pub fn enum_planes(&self) -> usize {
+        self.enum_planes
+    }
+
+    /// Sets [`Self::enum_planes`] (the run's `Scene::enum_planes`). Panics past
+    /// [`ENUM_PLANES_CAPACITY`], which the enumeration's buffers are sized for.
+    pub fn set_enum_planes(&mut self, n: usize) {
+        assert!(
+            n <= ENUM_PLANES_CAPACITY,
+            "{n} planes exceed the enumeration's capacity"
+        );
+        self.enum_planes = n;
     }
 
     /// The farthest that a vertex of the last evaluation's intersection lies outside one of its
@@ -255,7 +275,8 @@ pub fn overlap_volume<T: Real>(
     b: &[Plane<T>],
     start: Vector3<T>,
 ) -> Result<Overlap<T>, OverlapError> {
-    overlap_about_centre(ws, a, b, start, enum_planes())
+    let enumerate_up_to = ws.enum_planes;
+    overlap_about_centre(ws, a, b, start, enumerate_up_to)
 }
 
 /// [`overlap_volume`] with the faces always taken from the dual hull, also for the few planes
@@ -306,7 +327,7 @@ fn overlap_about_centre<T: Real>(
 
 /// [`overlap_volume`] about a given interior point `x0` (normally the Chebyshev centre). The
 /// faces come from the vertex enumeration for at most `enumerate_up_to` planes (normally
-/// [`enum_planes`], 0 for never), else from the dual hull.
+/// [`OverlapWorkspace::enum_planes`], 0 for never), else from the dual hull.
 pub(crate) fn overlap_about<T: Real>(
     ws: &mut OverlapWorkspace<T>,
     a: &[Plane<T>],

@@ -46,6 +46,11 @@ impl<T: Real> PairWorkspace<T> {
     pub fn boxed() -> Box<Self> {
         Box::default()
     }
+
+    /// Sets the enumeration's limit of its overlaps ([`OverlapWorkspace::set_enum_planes`]).
+    pub fn set_enum_planes(&mut self, n: usize) {
+        self.overlap.set_enum_planes(n);
+    }
 }
 
 /// Contact geometry of one particle pair in world coordinates.
@@ -242,12 +247,13 @@ fn overlap_in_pair_frame<T: Real>(
     let origin = origin + widen(&centre.point);
     ws.a.reposition_planes(ta, sa, pose_a, &origin);
     ws.b.reposition_planes(tb, sb, pose_b, &origin);
+    let enumerate_up_to = ws.overlap.enum_planes();
     Ok(overlap_about(
         &mut ws.overlap,
         ws.a.planes(),
         ws.b.planes(),
         Vector3::zeros(),
-        super::vertex_enumeration::enum_planes(),
+        enumerate_up_to,
     )?
     .to_world(&origin))
 }

@@ -165,6 +165,7 @@ impl Simulation {
             })
             .collect();
         let radius = state.radii();
+        let enum_planes = state.scene.enum_planes();
         Simulation {
             state,
             work: Workspace {
@@ -176,6 +177,7 @@ impl Simulation {
                 too_deep: None,
                 pair_outcomes: Vec::new(),
                 pair_precision,
+                enum_planes,
             },
         }
     }

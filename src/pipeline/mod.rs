@@ -73,6 +73,9 @@ struct Workspace {
     /// ([`crate::geometry::pair::overlap_pair_mixed`]), so that a mixed-precision run can be
     /// reproduced and checked without a GPU.
     pair_precision: crate::geometry::pair::Precision,
+    /// The scene's limit of the vertex enumeration ([`crate::scene::Scene::enum_planes`]), set
+    /// on the thread's workspaces before each overlap.
+    enum_planes: usize,
 }
 
 impl Simulation {

@@ -13,6 +13,7 @@ use crate::geometry::pair::{
     PairWorkspace, Precision, axis_separates, overlap_pair, overlap_pair_mixed_with,
 };
 use crate::geometry::sphere::sphere_lens;
+use crate::geometry::vertex_enumeration::enum_planes;
 use crate::run_state::{FirstFailure, pair_failure_key};
 use crate::state::Particles;
 use nalgebra::{Isometry3, Vector3};
@@ -183,9 +184,11 @@ impl Simulation {
         // Stages 4–5: the narrow phase (GJK where the Chebyshev centre proves no
         // intersection), then the overlap.
         let g = match if mixed {
-            with_workspaces(|w32, w64| overlap_pair_mixed_with(w32, w64, body_a, body_b, wide_lp))
+            with_workspaces(self.work.enum_planes, |w32, w64| {
+                overlap_pair_mixed_with(w32, w64, body_a, body_b, wide_lp)
+            })
         } else {
-            with_workspace(|ws| overlap_pair(ws, body_a, body_b))
+            with_workspace(self.work.enum_planes, |ws| overlap_pair(ws, body_a, body_b))
         } {
             Ok(g) => g,
             Err(e) => {
@@ -193,7 +196,14 @@ impl Simulation {
                     step: self.state.step,
                     what: format!("particles {} and {}", p.id[a], p.id[b]),
                     message: format!(
-                        "{e}; to reproduce with `polydem probe overlap{}`: A {}, B {}",
+                        "{e}; to reproduce with `{}polydem probe overlap{}`: A {}, B {}",
+                        // The probe has no scene: it takes the run's enumeration limit from
+                        // the setting.
+                        if self.work.enum_planes == enum_planes() {
+                            String::new()
+                        } else {
+                            format!("POLYDEM_ENUM_PLANES={} ", self.work.enum_planes)
+                        },
                         if mixed { " --precision mixed" } else { "" },
                         probe_body(ta, p.scale[a], &pose_a),
                         probe_body(tb, p.scale[b], &pose_b)
@@ -276,11 +286,19 @@ thread_local! {
 }
 
 /// Runs `f` with this thread's pair workspace (a fresh one if it is already in use, which only
-/// a nested call could cause).
-pub(super) fn with_workspace<R>(f: impl FnOnce(&mut PairWorkspace<f64>) -> R) -> R {
+/// a nested call could cause), its enumeration limit set to `enum_planes` (the scene's: a
+/// thread's workspace serves whichever run the thread works for).
+pub(super) fn with_workspace<R>(
+    enum_planes: usize,
+    f: impl FnOnce(&mut PairWorkspace<f64>) -> R,
+) -> R {
+    let run = |ws: &mut PairWorkspace<f64>| {
+        ws.set_enum_planes(enum_planes);
+        f(ws)
+    };
     WORKSPACE.with(|cell| match cell.try_borrow_mut() {
-        Ok(mut slot) => f(slot.get_or_insert_with(PairWorkspace::boxed)),
-        Err(_) => f(&mut PairWorkspace::boxed()),
+        Ok(mut slot) => run(slot.get_or_insert_with(PairWorkspace::boxed)),
+        Err(_) => run(&mut PairWorkspace::boxed()),
     })
 }
 
@@ -292,13 +310,17 @@ thread_local! {
 
 /// Runs `f` with this thread's f32 and f64 pair workspaces (for
 /// [`overlap_pair_mixed_with`]).
-fn with_workspaces<R>(f: impl FnOnce(&mut PairWorkspace<f32>, &mut PairWorkspace<f64>) -> R) -> R {
+fn with_workspaces<R>(
+    enum_planes: usize,
+    f: impl FnOnce(&mut PairWorkspace<f32>, &mut PairWorkspace<f64>) -> R,
+) -> R {
+    let run = |w32: &mut PairWorkspace<f32>| {
+        w32.set_enum_planes(enum_planes);
+        with_workspace(enum_planes, |w64| f(w32, w64))
+    };
     WORKSPACE_F32.with(|cell| match cell.try_borrow_mut() {
-        Ok(mut slot) => {
-            let w32 = slot.get_or_insert_with(PairWorkspace::boxed);
-            with_workspace(|w64| f(w32, w64))
-        }
-        Err(_) => with_workspace(|w64| f(&mut PairWorkspace::boxed(), w64)),
+        Ok(mut slot) => run(slot.get_or_insert_with(PairWorkspace::boxed)),
+        Err(_) => run(&mut PairWorkspace::boxed()),
     })
 }
 

@@ -79,7 +79,7 @@ impl Simulation {
             .into_par_iter()
             .with_min_len(crate::par::CONTACT)
             .map_init(Vec::new, |facets, i| {
-                let outcome = with_workspace(|ws| {
+                let outcome = with_workspace(self.work.enum_planes, |ws| {
                     let mut out = WallOutcome::default();
                     for (k, wall_pose) in poses.iter().enumerate() {
                         let Some(world) = self.wall_overlap(ws, facets, i, k, wall_pose)? else {

@@ -234,6 +234,7 @@ impl RunState {
                     let pose_b = Isometry3::from_parts(xb.into(), p.orientation[j]);
                     // A diagnostic after a failed step: a workspace of its own per pair.
                     let mut ws = PairWorkspace::<f64>::boxed();
+                    ws.set_enum_planes(s.enum_planes());
                     let g = overlap_pair(
                         &mut ws,
                         (ta, p.scale[i], &pose_a),

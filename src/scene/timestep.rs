@@ -10,6 +10,21 @@ impl Scene {
         !self.templates.is_empty() && self.templates.iter().all(|t| t.sphere)
     }
 
+    /// The most planes of a pair's overlap whose faces come from the vertex enumeration rather
+    /// than the dual hull, on every backend: 16 when a polyhedral template has more than 12
+    /// faces, else 8; `POLYDEM_ENUM_PLANES` overrides
+    /// ([`crate::geometry::vertex_enumeration::enum_planes_for`] says why).
+    pub fn enum_planes(&self) -> usize {
+        let max_faces = self
+            .templates
+            .iter()
+            .filter(|t| !t.sphere)
+            .map(|t| t.faces.len())
+            .max()
+            .unwrap_or(0);
+        crate::geometry::vertex_enumeration::enum_planes_for(max_faces)
+    }
+
     /// The time step (s): the fixed one, or the fraction of the Rayleigh step.
     pub fn time_step(&self) -> f64 {
         match self.simulation.dt {

@@ -111,7 +111,7 @@ impl KernelConfig {
             materials: scene.materials.len().max(1),
             ghosts: false,
             face_trajectory: scene.simulation.face_window == crate::contact::FaceWindow::Trajectory,
-            enum_planes: crate::geometry::vertex_enumeration::enum_planes(),
+            enum_planes: scene.enum_planes(),
         }
     }
 
