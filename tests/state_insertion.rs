@@ -127,6 +127,35 @@ fn a_checkpoint_s_particles_in_the_region_come_back_as_they_were() {
         "insertions[0].state",
         "another shape or material",
     );
+    // A type whose scales do not hold the state's (1.0): the cutoff, halo and critical step
+    // are sized from the type's range. A range that holds it is taken.
+    let with_scale = |scale: &str| {
+        scene(0.002, 1.0e-3, &format!("{region}\ncount = {}", west.len())).replace(
+            "size = 0.002 }\n",
+            &format!("size = 0.002 }}\nscale = {scale}\n"),
+        )
+    };
+    assert!(with_scale("0.5").contains("scale = 0.5"));
+    reject(
+        with_scale("0.5"),
+        "insertions[0].state",
+        "has scale 1e0, outside particle type \"sphere\"'s scales 5e-1 … 5e-1",
+    );
+    reject(
+        with_scale("{ distribution = \"uniform\", min = 1.01, max = 1.2 }"),
+        "insertions[0].state",
+        "outside particle type \"sphere\"'s scales 1.01e0 … 1.2e0",
+    );
+    let s = parse_scene(
+        &with_scale("{ distribution = \"uniform\", min = 0.9, max = 1.1 }"),
+        &dir,
+        "ranged.toml",
+    )
+    .unwrap();
+    assert_eq!(
+        Simulation::builder(s).state().unwrap().particles.len(),
+        west.len()
+    );
     reject(
         scene(
             0.002,

@@ -20,6 +20,19 @@ pub use slot_list::{SlotList, build_slot_list};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
+/// How far a pair list reaches: it holds the pairs whose centres are closer than
+/// `r_i + r_j + skin`, found in cells at least `cutoff` wide. The cutoff is the scene's
+/// `2 r_max + skin` (`Scene::cutoff_with_skin`, `r_max` the largest bounding radius any
+/// particle type can have), the one that also sizes the GPU's grid, the walls' facet grids and
+/// the decomposition's halo; the particles present never need more.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reach {
+    /// The Verlet skin (m).
+    pub skin: f64,
+    /// The least cell width (m), at least the largest two bounding radii plus the skin.
+    pub cutoff: f64,
+}
+
 /// The domain's box and periodicity, as the neighbour search needs them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Bounds {
@@ -109,14 +122,14 @@ impl PairList {
     }
 
     /// Builds the list for particles at `positions` with bounding radii `radii` and global ids
-    /// `ids`, keeping pairs closer than `r_i + r_j + skin`.
+    /// `ids`, keeping pairs closer than `r_i + r_j + skin` ([`Reach`]).
     pub fn build(
         &mut self,
         positions: &[Vector3<f64>],
         radii: &[f64],
         ids: &[u64],
         bounds: &Bounds,
-        skin: f64,
+        reach: Reach,
     ) {
         self.build_in(
             positions,
@@ -126,7 +139,7 @@ impl PairList {
             positions.len(),
             bounds,
             bounds,
-            skin,
+            reach,
         );
     }
 
@@ -146,10 +159,10 @@ impl PairList {
         owned: usize,
         bounds: &Bounds,
         region: &Bounds,
-        skin: f64,
+        reach: Reach,
     ) {
         let n = positions.len();
-        self.skin = skin;
+        self.skin = reach.skin;
         self.builds += 1;
         self.reference = positions.to_vec();
         self.pairs.clear();
@@ -158,7 +171,7 @@ impl PairList {
             self.refs.clear();
             return;
         }
-        let (pairs, _) = search(positions, bins, radii, ids, owned, bounds, region, skin);
+        let (pairs, _) = search(positions, bins, radii, ids, owned, bounds, region, reach);
         self.pairs = pairs;
         self.index_by_particle(n, ids);
     }
@@ -217,7 +230,7 @@ impl PairList {
 /// The candidate pairs of particles at `positions` (binned at `bins` on a grid over `region`,
 /// the first `owned` owned and the rest ghosts, see [`PairList::build_in`]): each pair `(i, j)`
 /// with `ids[i] < ids[j]` and a centre distance below `r_i + r_j + skin`, grouped by `i` in
-/// ascending order, and how many each `i` has. Count, exclusive prefix sum and fill on rayon
+/// ascending order, and how many each `i` has, binned in cells `reach.cutoff` wide or more. Count, exclusive prefix sum and fill on rayon
 /// threads (seed Sec. 2.2).
 #[allow(clippy::too_many_arguments)]
 fn search(
@@ -228,14 +241,21 @@ fn search(
     owned: usize,
     bounds: &Bounds,
     region: &Bounds,
-    skin: f64,
+    reach: Reach,
 ) -> (Vec<[u32; 2]>, Vec<u32>) {
     let n = positions.len();
     if n == 0 {
         return (Vec::new(), Vec::new());
     }
+    let Reach { skin, cutoff } = reach;
+    // Cells narrower than a pair's reach would miss pairs silently: a cutoff that does not
+    // hold the particles present is a defect of the caller's.
     let r_max = radii.iter().cloned().fold(0.0, f64::max);
-    let cutoff = 2.0 * r_max + skin;
+    assert!(
+        2.0 * r_max + skin <= cutoff,
+        "neighbour cutoff {cutoff} below the particles' 2 r_max + skin = {}",
+        2.0 * r_max + skin
+    );
     let grid = Grid::new(region, cutoff, 4 * n);
     // Bin: cell of each particle, then particles sorted by cell (counting sort).
     let cell: Vec<usize> = bins
@@ -480,7 +500,12 @@ mod tests {
             let radii: Vec<_> = (0..n).map(|_| rng.range(0.05, 0.15)).collect();
             let ids: Vec<u64> = (0..n as u64).map(|i| (i * 7919) % 1009).collect();
             let mut list = PairList::default();
-            list.build(&pos, &radii, &ids, &bounds, 0.05);
+            // Cells for the largest radius the draw allows (0.15), as a scene's cutoff is.
+            let reach = Reach {
+                skin: 0.05,
+                cutoff: 2.0 * 0.15 + 0.05,
+            };
+            list.build(&pos, &radii, &ids, &bounds, reach);
             let mut got: Vec<(u64, u64)> = list
                 .pairs
                 .iter()

@@ -12,7 +12,7 @@
 //! partner global id, and the history is keyed by global ids (docs/design.md §4, §7). A list
 //! only has to hold every pair that can touch while it is in use.
 
-use super::{Bounds, Grid, search};
+use super::{Bounds, Grid, Reach, search};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -36,14 +36,16 @@ pub struct SlotList {
 
 /// Builds the [`SlotList`] of particles at `positions` (three values per slot, the device's
 /// slot order) with bounding radii `radii` and global ids `ids`: the pairs closer than
-/// `r_i + r_j + skin` (seed Eq. 1, `L_v` = `skin`), in the minimum image of `bounds`.
+/// `r_i + r_j + skin` (seed Eq. 1, `L_v` = `skin`; [`Reach`]), in the minimum image of
+/// `bounds`.
 pub fn build_slot_list(
     positions: &[f64],
     radii: &[f64],
     ids: &[u64],
     bounds: &Bounds,
-    skin: f64,
+    reach: Reach,
 ) -> SlotList {
+    let skin = reach.skin;
     let t0 = Instant::now();
     let n = radii.len();
     assert_eq!(positions.len(), 3 * n, "three coordinates per slot");
@@ -63,8 +65,7 @@ pub fn build_slot_list(
         .collect();
     // Slots sorted by cell, then global id (the device build's order, cuda/neighbor.cu
     // `sort_cells`): neighbours sit close in memory when the device gathers its arrays.
-    let r_max = radii.iter().cloned().fold(0.0, f64::max);
-    let grid = Grid::new(bounds, 2.0 * r_max + skin, 4 * n);
+    let grid = Grid::new(bounds, reach.cutoff, 4 * n);
     let mut order: Vec<u32> = (0..n as u32).collect();
     order.par_sort_unstable_by_key(|&i| (grid.cell_of(&x[i as usize]), ids[i as usize]));
     let gather = crate::par::CHEAP;
@@ -83,7 +84,7 @@ pub fn build_slot_list(
         .with_min_len(gather)
         .map(|&i| ids[i as usize])
         .collect();
-    let (pairs, counts) = search(&xs, &xs, &rs, &is, n, bounds, bounds, skin);
+    let (pairs, counts) = search(&xs, &xs, &rs, &is, n, bounds, bounds, reach);
     let mut offset = Vec::with_capacity(n + 1);
     offset.push(0u32);
     let mut total = 0u32;
@@ -136,7 +137,11 @@ mod tests {
             let radii: Vec<f64> = (0..n).map(|_| rng.range(0.03, 0.09)).collect();
             let ids: Vec<u64> = (0..n as u64).map(|i| (i * 104_729) % 7919).collect();
             let flat: Vec<f64> = x.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
-            let list = build_slot_list(&flat, &radii, &ids, &bounds, 0.04);
+            let reach = Reach {
+                skin: 0.04,
+                cutoff: 2.0 * 0.09 + 0.04,
+            };
+            let list = build_slot_list(&flat, &radii, &ids, &bounds, reach);
             let mut seen = vec![false; n];
             for &o in &list.order {
                 assert!(
@@ -161,7 +166,7 @@ mod tests {
                 .collect();
             got.sort_unstable();
             let mut cpu = PairList::default();
-            cpu.build(&x, &radii, &ids, &bounds, 0.04);
+            cpu.build(&x, &radii, &ids, &bounds, reach);
             let mut want: Vec<(u64, u64)> = cpu
                 .pairs
                 .iter()

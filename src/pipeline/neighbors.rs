@@ -3,6 +3,7 @@
 //! owned particles.
 
 use super::Simulation;
+use crate::neighbor::Reach;
 use nalgebra::Vector3;
 use std::time::Instant;
 
@@ -29,6 +30,10 @@ impl Simulation {
     pub(super) fn neighbor_list(&mut self, owned: usize) {
         let t0 = Instant::now();
         let skin = self.state.scene.simulation.neighbor.skin;
+        let reach = Reach {
+            skin,
+            cutoff: self.state.scene.cutoff_with_skin(skin),
+        };
         let rebuild = match self.state.parallel {
             // Decided by all ranks together in the exchange.
             Some(_) => self.work.dirty,
@@ -53,7 +58,7 @@ impl Simulation {
                         owned,
                         &self.state.bounds,
                         &par.search_region(),
-                        skin,
+                        reach,
                     );
                 }
                 None => self.work.pairs.build(
@@ -61,7 +66,7 @@ impl Simulation {
                     &self.work.radius,
                     &self.state.particles.id,
                     &self.state.bounds,
-                    skin,
+                    reach,
                 ),
             }
             self.work.separating_axes = vec![Vector3::zeros(); self.work.pairs.pairs.len()];

@@ -374,6 +374,25 @@ impl Validator<'_> {
                 );
                 return None;
             }
+            // The scene's cutoff, halo, wall grids and critical step are sized from the types'
+            // scale ranges (`Scene::max_bounding_radius`, `min_equivalent_radius`): a body
+            // outside its type's range would be larger or smaller than all of them assume.
+            if let Some(dist) = scene.scale_distributions.get(particle_type) {
+                let (lo, hi) = (dist.min_scale(), dist.max_scale());
+                if !(lo..=hi).contains(&p.scale[j]) {
+                    self.err(
+                        &k("state"),
+                        format!(
+                            "{}: particle {j} (id {}) has scale {:e}, outside particle type \"{}\"'s scales {lo:e} … {hi:e} ({dist:?}); give the type a scale range that holds the state's",
+                            path.display(),
+                            p.id[j],
+                            p.scale[j],
+                            ptype.name
+                        ),
+                    );
+                    return None;
+                }
+            }
             bodies.push(ImportedBody {
                 position: p.position[j],
                 orientation: p.orientation[j],

@@ -41,7 +41,7 @@ use super::launch::{cfg, zeros};
 use super::layout::GridParams;
 use super::pairs::ListSource;
 use super::particles::DeviceParticles;
-use crate::neighbor::{Bounds, Builder, NeighborReport, SlotList, Switch, build_slot_list};
+use crate::neighbor::{Bounds, Builder, NeighborReport, Reach, SlotList, Switch, build_slot_list};
 use crate::scene::{NeighborMode, Scene};
 use auto::Auto;
 use cudarc::driver::CudaSlice;
@@ -69,22 +69,22 @@ impl HostSlots {
         })
     }
 
-    /// The slot list with `skin`, built here (rayon).
-    fn build(&self, bounds: &Bounds, skin: f64) -> SlotList {
+    /// The slot list of `reach`, built here (rayon).
+    fn build(&self, bounds: &Bounds, reach: Reach) -> SlotList {
         let n = self.n;
-        build_slot_list(&self.x[..3 * n], &self.r[..n], &self.id[..n], bounds, skin)
+        build_slot_list(&self.x[..3 * n], &self.r[..n], &self.id[..n], bounds, reach)
     }
 
-    /// The slot list with `skin`, built on a thread of its own named `name`.
+    /// The slot list of `reach`, built on a thread of its own named `name`.
     fn spawn(
         self,
         name: &str,
         bounds: Bounds,
-        skin: f64,
+        reach: Reach,
     ) -> Result<JoinHandle<SlotList>, CudaError> {
         std::thread::Builder::new()
             .name(name.into())
-            .spawn(move || self.build(&bounds, skin))
+            .spawn(move || self.build(&bounds, reach))
             .map_err(CudaError::PrebuildThread)
     }
 }
@@ -114,6 +114,10 @@ pub(super) struct ListBuilder {
     builder: Builder,
     skin: f64,
     hybrid_skin: f64,
+    /// The host builds' reaches with `skin` and `hybrid_skin` (the scene's cutoffs, as the
+    /// device grids').
+    reach: Reach,
+    hybrid_reach: Reach,
     bounds: Bounds,
     /// The device grids for lists of `skin` and `hybrid_skin`.
     grid: GridParams,
@@ -150,6 +154,14 @@ impl ListBuilder {
             builder,
             skin: n.skin,
             hybrid_skin: n.hybrid_skin,
+            reach: Reach {
+                skin: n.skin,
+                cutoff: scene.cutoff(),
+            },
+            hybrid_reach: Reach {
+                skin: n.hybrid_skin,
+                cutoff: hybrid_cutoff,
+            },
             bounds,
             grid,
             hybrid_grid: GridParams::new(&bounds, hybrid_cutoff, 4 * particles.max(1)),
@@ -199,7 +211,7 @@ impl ListBuilder {
         }
         let snapshot = gpu.stream.clone_dtod(&p.position)?;
         let slots = HostSlots::copy(gpu, p, &snapshot)?;
-        let thread = slots.spawn("polydem-prebuild", self.bounds, self.hybrid_skin)?;
+        let thread = slots.spawn("polydem-prebuild", self.bounds, self.hybrid_reach)?;
         self.pending = Some(Prebuild {
             generation,
             snapshot,
@@ -252,7 +264,7 @@ impl ListBuilder {
             Builder::Cpu => {
                 let snapshot = gpu.stream.clone_dtod(&p.position)?;
                 let t0 = Instant::now();
-                let list = HostSlots::copy(gpu, p, &snapshot)?.build(&self.bounds, self.skin);
+                let list = HostSlots::copy(gpu, p, &snapshot)?.build(&self.bounds, self.reach);
                 self.report.host_wait_s += t0.elapsed().as_secs_f64();
                 self.tau_cpu.0 += list.seconds;
                 self.tau_cpu.1 += 1;
@@ -360,7 +372,7 @@ impl ListBuilder {
             return Ok(());
         }
         let slots = HostSlots::copy(gpu, p, &p.position)?;
-        auto.start_probe(slots.spawn("polydem-probe", self.bounds, self.hybrid_skin)?);
+        auto.start_probe(slots.spawn("polydem-probe", self.bounds, self.hybrid_reach)?);
         Ok(())
     }
 
