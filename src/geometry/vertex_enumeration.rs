@@ -70,8 +70,8 @@ pub const MANY_FACES: usize = 12;
 /// keep 9–16 planes, which at the limit 8 leave the GPU's lean passes for the deferred dual
 /// hull, whose per-thread workspace sits in local memory. At 16 the settled 1e6 packings ran
 /// 1.11× (mineral grains) and 1.48× (cylinders) faster on one H100 in mixed precision. The CPU
-/// pays for it (the hull is the faster path there past 8 planes: about 0.75× on the mineral
-/// grains), and the results move in their last bits; `POLYDEM_ENUM_PLANES=8` restores both.
+/// pays for it (the hull is the faster path there past 8 planes: 0.68× on the settled cell of
+/// mineral grains), and the results move in their last bits; `POLYDEM_ENUM_PLANES=8` restores both.
 /// Up to 12 faces (the dodecahedra: 92.5 % of contacts at most 8 planes) the default stays 8,
 /// which keeps those scenes bitwise as they were.
 pub fn enum_planes_for(max_faces: usize) -> usize {
