@@ -333,7 +333,7 @@ pub fn prism_overlap_culled<T: Real>(
             .iter()
             .all(|p| p.distance(&centre.point) < -tol);
     let out = if proven {
-        let enumerate_up_to = ws.enum_planes();
+        let enumerate_up_to = ws.enum_planes;
         overlap_about(ws, body.planes(), kept, centre.point, enumerate_up_to)
     } else {
         body.restore_aside();

@@ -115,7 +115,7 @@ pub struct OverlapWorkspace<T: Real> {
     by_hull: bool,
     /// The most planes whose faces come from the vertex enumeration (the run's
     /// `Scene::enum_planes`; [`enum_planes`] until set).
-    enum_planes: usize,
+    pub(crate) enum_planes: usize,
 }
 
 impl<T: Real> Default for OverlapWorkspace<T> {
@@ -145,13 +145,8 @@ impl<T: Real> OverlapWorkspace<T> {
         Box::default()
     }
 
-    /// The most planes whose overlap faces come from the vertex enumeration rather than the
-    /// dual hull ([`overlap_volume`]).
-    pub fn enum_planes(&self) -> usize {
-        self.enum_planes
-    }
-
-    /// Sets [`Self::enum_planes`] (the run's `Scene::enum_planes`). Panics past
+    /// Sets the most planes whose overlap faces come from the vertex enumeration rather than
+    /// the dual hull (the run's `Scene::enum_planes`). Panics past
     /// [`ENUM_PLANES_CAPACITY`], which the enumeration's buffers are sized for.
     pub fn set_enum_planes(&mut self, n: usize) {
         assert!(
@@ -327,7 +322,7 @@ fn overlap_about_centre<T: Real>(
 
 /// [`overlap_volume`] about a given interior point `x0` (normally the Chebyshev centre). The
 /// faces come from the vertex enumeration for at most `enumerate_up_to` planes (normally
-/// [`OverlapWorkspace::enum_planes`], 0 for never), else from the dual hull.
+/// [`OverlapWorkspace::set_enum_planes`], 0 for never), else from the dual hull.
 pub(crate) fn overlap_about<T: Real>(
     ws: &mut OverlapWorkspace<T>,
     a: &[Plane<T>],

@@ -247,7 +247,7 @@ fn overlap_in_pair_frame<T: Real>(
     let origin = origin + widen(&centre.point);
     ws.a.reposition_planes(ta, sa, pose_a, &origin);
     ws.b.reposition_planes(tb, sb, pose_b, &origin);
-    let enumerate_up_to = ws.overlap.enum_planes();
+    let enumerate_up_to = ws.overlap.enum_planes;
     Ok(overlap_about(
         &mut ws.overlap,
         ws.a.planes(),

@@ -347,51 +347,18 @@ impl Validator<'_> {
                 return None;
             }
         };
-        let ptype = scene.particle_types.get(particle_type)?;
-        let density = scene
-            .materials
-            .get(ptype.material)
-            .map_or(0.0, |m| m.density);
-        let t = scene.templates.get(ptype.template)?;
+        // An unknown type was reported where it was named.
+        scene.particle_types.get(particle_type)?;
         let p = &c.particles;
         let mut bodies = Vec::new();
         for j in 0..p.len() {
             if !region.contains(&p.position[j]) {
                 continue;
             }
-            let mass = density * t.volume * p.scale[j].powi(3);
-            if (p.mass[j] - mass).abs() > 1e-12 * mass {
-                self.err(
-                    &k("state"),
-                    format!(
-                        "{}: particle {j} (id {}) has mass {} at scale {}; particle type \"{}\" has {mass} there (another shape or material)",
-                        path.display(),
-                        p.id[j],
-                        p.mass[j],
-                        p.scale[j],
-                        ptype.name
-                    ),
-                );
+            if let Some(why) = foreign_body(scene, particle_type, p, j) {
+                let e = format!("{}: particle {j} (id {}) {why}", path.display(), p.id[j]);
+                self.err(&k("state"), e);
                 return None;
-            }
-            // The scene's cutoff, halo, wall grids and critical step are sized from the types'
-            // scale ranges (`Scene::max_bounding_radius`, `min_equivalent_radius`): a body
-            // outside its type's range would be larger or smaller than all of them assume.
-            if let Some(dist) = scene.scale_distributions.get(particle_type) {
-                let (lo, hi) = (dist.min_scale(), dist.max_scale());
-                if !(lo..=hi).contains(&p.scale[j]) {
-                    self.err(
-                        &k("state"),
-                        format!(
-                            "{}: particle {j} (id {}) has scale {:e}, outside particle type \"{}\"'s scales {lo:e} … {hi:e} ({dist:?}); give the type a scale range that holds the state's",
-                            path.display(),
-                            p.id[j],
-                            p.scale[j],
-                            ptype.name
-                        ),
-                    );
-                    return None;
-                }
             }
             bodies.push(ImportedBody {
                 position: p.position[j],
@@ -483,4 +450,38 @@ impl Validator<'_> {
             );
         }
     }
+}
+
+/// Why particle `j` of a checkpoint cannot be a body of `particle_type` (its mass, or its
+/// scale), or `None` when it can.
+fn foreign_body(
+    scene: &Scene,
+    particle_type: usize,
+    p: &crate::state::Particles,
+    j: usize,
+) -> Option<String> {
+    let ptype = &scene.particle_types[particle_type];
+    let name = &ptype.name;
+    let density = scene
+        .materials
+        .get(ptype.material)
+        .map_or(0.0, |m| m.density);
+    let t = scene.templates.get(ptype.template)?;
+    let (scale, mass) = (p.scale[j], density * t.volume * p.scale[j].powi(3));
+    if (p.mass[j] - mass).abs() > 1e-12 * mass {
+        let m = p.mass[j];
+        return Some(format!(
+            "has mass {m} at scale {scale}; particle type \"{name}\" has {mass} there (another shape or material)"
+        ));
+    }
+    // The scene's cutoff, halo, wall grids and critical step are sized from the types' scale
+    // ranges (`Scene::max_bounding_radius`, `min_equivalent_radius`): a body outside its type's
+    // range would be larger or smaller than all of them assume.
+    let dist = scene.scale_distributions.get(particle_type)?;
+    let (lo, hi) = (dist.min_scale(), dist.max_scale());
+    (!(lo..=hi).contains(&scale)).then(|| {
+        format!(
+            "has scale {scale:e}, outside particle type \"{name}\"'s scales {lo:e} … {hi:e} ({dist:?}); give the type a scale range that holds the state's"
+        )
+    })
 }
