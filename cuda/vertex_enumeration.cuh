@@ -8,9 +8,9 @@
 
 #include "common.cuh"
 
-// Rust vertex_enumeration::{enum_planes, ENUM_MAX_VERTICES, ENUM_MAX_FACE_VERTICES}: the
-// planes up to which pairs take the enumeration (8 unless POLYDEM_ENUM_PLANES sets 9-16, from
-// Rust), and the vertices it keeps. At 8 planes every triple fits (C(8, 3) = 56, C(7, 2) = 21 on
+// Rust vertex_enumeration::{enum_planes_for, ENUM_MAX_VERTICES, ENUM_MAX_FACE_VERTICES}: the
+// planes up to which pairs take the enumeration (the scene's 8 or 16, or POLYDEM_ENUM_PLANES,
+// from Rust), and the vertices it keeps. At 8 planes every triple fits (C(8, 3) = 56, C(7, 2) = 21 on
 // a face) and the workspace keeps its size; past 8 it holds Rust's 96 and 32 and declines, as
 // Rust does, when a pair finds more.
 #ifndef PD_ENUM_MAX_PLANES

@@ -53,8 +53,8 @@ pub struct Tuning {
     /// host code and the layout it shares with the kernels are the binary's.
     pub cuda_sources: Option<PathBuf>,
     /// `POLYDEM_ENUM_PLANES`: the most planes whose overlap faces come from the vertex
-    /// enumeration rather than the dual hull (8–16; default 8), on the CPU and the GPU alike
-    /// (`geometry::vertex_enumeration::enum_planes`). Results change in the last bits where a
+    /// enumeration rather than the dual hull (8–16), on the CPU and the GPU alike, in place of
+    /// the scene's (`Scene::enum_planes`: 16 for templates of more than 12 faces, else 8). Results change in the last bits where a
     /// pair of 9 or more planes takes the enumeration.
     pub enum_planes: Option<u32>,
     /// `POLYDEM_ROOT`: the repository root (its `meshes/`) for `polydem bench accuracy`.

@@ -68,7 +68,7 @@ fn checkpoints_with_bad_contents_are_refused_naming_the_field() {
     let bad = dir.join("bad.ckpt");
     let out = dir.join("out");
     type Edit = fn(&mut polydem::io::Checkpoint);
-    let cases: [(Edit, &[&str]); 8] = [
+    let cases: [(Edit, &[&str]); 9] = [
         (
             |c| c.particles.kind[3] = 7,
             &["particle 3", "`kind` is 7", "1 particle type"],
@@ -88,6 +88,20 @@ fn checkpoints_with_bad_contents_are_refused_naming_the_field() {
         (
             |c| c.particles.scale[0] = -1.0,
             &["particle 0", "`scale` is -1", "> 0"],
+        ),
+        // Past the type's largest scale (1.2) by a relative 1e-13, the mass to match: the
+        // neighbour cutoff and the halo are sized from that scale.
+        (
+            |c| {
+                let s = 1.2 * (1.0 + 1e-13);
+                c.particles.mass[0] *= (s / c.particles.scale[0]).powi(3);
+                c.particles.scale[0] = s;
+            },
+            &[
+                "particle 0",
+                "`scale` is 1.2000000000001",
+                "has scales 0.8 to 1.2",
+            ],
         ),
         (
             |c| c.particles.mass[4] = 0.0,

@@ -504,8 +504,8 @@ fn many_faced_scenes_take_the_enumeration_to_sixteen_planes() {
         !same(&default, &eight),
         "the 8-plane run is the same: the limit did nothing"
     );
-    // The two limits differ by round-off only: the same contacts, forces within 1e-9 of the
-    // largest.
+    // The two limits differ by round-off only: the same contacts, forces within 1e-11 of the
+    // largest (1.6e-13 measured after 5 steps).
     assert_eq!(default.history.len(), eight.history.len());
     let scale = default
         .particles
@@ -520,5 +520,8 @@ fn many_faced_scenes_take_the_enumeration_to_sixteen_planes() {
         .zip(&eight.particles.force)
         .map(|(a, b)| (a - b).norm())
         .fold(0.0, f64::max);
-    assert!(gap <= 1e-9 * scale, "forces differ by {gap:e} of {scale:e}");
+    assert!(
+        gap <= 1e-11 * scale,
+        "forces differ by {gap:e} of {scale:e}"
+    );
 }

@@ -32,7 +32,7 @@ impl Simulation {
         let skin = self.state.scene.simulation.neighbor.skin;
         let reach = Reach {
             skin,
-            cutoff: self.state.scene.cutoff_with_skin(skin),
+            cutoff: self.state.scene.cutoff(),
         };
         let rebuild = match self.state.parallel {
             // Decided by all ranks together in the exchange.

@@ -13,7 +13,7 @@ use crate::geometry::pair::{
     PairWorkspace, Precision, axis_separates, overlap_pair, overlap_pair_mixed_with,
 };
 use crate::geometry::sphere::sphere_lens;
-use crate::geometry::vertex_enumeration::enum_planes;
+use crate::geometry::vertex_enumeration::ENUM_MAX_PLANES;
 use crate::run_state::{FirstFailure, pair_failure_key};
 use crate::state::Particles;
 use nalgebra::{Isometry3, Vector3};
@@ -198,8 +198,8 @@ impl Simulation {
                     message: format!(
                         "{e}; to reproduce with `{}polydem probe overlap{}`: A {}, B {}",
                         // The probe has no scene: it takes the run's enumeration limit from
-                        // the setting.
-                        if self.work.enum_planes == enum_planes() {
+                        // the setting, whose default is 8.
+                        if self.work.enum_planes == ENUM_MAX_PLANES {
                             String::new()
                         } else {
                             format!("POLYDEM_ENUM_PLANES={} ", self.work.enum_planes)

@@ -231,7 +231,9 @@ pub fn check_against_scene(c: &Checkpoint, scene: &Scene) -> Result<(), String> 
         let s = p.scale[i];
         if let Some(d) = scene.scale_distributions.get(kind) {
             let (lo, hi) = (d.min_scale(), d.max_scale());
-            if s < lo * (1.0 - MASS_TOLERANCE) || s > hi * (1.0 + MASS_TOLERANCE) {
+            // Exactly within: the neighbour cutoff, the halo and the critical step are sized
+            // from the range (a sampled scale never leaves it).
+            if !(lo..=hi).contains(&s) {
                 return Err(at(
                     "scale",
                     format!(

@@ -80,7 +80,7 @@ pub struct KernelConfig {
     /// normal motion (`contact::trajectory`); the secant's kernels carry none of its code.
     pub face_trajectory: bool,
     /// The most planes whose faces come from the vertex enumeration (`PD_ENUM_MAX_PLANES`,
-    /// [`crate::geometry::vertex_enumeration::enum_planes`]): the lean passes stage and take
+    /// the scene's [`crate::scene::Scene::enum_planes`]): the lean passes stage and take
     /// the pairs of at most that many planes.
     pub enum_planes: usize,
 }

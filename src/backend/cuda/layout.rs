@@ -408,7 +408,7 @@ pub struct ProbeTemplates {
 unsafe impl DeviceRepr for ProbeTemplates {}
 
 /// Bytes of one `StagedPlanes` record of cuda/contact.cu: `planes` planes (the enumeration's
-/// limit, [`crate::geometry::vertex_enumeration::enum_planes`]; normal and offset in the
+/// limit, [`crate::scene::Scene::enum_planes`]; normal and offset in the
 /// geometry's arithmetic), the frame origin in f64, two plane counts.
 pub fn staged_planes_bytes(precision: Precision, planes: usize) -> usize {
     let real = match precision {
