@@ -617,11 +617,16 @@ fn dodecahedra_twin_pours_settle_as_their_ensemble() {
 /// 0.5 … 1.5 s, the bed is lifted on the side the drum turns up (−x for +45 rpm about +y), its
 /// free surface stands at an angle of repose of a few tens of degrees, and a layer a grain or
 /// two deep flows down it over a bed that turns with the drum.
-#[test]
-fn the_drum_twin_lifts_its_bed_and_a_surface_layer_flows_down() {
-    let scene = load_scene(&repo_root().join("launch/production/twins/drum.toml")).unwrap();
+/// The drum twin run with `seed` (the scene's, 3, for `None`): the flow averaged over
+/// 0.5 … 1.5 s, every 0.01 s; `None` where the seed's random insertion cannot place the 45
+/// grains (most seeds: they fill 40 % of the cross-section).
+fn drum_twin_flow(seed: Option<u64>) -> Option<analysis::DrumFlow> {
+    let mut scene = load_scene(&repo_root().join("launch/production/twins/drum.toml")).unwrap();
+    if let Some(seed) = seed {
+        scene.simulation.seed = seed;
+    }
     let end = scene.simulation.end_time;
-    let mut sim = Simulation::builder(scene).build().unwrap();
+    let mut sim = Simulation::builder(scene).build().ok()?;
     let section = analysis::DrumSection {
         centre: [0.0, 0.0],
         radius: 0.05,
@@ -638,7 +643,21 @@ fn the_drum_twin_lifts_its_bed_and_a_surface_layer_flows_down() {
         }
     }
     assert_eq!(sim.state.particles.len(), 45);
-    let flow = samples.flow();
+    Some(samples.flow())
+}
+
+/// The drum twin's observables over the first eight seeds that place their grains
+/// (`drum_twin_ensemble`): mean and
+/// standard deviation of one run's angle of repose (°), surface speed (m/s) and flowing layer
+/// depth (m): seeds 1, 3, 4, 8, 9, 11, 13 and 18 (CPU, 2026-12-08). Retake them when the law
+/// or the integrator changes what a run gives.
+const DRUM_TWIN_ANGLE: (f64, f64) = (56.7495, 1.1100);
+const DRUM_TWIN_SPEED: (f64, f64) = (0.49635, 0.05334);
+const DRUM_TWIN_DEPTH: (f64, f64) = (0.017468, 0.002370);
+
+#[test]
+fn the_drum_twin_lifts_its_bed_and_a_surface_layer_flows_down() {
+    let flow = drum_twin_flow(None).expect("the scene's seed places its 45 grains");
     println!(
         "drum twin: angle {:?}, layer {:?}, surface speed {:?}, line {:?}",
         flow.angle_of_repose_deg, flow.flowing_layer_depth, flow.surface_speed, flow.surface_line
@@ -650,16 +669,65 @@ fn the_drum_twin_lifts_its_bed_and_a_surface_layer_flows_down() {
         slope < 0.0,
         "surface slope {slope}: the bed is not lifted on the rising side"
     );
-    let angle = flow.angle_of_repose_deg.unwrap();
-    assert!((20.0..70.0).contains(&angle), "angle of repose {angle}°");
-    // The surface flows down at a fraction of the rim speed (0.24 m/s) to a few m/s of free
-    // flight, over a layer between a third of a grain and three grains deep.
-    let speed = flow.surface_speed.unwrap();
-    assert!((0.05..3.0).contains(&speed), "surface speed {speed} m/s");
+    // Each observable within four of the seeds' standard deviations of their mean: the run is
+    // one draw of the ensemble, and the recorded spread says how far one draw goes.
+    let within = |what: &str, x: f64, (mean, sd): (f64, f64)| {
+        assert!(
+            (x - mean).abs() <= 4.0 * sd,
+            "{what} {x:.4} outside the eight seeds' {mean:.4} ± 4 × {sd:.4}"
+        );
+    };
+    within(
+        "angle of repose (°)",
+        flow.angle_of_repose_deg.unwrap(),
+        DRUM_TWIN_ANGLE,
+    );
+    within(
+        "surface speed (m/s)",
+        flow.surface_speed.unwrap(),
+        DRUM_TWIN_SPEED,
+    );
     let depth = flow
         .flowing_layer_depth
         .expect("u changes sign below the surface");
-    assert!((0.003..0.03).contains(&depth), "flowing layer {depth} m");
+    within("flowing layer (m)", depth, DRUM_TWIN_DEPTH);
+}
+
+/// The drum twin over the first eight seeds from 0 whose insertion places the grains
+/// (`PD_DRUM_SEEDS=N` for N), on rayon's threads: each seed's angle of repose, surface speed
+/// and flowing layer, and their mean and standard deviation, from which [`DRUM_TWIN_ANGLE`]
+/// and its kin are taken.
+#[test]
+#[ignore = "an ensemble of drum twins, 18 minutes on 2 cores: the constants' source"]
+fn drum_twin_ensemble() {
+    use rayon::prelude::*;
+    let n: u64 = std::env::var("PD_DRUM_SEEDS").map_or(8, |v| v.parse().unwrap());
+    let flows: Vec<_> = (0..4 * n)
+        .into_par_iter()
+        .filter_map(|seed| drum_twin_flow(Some(seed)).map(|f| (seed, f)))
+        .collect();
+    let flows = &flows[..flows.len().min(n as usize)];
+    assert_eq!(flows.len(), n as usize, "too few seeds place their grains");
+    let mut columns = [Vec::new(), Vec::new(), Vec::new()];
+    for (seed, f) in flows {
+        let row = [
+            f.angle_of_repose_deg.unwrap_or(f64::NAN),
+            f.surface_speed.unwrap_or(f64::NAN),
+            f.flowing_layer_depth.unwrap_or(f64::NAN),
+        ];
+        println!(
+            "seed {seed}: angle {:.3}°, surface speed {:.4} m/s, layer {:.5} m",
+            row[0], row[1], row[2]
+        );
+        for (c, x) in columns.iter_mut().zip(row) {
+            c.push(x);
+        }
+    }
+    for (name, c) in ["angle", "surface speed", "layer"].iter().zip(&columns) {
+        let m = c.iter().sum::<f64>() / c.len() as f64;
+        let v = c.iter().map(|a| (a - m).powi(2)).sum::<f64>() / (c.len() - 1) as f64;
+        println!("{name}: mean {m:.6}, sd {:.6}", v.sqrt());
+    }
 }
 
 /// Case 4's twin: 160 mineral grains of 25 mm fed from the central inlet of a narrow silo
