@@ -435,26 +435,7 @@ fn many_faced_scenes_take_the_enumeration_to_sixteen_planes() {
             "{scene}: {want} not in the defines"
         );
     }
-    let cell = 1.9347371379318832e-2;
-    let text = format!(
-        "gravity = [0.0, 0.0, 0.0]\n\
-         [simulation]\ndt_fraction = 0.025\nend_time = 1.0\nseed = 9\n\
-         [output]\ncheckpoint_interval = 1.0\n\
-         [domain]\nmin = [0.0, 0.0, 0.0]\nmax = [{cell}, {cell}, {cell}]\n\
-         periodic = [true, true, true]\n\
-         [[materials]]\nname = \"grain\"\nyoungs_modulus = 1.0e7\npoisson_ratio = 0.3\n\
-         density = 2500.0\n\
-         [[material_pairs]]\nmaterials = [\"grain\", \"grain\"]\nrestitution = 0.5\n\
-         friction = 0.5\n\
-         [[particle_types]]\nname = \"mineral_grain\"\nmaterial = \"grain\"\n\
-         mesh = \"{}\"\nscale = 1.0\n\
-         [[insertions]]\ntype = \"mineral_grain\"\n\
-         region = {{ kind = \"box\", min = [0.0, 0.0, 0.0], max = [{cell}, {cell}, {cell}] }}\n\
-         count = 4000\npacking = \"{}\"\n",
-        root.join("meshes/particles/mineral_grain.stl").display(),
-        root.join("launch/bench/packings/mineral_grains.packing")
-            .display(),
-    );
+    let text = mineral_cell_text();
     let dir = temp_dir("enum-planes-default");
     let scene = dir.join("mineral_cell.toml");
     std::fs::write(&scene, text).unwrap();

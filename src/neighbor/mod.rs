@@ -230,8 +230,8 @@ impl PairList {
 /// The candidate pairs of particles at `positions` (binned at `bins` on a grid over `region`,
 /// the first `owned` owned and the rest ghosts, see [`PairList::build_in`]): each pair `(i, j)`
 /// with `ids[i] < ids[j]` and a centre distance below `r_i + r_j + skin`, grouped by `i` in
-/// ascending order, and how many each `i` has, binned in cells `reach.cutoff` wide or more. Count, exclusive prefix sum and fill on rayon
-/// threads (seed Sec. 2.2).
+/// ascending order, and how many each `i` has, binned in cells `reach.cutoff` wide or more.
+/// Count, exclusive prefix sum and fill on rayon threads (seed Sec. 2.2).
 #[allow(clippy::too_many_arguments)]
 fn search(
     positions: &[Vector3<f64>],

@@ -541,3 +541,30 @@ pub fn long_pour(dir: &std::path::Path) -> PathBuf {
     std::fs::write(&scene, text).unwrap();
     scene
 }
+
+/// The committed settled cell of 4000 mineral grains (32 triangles; periodic, no gravity,
+/// `launch/bench/packings/mineral_grains.packing`) as a scene: E 1e7, e 0.5, μ 0.5, the default
+/// step, one checkpoint at the end of a run stopped by `--max-steps`.
+pub fn mineral_cell_text() -> String {
+    let root = repo_root();
+    let cell = 1.9347371379318832e-2;
+    format!(
+        "gravity = [0.0, 0.0, 0.0]\n\
+         [simulation]\ndt_fraction = 0.025\nend_time = 1.0\nseed = 9\n\
+         [output]\ncheckpoint_interval = 1.0\n\
+         [domain]\nmin = [0.0, 0.0, 0.0]\nmax = [{cell}, {cell}, {cell}]\n\
+         periodic = [true, true, true]\n\
+         [[materials]]\nname = \"grain\"\nyoungs_modulus = 1.0e7\npoisson_ratio = 0.3\n\
+         density = 2500.0\n\
+         [[material_pairs]]\nmaterials = [\"grain\", \"grain\"]\nrestitution = 0.5\n\
+         friction = 0.5\n\
+         [[particle_types]]\nname = \"mineral_grain\"\nmaterial = \"grain\"\n\
+         mesh = \"{}\"\nscale = 1.0\n\
+         [[insertions]]\ntype = \"mineral_grain\"\n\
+         region = {{ kind = \"box\", min = [0.0, 0.0, 0.0], max = [{cell}, {cell}, {cell}] }}\n\
+         count = 4000\npacking = \"{}\"\n",
+        root.join("meshes/particles/mineral_grain.stl").display(),
+        root.join("launch/bench/packings/mineral_grains.packing")
+            .display(),
+    )
+}

@@ -365,6 +365,6 @@ mod tests {
         assert_eq!(b.snapshot_distance(), f64::INFINITY);
         let h = builder("hybrid");
         // Snapshot at max((S − s)/2, S/4) with S = 2s: s/2.
-        assert!((h.snapshot_distance() - 0.5 * h.skin).abs() < 1e-15);
+        assert!((h.snapshot_distance() - 0.5 * h.reach.skin).abs() < 1e-15);
     }
 }

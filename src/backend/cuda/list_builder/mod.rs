@@ -112,14 +112,12 @@ struct Interval {
 pub(super) struct ListBuilder {
     /// The builder of the next list.
     builder: Builder,
-    skin: f64,
-    hybrid_skin: f64,
-    /// The host builds' reaches with `skin` and `hybrid_skin` (the scene's cutoffs, as the
-    /// device grids').
+    /// The reaches of lists with the scene's skin and its hybrid skin (their cutoffs the
+    /// scene's, as the device grids').
     reach: Reach,
     hybrid_reach: Reach,
     bounds: Bounds,
-    /// The device grids for lists of `skin` and `hybrid_skin`.
+    /// The device grids for lists of the skin and the hybrid skin.
     grid: GridParams,
     hybrid_grid: GridParams,
     pending: Option<Prebuild>,
@@ -152,8 +150,6 @@ impl ListBuilder {
         };
         ListBuilder {
             builder,
-            skin: n.skin,
-            hybrid_skin: n.hybrid_skin,
             reach: Reach {
                 skin: n.skin,
                 cutoff: scene.cutoff(),
@@ -191,7 +187,7 @@ impl ListBuilder {
     /// build's snapshot is due (`kick_drift`'s `snapshot` flag); infinite when none is wanted.
     pub(super) fn snapshot_distance(&self) -> f64 {
         if self.builder == Builder::Hybrid && self.pending.is_none() {
-            (0.5 * (self.hybrid_skin - self.skin)).max(0.25 * self.hybrid_skin)
+            (0.5 * (self.hybrid_reach.skin - self.reach.skin)).max(0.25 * self.hybrid_reach.skin)
         } else {
             f64::INFINITY
         }
@@ -314,7 +310,7 @@ impl ListBuilder {
         let half = if self.force_stale {
             0.0
         } else {
-            0.5 * self.hybrid_skin
+            0.5 * self.hybrid_reach.skin
         };
         let n = p.n as i32;
         // SAFETY: both position buffers hold 3n values, `flag` one.
@@ -340,12 +336,12 @@ impl ListBuilder {
     pub(super) fn device_source(&self) -> ListSource<'static> {
         if self.builder == Builder::Hybrid {
             ListSource::Device {
-                skin: self.hybrid_skin,
+                skin: self.hybrid_reach.skin,
                 grid: self.hybrid_grid,
             }
         } else {
             ListSource::Device {
-                skin: self.skin,
+                skin: self.reach.skin,
                 grid: self.grid,
             }
         }
